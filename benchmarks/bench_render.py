@@ -1,0 +1,84 @@
+"""Benchmark: the 72 views at 256x256 of nefertiti (100k faces), end to end, against Open3D.
+
+Prints rays per second of ``meshsal.render.render_views`` (ray generation,
+Embree tracing, shading, texture/colour lookup: everything a View holds) and,
+in the same run, of the same rays through Open3D's ``RaycastingScene``
+(tracing only) when Open3D is installed (``pip install -e '.[bench]'``; it
+needs ``apt-get install libusb-1.0-0``).  Figures are medians of repeats; the
+ratio is the one to quote, as the machine is shared and noisy.
+
+    python benchmarks/bench_render.py [--meshes-dir ../shared/meshes] [--repeats 7]
+"""
+
+from __future__ import annotations
+
+import argparse
+import statistics
+import time
+from pathlib import Path
+
+import numpy as np
+
+from meshsal import load_mesh
+from meshsal.mesh import bounding_sphere
+from meshsal.render import _rays, render_views, view_rig
+
+DEFAULT_MESHES = Path(__file__).resolve().parents[2] / "shared" / "meshes"
+
+
+def median_seconds(fn, repeats: int) -> float:
+    fn()  # warm-up: thread pools, page faults, BVH caches
+    times = []
+    for _ in range(repeats):
+        start = time.perf_counter()
+        fn()
+        times.append(time.perf_counter() - start)
+    return statistics.median(times)
+
+
+def open3d_seconds(mesh, cameras, size, repeats):
+    try:
+        import open3d as o3d
+    except ImportError:
+        return None
+    scene = o3d.t.geometry.RaycastingScene()
+    scene.add_triangles(o3d.core.Tensor(mesh.vertices.astype(np.float32)),
+                        o3d.core.Tensor(mesh.faces.astype(np.uint32)))
+    center, radius = bounding_sphere(mesh.vertices)
+    rays = []
+    for camera in cameras:
+        origins, directions = _rays(camera, center, radius, size)[:2]
+        rays.append(np.hstack([origins, directions]))
+    rays = o3d.core.Tensor(np.vstack(rays).astype(np.float32))
+    return median_seconds(lambda: scene.cast_rays(rays), repeats)
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--meshes-dir", type=Path, default=DEFAULT_MESHES)
+    parser.add_argument("--size", type=int, default=256)
+    parser.add_argument("--repeats", type=int, default=7)
+    args = parser.parse_args(argv)
+
+    mesh = load_mesh(args.meshes_dir / "nefertiti.obj")
+    cameras = [c for s in view_rig() for c in s]
+    n_rays = len(cameras) * args.size**2
+    ours = median_seconds(lambda: render_views(mesh, cameras, size=args.size), args.repeats)
+    peer = open3d_seconds(mesh, cameras, args.size, args.repeats)
+
+    print(f"nefertiti: {mesh.n_faces} faces, {len(cameras)} views at {args.size}^2 = {n_rays} rays, "
+          f"median of {args.repeats}\n")
+    print("| renderer | seconds (72 views) | Mrays/s |")
+    print("|---|---:|---:|")
+    print(f"| meshsal.render (Embree, shaded) | {ours:.3f} | {n_rays / ours / 1e6:.2f} |")
+    if peer is None:
+        print("| Open3D RaycastingScene | not installed | |")
+    else:
+        print(f"| Open3D RaycastingScene (trace only) | {peer:.3f} | {n_rays / peer / 1e6:.2f} |")
+        print(f"\nthroughput ratio meshsal / Open3D: {peer / ours:.2f}x")
+    print(f"target: 72 views <= 0.5 s -> {'met' if ours <= 0.5 else 'missed'}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,200 @@
+"""The triangle mesh record, its similarity transform, and derived geometry.
+
+Derived quantities (normals, areas, adjacency) are plain functions of
+``(vertices, faces)`` arrays, in the style of libigl: nothing is cached on
+the mesh.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass, field
+
+import numpy as np
+
+__all__ = [
+    "Mesh",
+    "MeshError",
+    "Similarity",
+    "face_normals",
+    "face_areas",
+    "vertex_normals",
+    "bounding_sphere",
+    "vertex_adjacency",
+]
+
+
+class MeshError(ValueError):
+    """A mesh file or array cannot be used; the message names the file and the problem."""
+
+
+@dataclass(frozen=True)
+class Similarity:
+    """A uniform scale then a translation: ``current = scale * source + offset``.
+
+    It maps a mesh's current frame back to the frame and units of the file it
+    was loaded from, so any result (points, normals, lengths) can be reported
+    in the user's own coordinates.
+
+    Examples
+    --------
+    >>> s = Similarity(scale=2.0, offset=np.array([1.0, 0.0, 0.0]))
+    >>> s.to_source(np.array([[3.0, 0.0, 0.0]]))
+    array([[1., 0., 0.]])
+    """
+
+    scale: float = 1.0
+    offset: np.ndarray = field(default_factory=lambda: np.zeros(3))
+
+    def __post_init__(self):
+        offset = np.asarray(self.offset, dtype=np.float64).reshape(3)
+        if not (np.isfinite(self.scale) and self.scale > 0):
+            raise ValueError(f"similarity scale must be finite and positive, got {self.scale}")
+        object.__setattr__(self, "scale", float(self.scale))
+        object.__setattr__(self, "offset", offset)
+
+    def then(self, other: Similarity) -> Similarity:
+        """The transform that applies ``self`` first, then ``other``."""
+        return Similarity(other.scale * self.scale, other.scale * self.offset + other.offset)
+
+    def apply(self, points: np.ndarray) -> np.ndarray:
+        """Map (k,3) points from the source frame into the current frame."""
+        return self.scale * np.asarray(points, dtype=np.float64) + self.offset
+
+    def to_source(self, points: np.ndarray) -> np.ndarray:
+        """Map (k,3) points from the current frame back to the source frame."""
+        return (np.asarray(points, dtype=np.float64) - self.offset) / self.scale
+
+    def length_to_source(self, length):
+        """Map a length (or array of lengths) back to source units."""
+        return np.asarray(length, dtype=np.float64) / self.scale
+
+
+@dataclass(frozen=True, eq=False)
+class Mesh:
+    """A triangle mesh with optional per-vertex colors and a texture.
+
+    Parameters
+    ----------
+    vertices : (n, 3) float64
+    faces : (m, 3) int32
+        Vertex indices, counter-clockwise seen from outside.
+    vertex_colors : (n, 3) float32 in [0, 1], optional
+    uv : (m, 3, 2) float32, optional
+        Texture coordinates of each face corner, origin at the image's bottom left.
+    texture : (H, W, 3) uint8, optional
+        RGB texture image, first row at the top.
+    name : str
+    transform : Similarity
+        Maps ``vertices`` back to the source file's frame and units
+        (identity for a mesh made in memory).
+
+    Examples
+    --------
+    >>> m = Mesh(vertices=[[0, 0, 0], [1, 0, 0], [0, 1, 0]], faces=[[0, 1, 2]])
+    >>> m.vertices.dtype, m.faces.dtype, m.vertex_colors
+    (dtype('float64'), dtype('int32'), None)
+    """
+
+    vertices: np.ndarray
+    faces: np.ndarray
+    vertex_colors: np.ndarray | None = None
+    uv: np.ndarray | None = None
+    texture: np.ndarray | None = None
+    name: str = ""
+    transform: Similarity = field(default_factory=Similarity)
+
+    def __post_init__(self):
+        V = np.ascontiguousarray(self.vertices, dtype=np.float64)
+        F = np.ascontiguousarray(self.faces, dtype=np.int32)
+        label = f"mesh {self.name!r}" if self.name else "mesh"
+        if V.ndim != 2 or V.shape[1] != 3:
+            raise MeshError(f"{label}: vertices must have shape (n, 3), got {V.shape}")
+        if F.ndim != 2 or F.shape[1] != 3:
+            raise MeshError(f"{label}: faces must have shape (m, 3), got {F.shape}")
+        object.__setattr__(self, "vertices", V)
+        object.__setattr__(self, "faces", F)
+        if self.vertex_colors is not None:
+            C = np.ascontiguousarray(self.vertex_colors, dtype=np.float32)
+            if C.shape != V.shape:
+                raise MeshError(f"{label}: vertex_colors must have shape {V.shape}, got {C.shape}")
+            object.__setattr__(self, "vertex_colors", np.clip(C, 0.0, 1.0))
+        if self.uv is not None:
+            UV = np.ascontiguousarray(self.uv, dtype=np.float32)
+            if UV.shape != (F.shape[0], 3, 2):
+                raise MeshError(f"{label}: uv must have shape {(F.shape[0], 3, 2)}, got {UV.shape}")
+            object.__setattr__(self, "uv", UV)
+        if self.texture is not None:
+            T = np.ascontiguousarray(self.texture, dtype=np.uint8)
+            if T.ndim != 3 or T.shape[2] != 3:
+                raise MeshError(f"{label}: texture must have shape (H, W, 3), got {T.shape}")
+            object.__setattr__(self, "texture", T)
+
+    @property
+    def n_vertices(self) -> int:
+        return int(self.vertices.shape[0])
+
+    @property
+    def n_faces(self) -> int:
+        return int(self.faces.shape[0])
+
+    def replace(self, **changes) -> Mesh:
+        """A copy with some fields changed (``dataclasses.replace``)."""
+        return dataclasses.replace(self, **changes)
+
+
+def face_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """Unit normals of the faces, (m, 3) float64; zero for degenerate faces."""
+    V = np.asarray(vertices, dtype=np.float64)
+    F = np.asarray(faces)
+    n = np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]])
+    length = np.linalg.norm(n, axis=1, keepdims=True)
+    return np.divide(n, length, out=np.zeros_like(n), where=length > 0)
+
+
+def face_areas(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """Areas of the faces, (m,) float64."""
+    V = np.asarray(vertices, dtype=np.float64)
+    F = np.asarray(faces)
+    return 0.5 * np.linalg.norm(np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]]), axis=1)
+
+
+def vertex_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """Area-weighted unit vertex normals, (n, 3) float64; zero at isolated vertices."""
+    V = np.asarray(vertices, dtype=np.float64)
+    F = np.asarray(faces)
+    # The unnormalized cross product is the area-weighted face normal.
+    n = np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]])
+    acc = np.zeros_like(V)
+    for k in range(3):
+        np.add.at(acc, F[:, k], n)
+    length = np.linalg.norm(acc, axis=1, keepdims=True)
+    return np.divide(acc, length, out=np.zeros_like(acc), where=length > 0)
+
+
+def bounding_sphere(vertices: np.ndarray) -> tuple[np.ndarray, float]:
+    """Centre and radius of a sphere enclosing all vertices.
+
+    The centre is the bounding box centre, so the sphere is tight to within
+    a factor sqrt(3) and moves with the mesh under similarity transforms.
+
+    Returns
+    -------
+    center : (3,) float64
+    radius : float
+    """
+    V = np.asarray(vertices, dtype=np.float64)
+    center = 0.5 * (V.min(axis=0) + V.max(axis=0))
+    return center, float(np.linalg.norm(V - center, axis=1).max())
+
+
+def vertex_adjacency(faces: np.ndarray, n_vertices: int):
+    """Symmetric vertex adjacency of the mesh edges as a scipy CSR matrix of ones, (n, n)."""
+    from scipy import sparse
+
+    F = np.asarray(faces)
+    i = np.concatenate([F[:, 0], F[:, 1], F[:, 2]])
+    j = np.concatenate([F[:, 1], F[:, 2], F[:, 0]])
+    A = sparse.coo_matrix((np.ones(i.size), (i, j)), shape=(n_vertices, n_vertices)).tocsr()
+    A = ((A + A.T) > 0).astype(np.float64)
+    return A.tocsr()

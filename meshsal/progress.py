@@ -1,0 +1,60 @@
+"""A dependency-free progress bar on stderr."""
+
+from __future__ import annotations
+
+import sys
+import time
+from collections.abc import Iterable, Iterator
+from typing import TypeVar
+
+T = TypeVar("T")
+
+
+def progress(items: Iterable[T], total: int | None = None, desc: str = "",
+             quiet: bool = False, stream=None) -> Iterator[T]:
+    """Yield ``items`` while drawing ``desc [#####.....] k/total elapsed`` on stderr.
+
+    Nothing is drawn when ``quiet`` is true.  On a terminal the bar redraws in
+    place; elsewhere (logs, CI) it prints a line at most every 10 % so logs
+    stay short.
+
+    Examples
+    --------
+    >>> sum(progress(range(3), quiet=True))
+    3
+    """
+    if quiet:
+        yield from items
+        return
+    stream = sys.stderr if stream is None else stream
+    if total is None:
+        total = len(items) if hasattr(items, "__len__") else 0
+    tty = hasattr(stream, "isatty") and stream.isatty()
+    start = time.perf_counter()
+    last_decile = -1
+
+    def draw(k: int) -> None:
+        nonlocal last_decile
+        elapsed = time.perf_counter() - start
+        if total:
+            frac = min(k / total, 1.0)
+            decile = int(frac * 10)
+            if not tty and decile == last_decile and k != total:
+                return
+            last_decile = decile
+            bar = "#" * int(frac * 30) + "." * (30 - int(frac * 30))
+            text = f"{desc} [{bar}] {k}/{total} {elapsed:5.1f}s"
+        else:
+            text = f"{desc} {k} {elapsed:5.1f}s"
+        stream.write(("\r" + text) if tty else text + "\n")
+        stream.flush()
+
+    draw(0)
+    k = 0
+    for item in items:
+        yield item
+        k += 1
+        draw(k)
+    if tty:
+        stream.write("\n")
+        stream.flush()

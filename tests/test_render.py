@@ -1,0 +1,123 @@
+"""The renderer against geometry with known answers."""
+
+import numpy as np
+import pytest
+
+from meshsal.mesh import Mesh
+from meshsal.render import Camera, project, render, render_views, surface_points, view_rig
+from shapes import icosphere
+
+FRONT = Camera(direction=[0, 0, -1], up=[0, 1, 0])
+
+
+@pytest.fixture(scope="module")
+def sphere():
+    return icosphere(radius=2.0, subdivisions=5, center=(1.0, -3.0, 0.5))
+
+
+def test_rig_is_18_sets_of_4_views_90_degrees_apart_on_a_great_circle():
+    rig = view_rig()
+    assert len(rig) == 18 and all(len(s) == 4 for s in rig)
+    for cams in rig:
+        D = np.array([c.direction for c in cams])
+        np.testing.assert_allclose(np.linalg.norm(D, axis=1), 1.0, atol=1e-12)
+        np.testing.assert_allclose(D @ D.T, np.array([[1, 0, -1, 0], [0, 1, 0, -1],
+                                                      [-1, 0, 1, 0], [0, -1, 0, 1]]), atol=1e-12)
+        axis = cams[0].up
+        assert all(np.allclose(c.up, axis) for c in cams)
+        np.testing.assert_allclose(D @ axis, 0.0, atol=1e-12)
+    indices = [c.view_index for s in rig for c in s]
+    assert indices == list(range(72))
+    directions = np.array([c.direction for s in rig for c in s])
+    assert len(np.unique(directions.round(6), axis=0)) == 72
+
+
+def test_rig_sees_top_bottom_and_every_face():
+    coarse = icosphere(subdivisions=2)
+    views = render_views(coarse, [c for s in view_rig() for c in s], size=64)
+    seen = np.unique(np.concatenate([v.face_id[v.mask] for v in views]))
+    assert seen.size == coarse.n_faces
+    directions = np.array([v.camera.direction for v in views])
+    assert directions[:, 1].max() > 0.95 and directions[:, 1].min() < -0.95
+
+
+@pytest.mark.parametrize("size", [65, 128])
+def test_sphere_mask_covers_its_disk(sphere, size):
+    view = render(sphere, FRONT, size=size)
+    radius_px = 2.0 / view.pixel_size
+    assert abs(view.mask.sum() / (np.pi * radius_px**2) - 1.0) < 0.01
+    assert view.rgb.shape == (size, size, 3) and view.rgb.dtype == np.float32
+    assert np.all(view.face_id[~view.mask] == -1) and np.all(np.isinf(view.depth[~view.mask]))
+    assert np.all(view.face_id[view.mask] >= 0) and np.all(np.isfinite(view.depth[view.mask]))
+
+
+def test_sphere_depth_at_centre_pixel_is_exact(sphere):
+    view = render(sphere, FRONT, size=129)  # odd: the centre pixel's ray passes through the centre
+    centre, radius = view.center, view.radius
+    expected = 2.0 * radius - 2.0  # the eye sits 2 * radius before the centre; the sphere's radius is 2
+    assert np.allclose(centre, [1.0, -3.0, 0.5])
+    assert abs(view.depth[64, 64] - expected) < 1e-3
+
+
+@pytest.mark.parametrize("projection", ["orthographic", "perspective"])
+def test_each_pixel_sees_a_face_that_projects_onto_it(sphere, projection):
+    camera = Camera(direction=[0.3, -0.2, -1.0], up=[0, 1, 0], projection=projection)
+    view = render(sphere, camera, size=96)
+    rows, cols = np.nonzero(view.mask)
+    centroids = sphere.vertices[sphere.faces[view.face_id[rows, cols]]].mean(axis=1)
+    offset = project(view, centroids) - np.stack([rows + 0.5, cols + 0.5], axis=1)
+    assert np.abs(offset).max() < 1.5
+    exact = project(view, surface_points(sphere, view, rows, cols))
+    np.testing.assert_allclose(exact, np.stack([rows + 0.5, cols + 0.5], axis=1), atol=1e-2)
+
+
+def test_perspective_sees_less_than_a_hemisphere(sphere):
+    ortho = render(sphere, FRONT, size=64)
+    persp = render(sphere, Camera(direction=[0, 0, -1], up=[0, 1, 0], projection="perspective"), size=64)
+    seen = lambda v: np.unique(v.face_id[v.mask]).size  # noqa: E731
+    assert seen(persp) < seen(ortho)
+
+
+def test_headlight_shading_is_brightest_where_the_surface_faces_the_camera(sphere):
+    view = render(sphere, FRONT, size=65)
+    gray = view.rgb[..., 0]
+    assert gray[32, 32] == pytest.approx(gray.max(), abs=0.02)
+    assert gray[32, 32] > 0.75 and 0.2 < gray[view.mask].min() < 0.4
+
+
+def test_vertex_colors_are_interpolated():
+    plane = Mesh(vertices=[[-1, -1, 0], [1, -1, 0], [1, 1, 0], [-1, 1, 0]], faces=[[0, 1, 2], [0, 2, 3]],
+                 vertex_colors=[[1, 0, 0], [1, 0, 0], [0, 0, 1], [0, 0, 1]])
+    view = render(plane, FRONT, size=64)
+    red, blue = view.rgb[..., 0], view.rgb[..., 2]
+    rows = np.arange(64)
+    assert red[52, 32] > 0.8 and blue[12, 32] > 0.8 and view.mask[12:53, 12:53].all()
+    assert np.all(np.diff(red[rows[view.mask[:, 32]], 32]) >= -1e-6)  # red fades towards the top
+
+
+def test_textured_cow_shows_its_texture(shared_mesh):
+    from meshsal import load_mesh
+
+    cow = load_mesh(shared_mesh("spot/spot.obj"))
+    assert cow.texture is not None and cow.uv is not None
+    view = render(cow, view_rig()[0][1], size=192)  # side view
+    rows, cols = np.nonzero(view.mask)
+    face = view.face_id[rows, cols]
+    uv = np.einsum("kc,kcd->kd", view.bary[rows, cols], cow.uv[face])
+    H, W = cow.texture.shape[:2]
+    texel = cow.texture[np.clip(((1 - uv[:, 1]) * H).astype(int), 0, H - 1),
+                        np.clip((uv[:, 0] * W).astype(int), 0, W - 1)].mean(axis=1)
+    shown = view.rgb[rows, cols].mean(axis=1)
+    flat = render(cow.replace(texture=None, uv=None), view_rig()[0][1], size=192).rgb[rows, cols].mean(axis=1)
+    # The texture's dark patches and eyes appear where the texture puts them, not a flat colour.
+    assert np.corrcoef(texel, shown / flat)[0, 1] > 0.9
+    assert (texel < 100).mean() > 0.05 and shown.std() > 0.1
+
+
+def test_bad_inputs_raise():
+    with pytest.raises(ValueError, match="parallel"):
+        Camera(direction=[0, 0, 1], up=[0, 0, 2])
+    with pytest.raises(ValueError, match="projection"):
+        Camera(direction=[0, 0, 1], up=[0, 1, 0], projection="fisheye")
+    with pytest.raises(ValueError, match="size"):
+        render(icosphere(subdivisions=1), FRONT, size=0)
