@@ -173,28 +173,42 @@ def _scene(mesh: Mesh):
     return scene
 
 
-def _rays(camera: Camera, center: np.ndarray, radius: float, size: int):
-    """Ray origins and directions (size*size, 3) float32, eye, pixel size, and the per-ray depth factor."""
+def _rays(camera: Camera, center: np.ndarray, radius: float, size: int, cull: bool = True):
+    """The rays of the pixels whose centre ray can meet the bounding sphere (all pixels if not ``cull``).
+
+    Returns ``pixels`` (k,) flat pixel indices, ``origins`` and ``directions``
+    (k, 3) float32, the eye, the pixel size, and the factor turning a hit
+    distance into depth along the view direction ((k,) or None when 1).
+    """
     half = radius * (1.0 + camera.margin)
     d, up, right = camera.direction, camera.up, camera.right
     offsets = (np.arange(size) + 0.5) / size * 2.0 - 1.0  # pixel centres in [-1, 1]
-    x = offsets[None, :]
-    y = -offsets[:, None]
+    if camera.projection == "orthographic":
+        disk = 1.0 / (1.0 + camera.margin)
+    else:
+        tan_half = np.tan(np.deg2rad(camera.fov_deg) / 2.0)
+        sin_sphere = np.sin(np.deg2rad(camera.fov_deg) / 2.0) / (1.0 + camera.margin)
+        disk = np.tan(np.arcsin(sin_sphere)) / tan_half
+    # Rays outside the sphere's image disk cannot hit: skipping them saves a quarter of the work.
+    inside = offsets[None, :] ** 2 + offsets[:, None] ** 2 <= (disk**2 * (1.0 + 1e-9) if cull else np.inf)
+    pixels = np.flatnonzero(inside)
+    x = offsets[pixels % size].astype(np.float32)[:, None]
+    y = -offsets[pixels // size].astype(np.float32)[:, None]
+    right32, up32 = right.astype(np.float32), up.astype(np.float32)
     if camera.projection == "orthographic":
         eye = center - d * 2.0 * radius
-        grid = (half * x)[..., None] * right + (half * y)[..., None] * up
-        origins = (eye + grid).reshape(-1, 3)
-        directions = np.broadcast_to(d, origins.shape)
-        return origins.astype(np.float32), np.ascontiguousarray(directions, np.float32), eye, 2 * half / size, None
-    tan_half = np.tan(np.deg2rad(camera.fov_deg) / 2.0)
-    distance = half / np.sin(np.deg2rad(camera.fov_deg) / 2.0)
+        origins = eye.astype(np.float32) + half * (x * right32 + y * up32)
+        directions = np.empty_like(origins)
+        directions[:] = d
+        return pixels, origins, directions, eye, 2 * half / size, None
+    distance = radius / sin_sphere
     eye = center - d * distance
-    directions = (d + tan_half * (x[..., None] * right + y[..., None] * up)).reshape(-1, 3)
-    directions /= np.linalg.norm(directions, axis=1, keepdims=True)
-    origins = np.broadcast_to(eye, directions.shape)
-    pixel_size = 2.0 * distance * tan_half / size
-    return (np.ascontiguousarray(origins, np.float32), directions.astype(np.float32), eye, pixel_size,
-            directions @ d)
+    directions = (d + tan_half * (x * right32 + y * up32)).astype(np.float32)
+    depth_factor = 1.0 / np.linalg.norm(directions, axis=1)
+    directions *= depth_factor[:, None]
+    origins = np.empty_like(directions)
+    origins[:] = eye
+    return pixels, origins, directions, eye, 2.0 * distance * tan_half / size, depth_factor
 
 
 def _sample_texture(texture: np.ndarray, uv: np.ndarray) -> np.ndarray:
@@ -208,10 +222,9 @@ def _sample_texture(texture: np.ndarray, uv: np.ndarray) -> np.ndarray:
     fy = (v - y0)[:, None].astype(np.float32)
     x0, x1 = np.mod(x0, W), np.mod(x0 + 1, W)
     y0, y1 = np.clip(y0, 0, H - 1), np.clip(y0 + 1, 0, H - 1)
-    tex = texture.astype(np.float32) / 255.0
-    top = tex[y0, x0] * (1 - fx) + tex[y0, x1] * fx
-    bottom = tex[y1, x0] * (1 - fx) + tex[y1, x1] * fx
-    return top * (1 - fy) + bottom * fy
+    top = texture[y0, x0] * (1 - fx) + texture[y0, x1] * fx
+    bottom = texture[y1, x0] * (1 - fx) + texture[y1, x1] * fx
+    return (top * (1 - fy) + bottom * fy) / 255.0
 
 
 def _shade(mesh: Mesh, normals: np.ndarray, faces: np.ndarray, bary: np.ndarray,
@@ -219,9 +232,8 @@ def _shade(mesh: Mesh, normals: np.ndarray, faces: np.ndarray, bary: np.ndarray,
     """Lambert shading of the hits from a headlight plus ambient, times the surface colour."""
     corners = mesh.faces[faces]
     n = np.einsum("kc,kcd->kd", bary, normals[corners])
-    n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-12)
     # Open meshes show their inside: light both sides rather than render them black.
-    lambert = np.abs(np.einsum("kd,kd->k", n, ray_dirs))
+    lambert = np.abs(np.einsum("kd,kd->k", n, ray_dirs)) / np.maximum(np.linalg.norm(n, axis=1), 1e-12)
     light = (AMBIENT + (1.0 - AMBIENT) * lambert)[:, None]
     if mesh.texture is not None and mesh.uv is not None:
         albedo = _sample_texture(mesh.texture, np.einsum("kc,kcd->kd", bary, mesh.uv[faces]))
@@ -233,23 +245,25 @@ def _shade(mesh: Mesh, normals: np.ndarray, faces: np.ndarray, bary: np.ndarray,
 
 
 def _render_one(mesh, scene, normals, center, radius, camera, size) -> View:
-    origins, directions, eye, pixel_size, depth_factor = _rays(camera, center, radius, size)
+    pixels, origins, directions, eye, pixel_size, depth_factor = _rays(camera, center, radius, size)
     hit = scene.run(origins, directions, output=1)
-    face = hit["primID"].astype(np.int32)
-    mask = face >= 0
-    u = hit["u"][mask]
-    v = hit["v"][mask]
-    bary_hit = np.stack([1.0 - u - v, u, v], axis=1).astype(np.float32)
-    depth = np.full(size * size, np.inf, np.float32)
-    tfar = hit["tfar"][mask]
-    depth[mask] = tfar if depth_factor is None else tfar * depth_factor[mask]
-    rgb = np.zeros((size * size, 3), np.float32)
-    rgb[mask] = _shade(mesh, normals, face[mask], bary_hit, directions[mask])
-    bary = np.zeros((size * size, 3), np.float32)
-    bary[mask] = bary_hit
-    face[~mask] = -1
+    hits = hit["primID"] >= 0
+    seen = pixels[hits]
+    face = hit["primID"][hits].astype(np.int32)
+    u, v = hit["u"][hits], hit["v"][hits]
+    tfar = hit["tfar"][hits]
+    n = size * size
+    depth = np.full(n, np.inf, np.float32)
+    depth[seen] = tfar if depth_factor is None else tfar * depth_factor[hits]
+    face_id = np.full(n, -1, np.int32)
+    face_id[seen] = face
+    bary = np.zeros((n, 3), np.float32)
+    bary[seen] = np.stack([1.0 - u - v, u, v], axis=1)
+    rgb = np.zeros((n, 3), np.float32)
+    rgb[seen] = _shade(mesh, normals, face, bary[seen], directions[hits])
+    mask = face_id >= 0
     return View(rgb=rgb.reshape(size, size, 3), depth=depth.reshape(size, size),
-                face_id=face.reshape(size, size), bary=bary.reshape(size, size, 3),
+                face_id=face_id.reshape(size, size), bary=bary.reshape(size, size, 3),
                 mask=mask.reshape(size, size), camera=camera, center=center, radius=radius,
                 eye=eye, pixel_size=float(pixel_size))
 
@@ -298,7 +312,7 @@ def render_views(mesh: Mesh, cameras, size: int = 256, threads: int | None = Non
     if mesh.n_faces == 0:
         raise ValueError(f"cannot render {mesh.name or 'mesh'}: it has no faces")
     scene = _scene(mesh)
-    normals = vertex_normals(mesh.vertices, mesh.faces)
+    normals = vertex_normals(mesh.vertices, mesh.faces).astype(np.float32)
     center, radius = bounding_sphere(mesh.vertices)
     radius = max(radius, 1e-12)
 

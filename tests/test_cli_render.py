@@ -1,0 +1,70 @@
+"""`visuotactile toys` and `visuotactile render` end to end."""
+
+import cv2
+import numpy as np
+import pytest
+
+from classify.cli import main
+from meshsal.io import save_ply
+from shapes import icosphere
+
+
+@pytest.fixture
+def sphere_file(tmp_path):
+    path = tmp_path / "sphere.ply"
+    save_ply(path, icosphere(radius=10.0, subdivisions=2))
+    return path
+
+
+def test_render_writes_72_views_and_a_contact_sheet(sphere_file, tmp_path, capsys):
+    out = tmp_path / "views"
+    assert main(["render", str(sphere_file), "--out", str(out), "--size", "32", "--quiet"]) == 0
+    views = sorted(out.glob("view_*.png"))
+    assert len(views) == 72
+    first = cv2.imread(str(views[0]))
+    assert first.shape == (32, 32, 3) and first[16, 16].mean() > 100 and first[0, 0].max() == 0
+    sheet = cv2.imread(str(out / "contact_sheet.png"))
+    assert sheet.shape[0] > 32 * 6 and sheet.shape[1] > 32 * 12
+    assert "wrote 72 views" in capsys.readouterr().out
+
+
+def test_render_shows_progress_on_stderr_unless_quiet(sphere_file, tmp_path, capsys):
+    assert main(["render", str(sphere_file), "--out", str(tmp_path / "v"), "--size", "16"]) == 0
+    assert "render [" in capsys.readouterr().err
+
+
+def test_render_of_a_bad_mesh_fails_with_the_loaders_message(tmp_path, capsys):
+    bad = tmp_path / "broken.obj"
+    bad.write_text("v 0 0 0\nv 1 0 0\nf 1 2 7\n")
+    out = tmp_path / "views"
+    assert main(["render", str(bad), "--out", str(out), "--quiet"]) == 1
+    err = capsys.readouterr().err
+    assert "broken.obj" in err and "error" in err
+    assert not out.exists() or not any(out.iterdir())
+
+
+def test_render_rejects_a_tiny_size(sphere_file, tmp_path, capsys):
+    assert main(["render", str(sphere_file), "--out", str(tmp_path), "--size", "4", "--quiet"]) == 1
+    assert "--size" in capsys.readouterr().err
+
+
+def test_toys_writes_six_coloured_plys(tmp_path):
+    from meshsal import load_mesh, toys
+
+    assert main(["toys", "--out", str(tmp_path), "--quiet"]) == 0
+    for name in toys.NAMES:
+        mesh = load_mesh(tmp_path / f"{name}.ply")
+        assert mesh.vertex_colors is not None and mesh.n_faces >= 5000
+        assert np.ptp(mesh.vertices, axis=0).max() <= 250.0
+
+
+def test_help_of_every_subcommand(capsys):
+    with pytest.raises(SystemExit) as exit_info:
+        main(["--help"])
+    assert exit_info.value.code == 0
+    commands = ["toys", "render"]
+    for command in commands:
+        with pytest.raises(SystemExit) as exit_info:
+            main([command, "--help"])
+        assert exit_info.value.code == 0
+    assert "--out" in capsys.readouterr().out
