@@ -1,0 +1,111 @@
+"""Similarity transforms that bring a mesh to a standard size and place.
+
+Each function returns a new mesh whose ``transform`` composes the step with
+the mesh's earlier ones, so ``out.transform.to_source(out.vertices)`` is
+always the source file's own coordinates.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from meshsal.mesh import Mesh, MeshError, Similarity, bounding_sphere
+
+__all__ = ["scale_to", "normalize"]
+
+
+def _label(mesh: Mesh) -> str:
+    return f"mesh {mesh.name!r}" if mesh.name else "mesh"
+
+
+def _apply(mesh: Mesh, step: Similarity) -> Mesh:
+    return mesh.replace(vertices=step.apply(mesh.vertices), transform=mesh.transform.then(step))
+
+
+def scale_to(mesh: Mesh, diagonal_mm: float = 150.0) -> Mesh:
+    """Scale uniformly to a bounding-box diagonal and centre the box at the origin.
+
+    Parameters
+    ----------
+    mesh : Mesh
+    diagonal_mm : float
+        Length of the axis-aligned bounding box's diagonal after scaling
+        (millimetres by convention: the toys of the paper are 100-250 mm).
+
+    Returns
+    -------
+    Mesh
+        Same faces, colors and texture; ``vertices`` scaled and centred;
+        ``transform`` extended so it still maps back to the source frame.
+
+    Raises
+    ------
+    ValueError
+        ``diagonal_mm`` is not a positive finite number.
+    MeshError
+        The mesh has no vertices or zero extent (all vertices coincide).
+
+    Examples
+    --------
+    >>> m = Mesh(vertices=[[0, 0, 0], [3, 0, 0], [0, 4, 0]], faces=[[0, 1, 2]])
+    >>> s = scale_to(m, diagonal_mm=10.0)
+    >>> s.vertices.min(axis=0), s.vertices.max(axis=0)
+    (array([-3., -4.,  0.]), array([3., 4., 0.]))
+    >>> s.transform.to_source(s.vertices)[1]
+    array([3., 0., 0.])
+    """
+    try:
+        diagonal_mm = float(diagonal_mm)
+    except (TypeError, ValueError):
+        raise ValueError(f"diagonal_mm must be a positive number, got {diagonal_mm!r}") from None
+    if not (math.isfinite(diagonal_mm) and diagonal_mm > 0):
+        raise ValueError(f"diagonal_mm must be positive and finite, got {diagonal_mm}")
+    if mesh.n_vertices == 0:
+        raise MeshError(f"{_label(mesh)}: cannot scale a mesh without vertices")
+    lo, hi = mesh.vertices.min(axis=0), mesh.vertices.max(axis=0)
+    diagonal = float(np.linalg.norm(hi - lo))
+    if not (math.isfinite(diagonal) and diagonal > 0):
+        raise MeshError(f"{_label(mesh)}: cannot scale a mesh of zero extent (all vertices coincide)")
+    scale = diagonal_mm / diagonal
+    return _apply(mesh, Similarity(scale, -scale * 0.5 * (lo + hi)))
+
+
+def normalize(mesh: Mesh) -> Mesh:
+    """Move the bounding-sphere centre to the origin and scale the sphere to unit radius.
+
+    The sphere is :func:`meshsal.mesh.bounding_sphere` (centred on the
+    bounding box), so every vertex ends up within distance 1 of the origin
+    and at least one at distance exactly 1.
+
+    Parameters
+    ----------
+    mesh : Mesh
+
+    Returns
+    -------
+    Mesh
+        ``vertices`` normalized, ``transform`` extended so it still maps
+        back to the source frame.
+
+    Raises
+    ------
+    MeshError
+        The mesh has no vertices or zero extent.
+
+    Examples
+    --------
+    >>> m = Mesh(vertices=[[1, 1, 1], [3, 1, 1], [1, 1, 3]], faces=[[0, 1, 2]])
+    >>> n = normalize(m)
+    >>> round(float(np.linalg.norm(n.vertices, axis=1).max()), 12)
+    1.0
+    >>> n.transform.to_source(n.vertices)[1]
+    array([3., 1., 1.])
+    """
+    if mesh.n_vertices == 0:
+        raise MeshError(f"{_label(mesh)}: cannot normalize a mesh without vertices")
+    center, radius = bounding_sphere(mesh.vertices)
+    if not (math.isfinite(radius) and radius > 0):
+        raise MeshError(f"{_label(mesh)}: cannot normalize a mesh of zero extent (all vertices coincide)")
+    return _apply(mesh, Similarity(1.0 / radius, -center / radius))

@@ -1,0 +1,520 @@
+"""Mesh loading (OBJ/PLY/OFF/STL), repairs, bad input, and PLY output."""
+
+import subprocess
+import sys
+import warnings
+
+import cv2
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from meshsal.io import MeshRepairWarning, load_mesh, load_vertex_quality, save_ply
+from meshsal.mesh import Mesh, MeshError, face_areas
+
+SQUARE = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], dtype=np.float64)
+TETRA_V = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]], dtype=np.float64)
+TETRA_F = np.array([[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]])
+
+
+def load_clean(path):
+    """Load and fail on any warning: a clean file needs no repair."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        return load_mesh(path)
+
+
+def write(path, text):
+    path.write_text(text)
+    return path
+
+
+def obj_text(V, F, colors=None):
+    lines = []
+    for i, v in enumerate(V):
+        c = "" if colors is None else " " + " ".join(f"{x:.6f}" for x in colors[i])
+        lines.append("v " + " ".join(repr(float(x)) for x in v) + c)
+    lines += ["f " + " ".join(str(i + 1) for i in f) for f in F]
+    return "\n".join(lines) + "\n"
+
+
+def ply_ascii(V, F, colors=None):
+    head = ["ply", "format ascii 1.0", f"element vertex {len(V)}"]
+    head += [f"property float {c}" for c in "xyz"]
+    if colors is not None:
+        head += [f"property uchar {c}" for c in ("red", "green", "blue")]
+    head += [f"element face {len(F)}", "property list uchar int vertex_indices", "end_header"]
+    rows = []
+    for i, v in enumerate(V):
+        rows.append(" ".join(map(str, v)) + ("" if colors is None else " " + " ".join(map(str, colors[i]))))
+    rows += [f"{len(f)} " + " ".join(map(str, f)) for f in F]
+    return "\n".join(head + rows) + "\n"
+
+
+def stl_binary(path, triangles):
+    rec = np.zeros(len(triangles), dtype=[("n", "<f4", (3,)), ("v", "<f4", (3, 3)), ("a", "<u2")])
+    rec["v"] = triangles
+    path.write_bytes(b"\0" * 80 + np.uint32(len(triangles)).tobytes() + rec.tobytes())
+    return path
+
+
+# --------------------------------------------------------------------------- good files
+
+
+def test_obj_quad_is_triangulated_named_and_untransformed(tmp_path):
+    m = load_clean(write(tmp_path / "square.obj", obj_text(SQUARE, [[0, 1, 2, 3]])))
+    assert m.name == "square"
+    assert m.faces.shape == (2, 3) and m.faces.dtype == np.int32
+    np.testing.assert_array_equal(m.vertices, SQUARE)
+    assert face_areas(m.vertices, m.faces).sum() == pytest.approx(1.0)
+    assert m.transform.scale == 1.0 and not m.transform.offset.any()
+    assert m.vertex_colors is None and m.uv is None and m.texture is None
+
+
+def test_obj_vertex_colors(tmp_path):
+    colors = np.array([[1, 0, 0], [0, 1, 0], [0, 0, 1], [0.2, 0.4, 0.6]])
+    m = load_clean(write(tmp_path / "c.obj", obj_text(TETRA_V, TETRA_F, colors)))
+    assert m.vertex_colors.dtype == np.float32
+    np.testing.assert_allclose(m.vertex_colors, colors, atol=1 / 255)
+
+
+def test_obj_negative_indices_and_slashes(tmp_path):
+    text = "v 0 0 0\nv 1 0 0\nv 0 1 0\nvn 0 0 1\nf -3//1 -2//1 -1//1\nv 0 0 1\nf 1 2 -1\n"
+    m = load_clean(write(tmp_path / "neg.obj", text))
+    np.testing.assert_array_equal(m.faces, [[0, 1, 2], [0, 1, 3]])
+
+
+def textured_obj(tmp_path, image=True, extra_faces=""):
+    # 2x4 texture: top row red, bottom row blue.
+    if image:
+        img = np.zeros((2, 4, 3), np.uint8)
+        img[0] = (255, 0, 0)
+        img[1] = (0, 0, 255)
+        cv2.imwrite(str(tmp_path / "tex.png"), img[:, :, ::-1])
+    write(tmp_path / "t.mtl", "newmtl paint\nKd 1 1 1\nmap_Kd -s 1 1 1 tex.png\n")
+    text = (
+        "mtllib t.mtl\nusemtl paint\n"
+        "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\n"
+        "vt 0 0\nvt 1 0\nvt 1 1\nvt 0 1\n"
+        "f 1/1 2/2 3/3\nf 1/1 3/3 4/4\n" + extra_faces
+    )
+    return write(tmp_path / "t.obj", text)
+
+
+def test_obj_texture_and_uv(tmp_path):
+    m = load_clean(textured_obj(tmp_path))
+    assert m.texture.shape == (2, 4, 3) and m.texture.dtype == np.uint8
+    np.testing.assert_array_equal(m.texture[0, 0], [255, 0, 0])  # row 0 is the image's top, RGB order
+    np.testing.assert_array_equal(m.texture[1, 0], [0, 0, 255])
+    assert m.uv.shape == (2, 3, 2) and m.uv.dtype == np.float32
+    # Each corner's uv equals its vertex's xy in this file.
+    np.testing.assert_allclose(m.uv, m.vertices[m.faces][:, :, :2])
+
+
+def test_missing_texture_image_loads_geometry_with_warning(tmp_path):
+    path = textured_obj(tmp_path, image=False)
+    with pytest.warns(MeshRepairWarning, match=r"t\.obj.*tex\.png.*missing"):
+        m = load_mesh(path)
+    assert m.n_faces == 2 and m.texture is None and m.uv is None
+
+
+def test_missing_material_library_warns(tmp_path):
+    text = "mtllib gone.mtl\nusemtl paint\nv 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n"
+    with pytest.warns(MeshRepairWarning, match=r"m\.obj: material library 'gone\.mtl' not found"):
+        m = load_mesh(write(tmp_path / "m.obj", text))
+    assert m.n_faces == 1 and m.texture is None
+
+
+def test_two_texture_images_warn_and_load_untextured(tmp_path):
+    for name in ("a.png", "b.png"):
+        cv2.imwrite(str(tmp_path / name), np.zeros((2, 2, 3), np.uint8))
+    write(tmp_path / "two.mtl", "newmtl a\nmap_Kd a.png\nnewmtl b\nmap_Kd b.png\n")
+    text = (
+        "mtllib two.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nv 1 1 0\nvt 0 0\n"
+        "usemtl a\nf 1/1 2/1 3/1\nusemtl b\nf 2/1 4/1 3/1\n"
+    )
+    with pytest.warns(MeshRepairWarning, match="2 texture images"):
+        m = load_mesh(write(tmp_path / "two.obj", text))
+    assert m.n_faces == 2 and m.texture is None and m.uv is None
+
+
+def test_uv_follows_dropped_faces(tmp_path):
+    path = textured_obj(tmp_path, extra_faces="v 2 0 0\nvt 0.5 0.5\nf 1/5 2/5 5/5\n")  # collinear face
+    with pytest.warns(MeshRepairWarning, match="dropped 1 zero-area faces"):
+        m = load_mesh(path)
+    assert m.uv.shape == (2, 3, 2) and m.n_vertices == 4  # vertex 5 only served the dropped face
+    np.testing.assert_allclose(m.uv, m.vertices[m.faces][:, :, :2])
+
+
+def test_ply_ascii_with_colors(tmp_path):
+    colors = np.array([[255, 0, 0], [0, 255, 0], [0, 0, 255], [10, 20, 30]])
+    m = load_clean(write(tmp_path / "a.ply", ply_ascii(TETRA_V, TETRA_F, colors)))
+    np.testing.assert_array_equal(m.faces, TETRA_F)
+    np.testing.assert_allclose(m.vertex_colors * 255, colors, atol=1e-3)
+
+
+def test_ply_binary_big_endian_mixed_polygons(tmp_path):
+    # A pyramid: square base (one quad) plus 4 triangles; lists of unequal length.
+    V = np.vstack([SQUARE, [[0.5, 0.5, 1.0]]]).astype(">f4")
+    faces = [[0, 3, 2, 1], [0, 1, 4], [1, 2, 4], [2, 3, 4], [3, 0, 4]]
+    header = (
+        "ply\nformat binary_big_endian 1.0\nelement vertex 5\nproperty float x\nproperty float y\n"
+        "property float z\nelement face 5\nproperty list uchar int vertex_indices\nend_header\n"
+    )
+    body = V.tobytes() + b"".join(bytes([len(f)]) + np.array(f, ">i4").tobytes() for f in faces)
+    (tmp_path / "pyr.ply").write_bytes(header.encode() + body)
+    m = load_clean(tmp_path / "pyr.ply")
+    assert m.n_faces == 6
+    assert face_areas(m.vertices, m.faces).sum() == pytest.approx(1 + 4 * 0.5 * np.sqrt(1.25))
+
+
+def test_off_and_coff(tmp_path):
+    m = load_clean(write(tmp_path / "sq.off", "OFF\n# a comment\n4 1 0\n0 0 0\n1 0 0\n1 1 0\n0 1 0\n4 0 1 2 3\n"))
+    assert m.n_faces == 2 and m.vertex_colors is None
+    text = "COFF 3 1 0\n0 0 0 255 0 0 255\n1 0 0 0 255 0 255\n0 1 0 0 0 255 255\n3 0 1 2\n"
+    c = load_clean(write(tmp_path / "tri.off", text))
+    np.testing.assert_allclose(c.vertex_colors, np.eye(3), atol=1e-6)
+
+
+def test_stl_binary_duplicates_merged_with_warning(tmp_path):
+    tris = TETRA_V[TETRA_F]
+    with pytest.warns(MeshRepairWarning, match=r"tet\.stl: merged 8 duplicate vertices"):
+        m = load_mesh(stl_binary(tmp_path / "tet.stl", tris))
+    assert m.n_vertices == 4 and m.n_faces == 4
+    np.testing.assert_allclose(m.vertices[m.faces], tris)
+
+
+def test_stl_ascii(tmp_path):
+    facets = "".join(
+        "facet normal 0 0 0\nouter loop\n" + "".join(f"vertex {x} {y} {z}\n" for x, y, z in t) + "endloop\nendfacet\n"
+        for t in TETRA_V[TETRA_F]
+    )
+    with pytest.warns(MeshRepairWarning, match="merged 8 duplicate vertices"):
+        m = load_mesh(write(tmp_path / "tet.stl", f"solid tet\n{facets}endsolid tet\n"))
+    assert m.n_vertices == 4 and m.n_faces == 4
+
+
+def test_unreferenced_vertices_removed_colors_kept(tmp_path):
+    V = np.vstack([TETRA_V[:3], [[5, 5, 5]], TETRA_V[3:]])
+    colors = np.array([[1, 0, 0], [0, 1, 0], [0, 0, 1], [1, 1, 1], [0, 0, 0]])
+    F = np.where(TETRA_F == 3, 4, TETRA_F)
+    with pytest.warns(MeshRepairWarning, match="removed 1 unreferenced vertices"):
+        m = load_mesh(write(tmp_path / "u.obj", obj_text(V, F, colors)))
+    np.testing.assert_array_equal(m.vertices, TETRA_V)
+    np.testing.assert_allclose(m.vertex_colors, colors[[0, 1, 2, 4]], atol=1 / 255)
+
+
+def test_duplicates_with_different_colors_are_kept_apart(tmp_path):
+    V = np.vstack([TETRA_V, TETRA_V[:1]])
+    colors = np.array([[1, 0, 0], [0, 1, 0], [0, 0, 1], [1, 1, 1], [0, 0, 0]])
+    F = np.vstack([TETRA_F, [[4, 1, 3]]])  # face on vertex 0's black twin
+    m = load_clean(write(tmp_path / "twin.obj", obj_text(V, F, colors)))
+    assert m.n_vertices == 5
+
+
+def test_repeated_index_face_dropped_and_counted(tmp_path):
+    F = np.vstack([TETRA_F, [[0, 0, 1]]])
+    with pytest.warns(MeshRepairWarning, match=r"r\.ply: dropped 1 zero-area faces"):
+        m = load_mesh(write(tmp_path / "r.ply", ply_ascii(TETRA_V, F)))
+    np.testing.assert_array_equal(m.faces, TETRA_F)
+
+
+@pytest.mark.parametrize(
+    "name, content",
+    [
+        ("tq.obj", "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nf 1 2 3 3\nf 1 1 3 4\n"),
+        ("tq.off", "OFF\n4 2 0\n0 0 0\n1 0 0\n1 1 0\n0 1 0\n4 0 1 2 2\n4 0 0 2 3\n"),
+    ],
+)
+def test_triangles_written_as_quads_with_a_repeated_corner(tmp_path, name, content):
+    m = load_clean(write(tmp_path / name, content))
+    np.testing.assert_array_equal(m.faces, [[0, 1, 2], [0, 2, 3]])
+
+
+# --------------------------------------------------------------------------- bad input
+
+
+def expect_error(path, *fragments):
+    with pytest.raises(MeshError) as info:
+        load_mesh(path)
+    message = str(info.value)
+    assert path.name in message
+    for fragment in fragments:
+        assert fragment in message, message
+
+
+def test_missing_file(tmp_path):
+    expect_error(tmp_path / "nothing.obj", "no such file")
+
+
+def test_directory(tmp_path):
+    (tmp_path / "folder.obj").mkdir()
+    expect_error(tmp_path / "folder.obj", "directory")
+
+
+def test_unknown_extension(tmp_path):
+    expect_error(write(tmp_path / "m.xyz", "1 2 3\n"), "unknown extension '.xyz'")
+
+
+@pytest.mark.parametrize("content", ["", "  \n\n"])
+def test_empty_file(tmp_path, content):
+    expect_error(write(tmp_path / "e.ply", content), "empty file")
+
+
+@pytest.mark.parametrize(
+    "name, content",
+    [
+        ("bad.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nhello world\nf 1 2 3\n"),
+        ("bad.obj", "v 0 0 zero\n"),
+        ("bad.ply", "plyx\nformat ascii 1.0\nend_header\n"),
+        ("bad.ply", "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nend_header\n1\n2\n3\n"),
+        ("bad.ply", "ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\nproperty float y\nproperty float z\n"),
+        ("bad.off", "FOO\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n"),
+        ("bad.off", "OFF\n3 1 0\n0 0 0\n1 0 0\n"),
+        ("bad.stl", "not an stl at all, long enough to hold a binary header. " * 3),
+    ],
+)
+def test_unparseable_content(tmp_path, name, content):
+    expect_error(write(tmp_path / name, content), "unparseable content")
+
+
+def test_binary_garbage_in_text_format(tmp_path):
+    path = tmp_path / "bin.obj"
+    path.write_bytes(b"v 0 0 0\n\0\1\2\3")
+    expect_error(path, "unparseable content", "binary")
+
+
+@pytest.mark.parametrize(
+    "name, content",
+    [
+        ("i.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 4\n"),
+        ("i.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 0 1 2\n"),
+        ("i.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf -1 -2 -4\n"),
+        ("i.ply", ply_ascii(TETRA_V[:3], [[0, 1, 3]])),
+        ("i.off", "OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1 3\n"),
+    ],
+)
+def test_face_index_out_of_range(tmp_path, name, content):
+    expect_error(write(tmp_path / name, content), "out of range")
+
+
+def test_texture_index_out_of_range(tmp_path):
+    expect_error(write(tmp_path / "vt.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nvt 0 0\nf 1/1 2/2 3/1\n"), "out of range")
+
+
+@pytest.mark.parametrize(
+    "name, content",
+    [
+        ("n.obj", "v 0 0 0\nv 1 nan 0\nv 0 1 0\nv 0 0 1\nf 1 2 3\nf 1 3 4\n"),
+        ("n.ply", ply_ascii(TETRA_V, TETRA_F).replace("\n1.0 0.0 0.0\n", "\n1.0 inf 0.0\n")),
+        ("n.off", "OFF\n3 1 0\n0 0 0\n1 0 0\n0 NaN 0\n3 0 1 2\n"),
+        # Beyond single precision, the type the file declares.
+        ("big.ply", ply_ascii(TETRA_V, TETRA_F).replace("\n1.0 0.0 0.0\n", "\n1e48 0.0 0.0\n")),
+        ("big.stl", "solid s\nfacet normal 0 0 0\nouter loop\nvertex 0 0 0\nvertex 1e48 0 0\nvertex 0 1 0\n"
+         "endloop\nendfacet\nendsolid s\n"),
+    ],
+)  # fmt: skip
+def test_non_finite_coordinates(tmp_path, name, content):
+    expect_error(write(tmp_path / name, content), "non-finite")
+
+
+def test_non_finite_binary_stl(tmp_path):
+    tris = TETRA_V[TETRA_F].copy()
+    tris[2, 1, 0] = np.inf
+    expect_error(stl_binary(tmp_path / "inf.stl", tris), "non-finite")
+
+
+@pytest.mark.parametrize(
+    "name, content",
+    [
+        ("cloud.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\n"),
+        ("cloud.ply", "ply\nformat ascii 1.0\nelement vertex 2\nproperty float x\nproperty float y\n"
+         "property float z\nend_header\n0 0 0\n1 1 1\n"),
+        ("cloud.off", "OFF\n2 0 0\n0 0 0\n1 1 1\n"),
+    ],
+)  # fmt: skip
+def test_point_cloud(tmp_path, name, content):
+    expect_error(write(tmp_path / name, content), "no faces", "point cloud")
+
+
+@pytest.mark.parametrize(
+    "name, content",
+    [
+        ("flat.obj", "v 0 0 0\nv 1 0 0\nv 2 0 0\nv 3 0 0\nf 1 2 3\nf 2 3 4\n"),
+        ("flat.ply", ply_ascii(TETRA_V, [[0, 0, 1], [2, 2, 2]])),
+        ("flat.stl", "solid s\nfacet normal 0 0 0\nouter loop\nvertex 0 0 0\nvertex 1 1 1\nvertex 2 2 2\n"
+         "endloop\nendfacet\nendsolid s\n"),
+    ],
+)  # fmt: skip
+def test_no_non_degenerate_face_left(tmp_path, name, content):
+    expect_error(write(tmp_path / name, content), "no non-degenerate face left")
+
+
+def test_truncated_binary_ply(tmp_path):
+    good = tmp_path / "good.ply"
+    save_ply(good, Mesh(vertices=TETRA_V, faces=TETRA_F))
+    data = good.read_bytes()
+    for cut in (len(data) - 1, len(data) - 13, data.index(b"end_header") + 20):
+        (tmp_path / "cut.ply").write_bytes(data[:cut])
+        expect_error(tmp_path / "cut.ply", "unparseable content", "truncated")
+
+
+def test_truncated_binary_stl(tmp_path):
+    data = stl_binary(tmp_path / "good.stl", TETRA_V[TETRA_F]).read_bytes()
+    (tmp_path / "cut.stl").write_bytes(data[:-7])
+    expect_error(tmp_path / "cut.stl", "unparseable content", "truncated")
+
+
+def test_faces_lost_by_pymeshlab_raise(tmp_path):
+    # pymeshlab turns this non-planar pentagon into fewer than the 3 triangles it needs.
+    text = "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nv 0.5 0.5 1\nf 1 2 3 4 5\n"
+    expect_error(write(tmp_path / "penta.obj", text), "the file holds 5 vertices and 3 triangles")
+
+
+# --------------------------------------------------------------------------- garbage never crashes
+
+EXTENSIONS = (".obj", ".ply", ".off", ".stl")
+PREFIXES = (b"", b"ply\nformat binary_little_endian 1.0\nelement vertex 3\n", b"OFF\n3 1 0\n", b"solid x\n", b"v 1 2 3\nf ")
+
+
+@settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(ext=st.sampled_from(EXTENSIONS), prefix=st.sampled_from(PREFIXES), body=st.binary(max_size=300))
+def test_random_bytes_raise_mesh_error(tmp_path, ext, prefix, body):
+    path = tmp_path / f"garbage{ext}"
+    path.write_bytes(prefix + body)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        try:
+            load_mesh(path)
+        except MeshError as e:
+            assert path.name in str(e)
+
+
+GARBAGE_SCRIPT = """
+import sys, warnings
+import numpy as np
+from meshsal.io import load_mesh, save_ply
+from meshsal.mesh import Mesh, MeshError
+warnings.simplefilter("ignore")
+root = sys.argv[1]
+rng = np.random.default_rng(0)
+V = rng.random((30, 3)); F = rng.integers(0, 30, (40, 3))
+save_ply(root + "/seed.ply", Mesh(vertices=V, faces=F))
+seeds = {".ply": open(root + "/seed.ply", "rb").read(),
+         ".stl": b"\\0" * 80 + np.uint32(4).tobytes() + rng.bytes(200),
+         ".obj": "".join(f"v {a} {b} {c}\\n" for a, b, c in V).encode() + b"f 1 2 3\\nf 4 5 6\\n",
+         ".off": b"OFF\\n30 40 0\\n" + b"".join(b"%f %f %f\\n" % tuple(v) for v in V)}
+count = 0
+for ext, seed in seeds.items():
+    for trial in range(25):
+        data = bytearray(seed[: rng.integers(0, len(seed) + 1)])
+        for _ in range(rng.integers(0, 4)):
+            if data:
+                data[rng.integers(0, len(data))] = rng.integers(0, 256)
+        if trial % 5 == 0:
+            data = rng.bytes(rng.integers(1, 400))
+        path = f"{root}/g{trial}{ext}"
+        open(path, "wb").write(bytes(data))
+        try:
+            load_mesh(path)
+        except MeshError:
+            pass
+        count += 1
+print(count)
+"""
+
+
+def test_truncated_and_corrupted_files_do_not_crash_the_interpreter(tmp_path):
+    # A child process, so a segfault shows as a failed test rather than killing pytest.
+    result = subprocess.run(
+        [sys.executable, "-c", GARBAGE_SCRIPT, str(tmp_path)], capture_output=True, text=True, timeout=300
+    )
+    assert result.returncode == 0, result.stderr[-2000:]
+    assert result.stdout.split()[-1] == "100"
+
+
+# --------------------------------------------------------------------------- PLY output
+
+
+def test_save_ply_round_trip_with_colors_and_quality(tmp_path):
+    rng = np.random.default_rng(1)
+    colors = rng.integers(0, 256, (4, 3)) / 255.0
+    mesh = Mesh(vertices=TETRA_V * 3.5 - 1, faces=TETRA_F, vertex_colors=colors)
+    quality = np.array([0.25, -1.5, 3.0, 1e3])
+    path = tmp_path / "out.ply"
+    save_ply(path, mesh, quality=quality)
+    assert path.read_bytes().startswith(b"ply\nformat binary_little_endian 1.0\n")
+    back = load_clean(path)
+    np.testing.assert_allclose(back.vertices, mesh.vertices, atol=1e-6)
+    np.testing.assert_array_equal(back.faces, mesh.faces)
+    np.testing.assert_allclose(back.vertex_colors, colors, atol=1e-6)
+    np.testing.assert_array_equal(load_vertex_quality(path), quality)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["out.ply"]  # no temporary left behind
+
+
+def test_saved_quality_is_meshlab_vertex_quality(tmp_path):
+    import pymeshlab
+
+    path = tmp_path / "q.ply"
+    save_ply(path, Mesh(vertices=TETRA_V, faces=TETRA_F), quality=[1.0, 2.0, 3.0, 4.0])
+    ms = pymeshlab.MeshSet()
+    ms.load_new_mesh(str(path))
+    np.testing.assert_array_equal(ms.current_mesh().vertex_scalar_array(), [1, 2, 3, 4])
+
+
+def test_save_ply_without_colors_round_trips(tmp_path):
+    path = tmp_path / "plain.ply"
+    save_ply(path, Mesh(vertices=TETRA_V, faces=TETRA_F))
+    back = load_clean(path)
+    assert back.vertex_colors is None
+    np.testing.assert_array_equal(back.faces, TETRA_F)
+
+
+def test_save_ply_rejects_wrong_quality_shape_and_writes_nothing(tmp_path):
+    with pytest.raises(ValueError, match=r"q\.ply.*shape \(4,\)"):
+        save_ply(tmp_path / "q.ply", Mesh(vertices=TETRA_V, faces=TETRA_F), quality=[1.0, 2.0])
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_load_vertex_quality_needs_a_ply(tmp_path):
+    with pytest.raises(MeshError, match=r"q\.obj.*only stored in PLY"):
+        load_vertex_quality(write(tmp_path / "q.obj", "v 0 0 0\n"))
+
+
+def test_load_vertex_quality_without_quality(tmp_path):
+    path = tmp_path / "noq.ply"
+    save_ply(path, Mesh(vertices=TETRA_V, faces=TETRA_F))
+    with pytest.raises(MeshError, match=r"noq\.ply.*quality"):
+        load_vertex_quality(path)
+
+
+# --------------------------------------------------------------------------- shared meshes
+
+
+def test_spot_cow_has_uv_and_texture(shared_mesh):
+    m = load_clean(shared_mesh("spot/spot.obj"))
+    assert m.name == "spot"
+    assert m.texture.shape == (1024, 1024, 3)
+    assert m.uv.shape == (m.n_faces, 3, 2)
+    # The first face's corners carry the file's own vt values.
+    lines = shared_mesh("spot/spot.obj").read_text().splitlines()
+    vt = [[float(x) for x in ln.split()[1:3]] for ln in lines if ln.startswith("vt ")]
+    first = next(ln for ln in lines if ln.startswith("f ")).split()[1:4]
+    np.testing.assert_allclose(m.uv[0], [vt[int(c.split("/")[1]) - 1] for c in first], atol=1e-6)
+    assert m.texture.std() > 20  # painted, not a flat color
+
+
+@pytest.mark.parametrize(
+    "name",
+    ["cow.obj", "teapot.obj", "stanford-bunny.obj", "fandisk.obj", "rocker-arm.obj",
+     "suzanne.obj", "beetle.obj", "nefertiti.obj"],
+)  # fmt: skip
+def test_shared_meshes_load(shared_mesh, name):
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", MeshRepairWarning)
+        m = load_mesh(shared_mesh(name))
+    assert m.n_faces > 500
+    assert np.isfinite(m.vertices).all()
+    assert m.faces.min() == 0 and m.faces.max() == m.n_vertices - 1  # every vertex referenced
+    assert (face_areas(m.vertices, m.faces) > 0).all()
