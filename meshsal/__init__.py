@@ -18,6 +18,7 @@ _EXPORTS = {
     "vertex_adjacency": "mesh",
     "load_mesh": "io",
     "save_ply": "io",
+    "MeshRepairWarning": "io",
     "scale_to": "transform",
     "normalize": "transform",
     "Camera": "render",
