@@ -1,0 +1,134 @@
+"""Benchmark the attention model: the eight channel maps over the 72 views, and mesh saliency.
+
+Prints Markdown tables: wall time per channel for all 72 views of the
+textured cow at 256 x 256 (views in a thread pool), the full
+``saliency_views`` (all channels + combination), and mesh saliency on
+nefertiti and on a subdivided nefertiti of about 200k vertices.  Times are
+medians of ``--repeats`` runs.
+
+Targets (2 cores): all channels of all 72 views <= 2 s; mesh saliency of
+100k vertices <= 1 s.
+
+    .venv/bin/python benchmarks/bench_attention.py [--meshes-dir DIR] [--repeats 3]
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import statistics
+import sys
+import time
+from concurrent.futures import ThreadPoolExecutor
+from pathlib import Path
+
+import numpy as np
+
+import meshsal
+from meshsal import attention, render
+from meshsal.attention.combine import channel_function
+from meshsal.curvature import mesh_saliency
+
+DEFAULT_MESHES = Path(__file__).resolve().parents[1].parent / "shared" / "meshes"
+
+
+def median_time(fn, repeats: int) -> tuple[float, float]:
+    """Median wall time and median process CPU time (all threads) of ``fn()``, seconds.
+
+    On a shared machine the wall time grows with other people's load; the CPU
+    time does much less, and CPU / cores is what an idle machine would take
+    if the threads scale.
+    """
+    walls, cpus = [], []
+    for _ in range(repeats):
+        start, cpu = time.perf_counter(), time.process_time()
+        fn()
+        walls.append(time.perf_counter() - start)
+        cpus.append(time.process_time() - cpu)
+    return statistics.median(walls), statistics.median(cpus)
+
+
+def channel_over_views(name, views, faces, vertex_saliency, pool):
+    if name == "curvature":
+        return list(pool.map(lambda v: attention.curvature(v, vertex_saliency, faces), views))
+    fn = channel_function(name)
+    return list(pool.map(lambda v: fn(v.rgb), views))
+
+
+def bench_channels(mesh_path: Path, size: int, repeats: int, threads: int) -> None:
+    mesh = meshsal.load_mesh(mesh_path)
+    cameras = [c for s in render.view_rig() for c in s]
+    start = time.perf_counter()
+    views = render.render_views(mesh, cameras, size=size)
+    render_s = time.perf_counter() - start
+    vertex_saliency = mesh_saliency(mesh)
+
+    rows = []
+    with ThreadPoolExecutor(max_workers=threads) as pool:
+        for name in attention.CHANNELS:
+            rows.append((name, *median_time(
+                lambda: channel_over_views(name, views, mesh.faces, vertex_saliency, pool), repeats)))
+    rows.append(("sum of channels", sum(r[1] for r in rows), sum(r[2] for r in rows)))
+    rows.append(("saliency_views (8 channels + combination)", *median_time(
+        lambda: attention.saliency_views(views, mesh, vertex_saliency=vertex_saliency, threads=threads), repeats)))
+
+    n = len(views)
+    print(f"\n### Channel maps: {mesh_path.name}, {n} views at {size}x{size}, "
+          f"{threads} threads, median of {repeats}\n")
+    print("| channel | wall, all views (s) | CPU, all views (s) | CPU per view (ms) |")
+    print("|---|---:|---:|---:|")
+    for name, wall, cpu in rows:
+        print(f"| {name} | {wall:.3f} | {cpu:.3f} | {1000 * cpu / n:.2f} |")
+    wall, cpu = rows[-1][1:]
+    print(f"\nTarget: all channels of all views <= 2 s on 2 cores; measured {wall:.2f} s wall, "
+          f"{cpu:.2f} s CPU (load average at the end: {os.getloadavg()[0]:.1f}). "
+          f"Rendering the views, not included: {render_s:.2f} s.")
+
+
+def subdivided(mesh, target_vertices: int):
+    import igl
+
+    V = np.ascontiguousarray(mesh.vertices, np.float64)
+    F = np.ascontiguousarray(mesh.faces, np.int64)
+    while V.shape[0] < target_vertices:
+        V, F = igl.upsample(V, F)
+    return meshsal.Mesh(vertices=V, faces=F.astype(np.int32), name=f"{mesh.name} subdivided")
+
+
+def bench_mesh_saliency(meshes_dir: Path, repeats: int) -> None:
+    path = meshes_dir / "nefertiti.obj"
+    base = meshsal.load_mesh(path)
+    cases = [("nefertiti", base), ("nefertiti, 1:4 midpoint upsample (igl.upsample)", subdivided(base, 150_000))]
+    print(f"\n### Mesh saliency (Lee et al. 2005), median of {repeats}\n")
+    print("| mesh | vertices | faces | wall (s) | CPU (s) | wall per 100k vertices (s) |")
+    print("|---|---:|---:|---:|---:|---:|")
+    for label, mesh in cases:
+        wall, cpu = median_time(lambda: mesh_saliency(mesh), repeats)
+        n = mesh.vertices.shape[0]
+        print(f"| {label} | {n} | {mesh.faces.shape[0]} | {wall:.3f} | {cpu:.3f} | {wall * 1e5 / n:.3f} |")
+    print(f"\nTarget: 100k vertices <= 1 s (load average at the end: {os.getloadavg()[0]:.1f}).")
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--meshes-dir", type=Path, default=DEFAULT_MESHES,
+                        help=f"folder of the public test meshes (default {DEFAULT_MESHES})")
+    parser.add_argument("--size", type=int, default=256, help="view size in pixels (default 256)")
+    parser.add_argument("--repeats", type=int, default=3, help="timed repeats, median reported (default 3)")
+    parser.add_argument("--threads", type=int, default=os.cpu_count() or 1,
+                        help="worker threads over views (default: CPU count)")
+    parser.add_argument("--skip-mesh-saliency", action="store_true", help="only time the channel maps")
+    args = parser.parse_args(argv)
+    spot = args.meshes_dir / "spot" / "spot.obj"
+    if not spot.exists():
+        print(f"bench_attention: error: {spot} not found (use --meshes-dir)", file=sys.stderr)
+        return 1
+    print(f"cores: {os.cpu_count()}, threads: {args.threads}")
+    bench_channels(spot, args.size, args.repeats, args.threads)
+    if not args.skip_mesh_saliency:
+        bench_mesh_saliency(args.meshes_dir, args.repeats)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

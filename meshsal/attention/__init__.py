@@ -1,0 +1,58 @@
+"""Visual attention: the eight conspicuity maps of a rendered view and their combination.
+
+The improved attention model of Rouhafzay, Pedneault & Cretu (2017) extends
+Itti, Koch & Niebur (1998) with symmetry, curvature, DKL color, entropy and
+contrast channels.  Each image channel is a plain function
+``(img (H, W, 3) float32 in [0, 1]) -> (H, W) float32 in [0, 1]``:
+
+>>> import numpy as np
+>>> from meshsal import attention
+>>> img = np.full((64, 64, 3), 0.2, np.float32); img[10:20, 40:50] = 0.9
+>>> attention.intensity(img).shape
+(64, 64)
+
+``curvature(view, vertex_saliency, faces)`` renders per-vertex mesh saliency
+into a view, ``saliency(view, mesh)`` combines the eight channels and
+``saliency_views(views, mesh)`` does so for many views in a thread pool.
+"""
+
+# Functions are bound after their modules, so ``attention.dkl`` and
+# ``attention.symmetry`` are the channel functions, not the submodules.
+from .pyramid import center_surround_map, gaussian_pyramid, normalize_map
+from .itti import color, intensity, orientation
+from .dkl import dkl
+from .symmetry import symmetry
+from .local import contrast, entropy
+from .combine import (
+    CHANNELS,
+    IMAGE_CHANNELS,
+    SaliencyResult,
+    combine_maps,
+    curvature,
+    erode_mask,
+    image_channels,
+    saliency,
+    saliency_views,
+)
+
+__all__ = [
+    "CHANNELS",
+    "IMAGE_CHANNELS",
+    "SaliencyResult",
+    "center_surround_map",
+    "color",
+    "combine_maps",
+    "contrast",
+    "curvature",
+    "dkl",
+    "entropy",
+    "erode_mask",
+    "gaussian_pyramid",
+    "image_channels",
+    "intensity",
+    "normalize_map",
+    "orientation",
+    "saliency",
+    "saliency_views",
+    "symmetry",
+]

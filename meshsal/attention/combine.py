@@ -1,0 +1,325 @@
+"""The curvature channel and the combination of the eight channels into one saliency map."""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Mapping, Sequence
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+from .dkl import dkl
+from .itti import color, intensity, orientation
+from .local import contrast, entropy
+from .pyramid import normalize_map, scale_to_max
+from .symmetry import symmetry
+
+__all__ = [
+    "CHANNELS",
+    "IMAGE_CHANNELS",
+    "SaliencyResult",
+    "channel_function",
+    "image_channels",
+    "curvature",
+    "outline_radius",
+    "erode_mask",
+    "combine_maps",
+    "saliency",
+    "saliency_views",
+]
+
+CHANNELS = ("intensity", "color", "orientation", "dkl", "symmetry", "curvature", "entropy", "contrast")
+IMAGE_CHANNELS = tuple(c for c in CHANNELS if c != "curvature")
+
+_FUNCTIONS = {
+    "intensity": intensity,
+    "color": color,
+    "orientation": orientation,
+    "dkl": dkl,
+    "symmetry": symmetry,
+    "entropy": entropy,
+    "contrast": contrast,
+}
+
+
+def channel_function(name: str):
+    """The function ``(img (H, W, 3) float32) -> (H, W) float32`` of an image channel."""
+    if name not in _FUNCTIONS:
+        raise ValueError(f"unknown image channel {name!r}; expected one of {IMAGE_CHANNELS}")
+    return _FUNCTIONS[name]
+
+
+@dataclass(frozen=True, eq=False)
+class SaliencyResult:
+    """Saliency of one view.
+
+    Attributes
+    ----------
+    map : (H, W) float32 in [0, 1]
+        Weighted combination of the channels, zero outside the eroded silhouette.
+    channels : dict str -> (H, W) float32 in [0, 1]
+        The eight conspicuity maps, keyed by the names of ``CHANNELS``, over the
+        whole image (not masked).
+    """
+
+    map: np.ndarray
+    channels: dict
+
+
+def image_channels(img: np.ndarray, names: Sequence[str] = IMAGE_CHANNELS) -> dict[str, np.ndarray]:
+    """Compute several image channels of one RGB image.
+
+    Parameters
+    ----------
+    img : (H, W, 3) float32 in [0, 1]
+    names : sequence of image channel names (all seven by default)
+
+    Returns
+    -------
+    dict name -> (H, W) float32 in [0, 1]
+    """
+    return {name: channel_function(name)(img) for name in names}
+
+
+def curvature(view, vertex_saliency: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """Render per-vertex saliency into a view (the curvature channel).
+
+    Each object pixel interpolates the values of the three vertices of the
+    face it sees with its barycentric weights; background pixels are zero.
+    Values are min-max scaled over the whole mesh, not the view, so a vertex
+    has the same value in every view and a view without salient geometry is
+    not inflated.
+
+    Parameters
+    ----------
+    view : View
+        Uses ``view.face_id`` (H, W) int (-1 on background) and ``view.bary`` (H, W, 3).
+    vertex_saliency : (n,) float
+        E.g. ``meshsal.mesh_saliency(mesh)``.
+    faces : (m, 3) int
+        The faces the view was rendered from (``mesh.faces``).
+
+    Returns
+    -------
+    (H, W) float32 in [0, 1]
+
+    Examples
+    --------
+    >>> from types import SimpleNamespace
+    >>> v = SimpleNamespace(face_id=np.array([[0, -1]]), bary=np.array([[[0.5, 0.5, 0.0], [0, 0, 0]]]))
+    >>> curvature(v, np.array([0.0, 1.0, 2.0]), np.array([[0, 1, 2]])).tolist()
+    [[0.25, 0.0]]
+    """
+    values = np.asarray(vertex_saliency, dtype=np.float64)
+    faces = np.asarray(faces)
+    face_id = np.asarray(view.face_id)
+    if values.ndim != 1:
+        raise ValueError(f"vertex_saliency must be a 1-D array with one value per vertex, got shape {values.shape}")
+    if not np.isfinite(values).all():
+        raise ValueError("vertex_saliency contains NaN or infinite values")
+    if faces.ndim != 2 or faces.shape[1] != 3:
+        raise ValueError(f"faces must be an (m, 3) array, got shape {faces.shape}")
+    if faces.size and int(faces.max()) >= values.size:
+        raise ValueError(
+            f"vertex_saliency has {values.size} values but the faces index vertex {int(faces.max())}"
+        )
+    seen = face_id >= 0
+    if seen.any() and int(face_id.max()) >= len(faces):
+        raise ValueError(f"the view shows face {int(face_id.max())} but only {len(faces)} faces were given")
+    out = np.zeros(face_id.shape, np.float32)
+    if values.size == 0:
+        return out
+    lo, span = float(values.min()), float(np.ptp(values))
+    if not span > 0:
+        return out
+    scaled = ((values - lo) / span).astype(np.float32)
+    corners = faces[face_id[seen]]
+    out[seen] = np.einsum("kc,kc->k", scaled[corners], np.asarray(view.bary, np.float32)[seen])
+    return np.clip(out, 0.0, 1.0)
+
+
+def outline_radius(shape: tuple[int, int]) -> int:
+    """Default silhouette erosion: 2% of the image's longer side (5 px at 256), at least 1."""
+    return max(1, int(round(0.02 * max(shape[:2]))))
+
+
+def erode_mask(mask: np.ndarray, radius: int | None = None) -> np.ndarray:
+    """Shrink a silhouette by ``radius`` pixels (a disk), dropping the band along its outline.
+
+    The paper removes the salient regions around the object's outline: the
+    contrast between object and background is not a property of the object.
+
+    Parameters
+    ----------
+    mask : (H, W) bool
+    radius : int, optional
+        Default :func:`outline_radius`; 0 returns the mask unchanged.
+
+    Returns
+    -------
+    (H, W) bool
+    """
+    mask = np.asarray(mask, dtype=bool)
+    if mask.ndim != 2:
+        raise ValueError(f"mask must be (H, W), got shape {mask.shape}")
+    r = outline_radius(mask.shape) if radius is None else int(radius)
+    if r < 0:
+        raise ValueError(f"erosion radius must be non-negative, got {radius}")
+    if r == 0:
+        return mask.copy()
+    disk = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * r + 1, 2 * r + 1))
+    # Outside the image counts as background, so the outline at the border is eroded too.
+    eroded = cv2.erode(mask.astype(np.uint8), disk, borderType=cv2.BORDER_CONSTANT, borderValue=0)
+    return eroded.astype(bool)
+
+
+def _check_weights(weights: Mapping[str, float] | None) -> dict[str, float]:
+    if weights is None:
+        return dict.fromkeys(CHANNELS, 1.0)
+    if not isinstance(weights, Mapping):
+        raise ValueError(f"weights must be a dict channel name -> float, got {type(weights).__name__}")
+    unknown = sorted(set(weights) - set(CHANNELS))
+    if unknown:
+        raise ValueError(f"unknown channel(s) in weights: {unknown}; expected names from {CHANNELS}")
+    out = dict.fromkeys(CHANNELS, 0.0)
+    for name, w in weights.items():
+        w = float(w)
+        if not (np.isfinite(w) and w >= 0):
+            raise ValueError(f"weight of channel {name!r} must be finite and non-negative, got {w}")
+        out[name] = w
+    if not sum(out.values()) > 0:
+        raise ValueError("weights are all zero: at least one channel needs a positive weight")
+    return out
+
+
+def combine_maps(
+    channels: Mapping[str, np.ndarray],
+    mask: np.ndarray,
+    weights: Mapping[str, float] | None = None,
+    erode: int | None = None,
+    normalize: bool = True,
+) -> np.ndarray:
+    """Weighted combination of channel maps inside the eroded silhouette.
+
+    Each channel is cut to the silhouette shrunk by ``erode`` pixels (see
+    :func:`erode_mask`) and scaled to [0, 1] there; with ``normalize`` it is
+    then multiplied by its N(.) amplitude, as Itti combines conspicuity maps
+    (S = sum of N(conspicuity)): :func:`~meshsal.attention.pyramid.normalize_map`
+    of the cut map averaged down to the resolution of scale 4 (1/16), so a
+    channel with one outstanding region counts fully and a channel that
+    responds everywhere on the object counts little.  The weighted sum is
+    divided by its maximum.
+
+    Parameters
+    ----------
+    channels : dict name -> (H, W) map; every channel with a positive weight must be present
+    mask : (H, W) bool silhouette
+    weights : dict name -> float, optional
+        Equal weights for the eight channels by default; channels missing
+        from a given dict weigh zero; unknown names raise ValueError.
+    erode : int, optional
+        Erosion radius in pixels (default :func:`outline_radius`).
+    normalize : bool
+        Apply N(.) to each channel before summing (default True).
+
+    Returns
+    -------
+    (H, W) float32 in [0, 1], zero outside the eroded mask.
+    """
+    w = _check_weights(weights)
+    inside = erode_mask(mask, erode)
+    h, wd = inside.shape
+    small = (max(1, wd // 16), max(1, h // 16))
+    total = np.zeros(inside.shape, np.float32)
+    for name, weight in w.items():
+        if weight == 0:
+            continue
+        if name not in channels:
+            raise ValueError(f"channel {name!r} has weight {weight} but its map was not given")
+        ch = np.asarray(channels[name], np.float32)
+        if ch.shape != inside.shape:
+            raise ValueError(f"channel {name!r} has shape {ch.shape}, the mask {inside.shape}")
+        cut = scale_to_max(np.where(inside, ch, np.float32(0.0)))
+        gain = weight
+        if normalize and cut.any():
+            gain *= float(normalize_map(cv2.resize(cut, small, interpolation=cv2.INTER_AREA)).max())
+        total += np.float32(gain) * cut
+    return scale_to_max(total)
+
+
+def saliency(view, mesh, weights: Mapping[str, float] | None = None, vertex_saliency=None) -> SaliencyResult:
+    """The eight-channel saliency map of one rendered view.
+
+    Parameters
+    ----------
+    view : View
+        From :mod:`meshsal.render`; the image channels use ``view.rgb``, the
+        curvature channel ``view.face_id`` and ``view.bary``.
+    mesh : Mesh
+        The rendered mesh.
+    weights : dict name -> float, optional
+        Equal weights by default (see :func:`combine_maps`).
+    vertex_saliency : (n,) float, optional
+        Per-vertex mesh saliency; computed with
+        ``meshsal.curvature.mesh_saliency(mesh)`` when omitted.  Pass it when
+        processing many views of one mesh.
+
+    Returns
+    -------
+    SaliencyResult
+        ``map`` zero outside the silhouette eroded by :func:`outline_radius`
+        pixels, so that the object-background edge does not dominate;
+        ``channels`` the eight full-image maps.
+    """
+    w = _check_weights(weights)
+    if vertex_saliency is None:
+        from meshsal.curvature import mesh_saliency
+
+        vertex_saliency = mesh_saliency(mesh)
+    channels = image_channels(view.rgb)
+    channels["curvature"] = curvature(view, vertex_saliency, mesh.faces)
+    channels = {name: channels[name] for name in CHANNELS}
+    return SaliencyResult(map=combine_maps(channels, view.mask, w), channels=channels)
+
+
+def saliency_views(
+    views: Sequence,
+    mesh,
+    weights: Mapping[str, float] | None = None,
+    vertex_saliency=None,
+    threads: int | None = None,
+) -> list[SaliencyResult]:
+    """:func:`saliency` of many views of one mesh, in a thread pool.
+
+    The mesh saliency is computed once; OpenCV releases the GIL, so views
+    run in parallel.
+
+    Parameters
+    ----------
+    views : sequence of View
+    mesh : Mesh
+    weights, vertex_saliency : as in :func:`saliency`
+    threads : int, optional
+        Worker threads (default: the CPU count).
+
+    Returns
+    -------
+    list of SaliencyResult, in the order of ``views``
+    """
+    views = list(views)
+    _check_weights(weights)
+    if vertex_saliency is None:
+        from meshsal.curvature import mesh_saliency
+
+        vertex_saliency = mesh_saliency(mesh)
+
+    def one(view):
+        return saliency(view, mesh, weights, vertex_saliency)
+
+    workers = threads or os.cpu_count() or 1
+    if workers == 1 or len(views) <= 1:
+        return [one(v) for v in views]
+    with ThreadPoolExecutor(max_workers=workers) as pool:
+        return list(pool.map(one, views))

@@ -1,0 +1,382 @@
+"""Gaussian pyramids, center-surround differences and Itti's map normalization.
+
+The shared machinery of the Itti-Koch style channels (Itti, Koch & Niebur,
+PAMI 1998; Itti & Koch, J. Electronic Imaging 2001): a dyadic Gaussian
+pyramid of a feature, center-surround differences ``|F(c) - F(s)|`` for center
+scales ``c in {2, 3, 4}`` and surround scales ``s = c + d, d in {3, 4}``,
+each normalized by ``N(.)``, summed across scales at the resolution of scale 4,
+normalized again and brought back to the input size.
+
+N(.) is by default the global non-linear normalization ("maxima": scale to
+[0, 1], multiply by ``(1 - mean of the rival local maxima)**2``) that Itti &
+Koch (2001) compare with their iterative difference-of-Gaussians competition;
+the latter is available as ``normalize_map(m, "iterative")``
+(see :func:`normalize_map` for why it is not the default).
+
+Coarse levels are brought back up with the pyramid's own geometry
+(:func:`upsample`): ``cv2.pyrDown`` puts coarse pixel ``i`` on fine pixel
+``2 i``, and resizing as if pixel centres were aligned would shift a scale-4
+map by 7.5 input pixels.
+
+Small images
+------------
+The full scheme needs nine pyramid levels (0..8), i.e. images of at least
+256 pixels on their shorter side.  Smaller images get fewer levels (levels
+are built while the shorter side is at least 2 pixels) and the (c, s) pairs
+whose surround level does not exist are dropped; if no pair survives (shorter
+side below 32 pixels) the finest center and the coarsest surround available
+are used, ``(0, L - 1)``.  A single-pixel or constant feature gives a zero map.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+
+import cv2
+import numpy as np
+
+__all__ = [
+    "CENTERS",
+    "DELTAS",
+    "gaussian_pyramid",
+    "normalize_map",
+    "across_scale_sum",
+    "conspicuity_map",
+    "conspicuity_from_pyramids",
+    "scale_pairs",
+    "levels_used",
+    "center_surround_map",
+    "to_unit",
+    "upsample",
+    "scale_to_max",
+    "check_image",
+]
+
+CENTERS = (2, 3, 4)
+DELTAS = (3, 4)
+_LEVELS = max(CENTERS) + max(DELTAS) + 1
+
+# Itti & Koch (2001), iterative N(.): excitatory and inhibitory Gaussians of
+# 2% and 25% of the map width with gains 0.5 and 1.5, global inhibition 0.02.
+_C_EX, _C_INH = 0.5, 1.5
+_SIGMA_EX, _SIGMA_INH = 0.02, 0.25
+_GLOBAL_INH = 0.02
+# N(.) "maxima": local maxima (3x3) above 10% of the range count as peaks;
+# those within 2 pixels (Chebyshev) of the global maximum belong to it.
+_PEAK_FLOOR = 0.1
+_PEAK_EXCLUSION = 2
+# Maps whose value range is below this are flat: nothing to normalize.
+_FLAT = 1e-6
+
+
+def gaussian_pyramid(img: np.ndarray, levels: int = _LEVELS) -> list[np.ndarray]:
+    """Dyadic Gaussian pyramid (5x5 binomial filter, then subsampling by 2).
+
+    Parameters
+    ----------
+    img : (H, W) or (H, W, C) array
+        Level 0 (converted to float32).
+    levels : int
+        Wanted number of levels.  Fewer are returned when the image runs out:
+        a level is added only while the previous level's shorter side is at
+        least 2 pixels.
+
+    Returns
+    -------
+    list of float32 arrays; level ``k`` has shape ``ceil(H / 2**k), ceil(W / 2**k)``.
+
+    Examples
+    --------
+    >>> [p.shape for p in gaussian_pyramid(np.zeros((64, 48), np.float32), 4)]
+    [(64, 48), (32, 24), (16, 12), (8, 6)]
+    """
+    if levels < 1:
+        raise ValueError(f"gaussian_pyramid needs at least one level, got {levels}")
+    pyramid = [np.ascontiguousarray(img, dtype=np.float32)]
+    while len(pyramid) < levels and min(pyramid[-1].shape[:2]) >= 2:
+        pyramid.append(cv2.pyrDown(pyramid[-1]))
+    return pyramid
+
+
+def _gaussian(m: np.ndarray, sigma: float) -> np.ndarray:
+    k = 2 * max(1, math.ceil(3.0 * sigma)) + 1
+    return cv2.GaussianBlur(m, (k, k), sigmaX=sigma, sigmaY=sigma, borderType=cv2.BORDER_REFLECT)
+
+
+def upsample(m: np.ndarray, factor: int, shape: tuple[int, int]) -> np.ndarray:
+    """Bilinear upsampling that respects the pyramid's geometry.
+
+    ``cv2.pyrDown`` centres pixel ``i`` of the coarse level on pixel ``2 i`` of
+    the finer one (not on ``2 i + 0.5`` as ``cv2.resize`` assumes), so a level-k
+    pixel ``i`` sits at input pixel ``i * 2**k``; upsampling with that same map
+    keeps features in place instead of drifting by up to ``2**k / 2`` pixels.
+
+    Parameters
+    ----------
+    m : (h, w) float32
+    factor : int, e.g. ``2**k``
+    shape : (H, W) output shape
+
+    Returns
+    -------
+    (H, W) float32
+    """
+    inv = 1.0 / factor
+    warp = np.array([[inv, 0.0, 0.0], [0.0, inv, 0.0]], np.float32)
+    return cv2.warpAffine(
+        m, warp, (shape[1], shape[0]), flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP,
+        borderMode=cv2.BORDER_REPLICATE,
+    )
+
+
+def to_unit(m: np.ndarray) -> np.ndarray:
+    """Min-max scale a map to [0, 1] as float32; a flat map becomes zeros."""
+    m = np.asarray(m, dtype=np.float32)
+    lo = float(m.min()) if m.size else 0.0
+    span = (float(m.max()) - lo) if m.size else 0.0
+    if not span > _FLAT:
+        return np.zeros(m.shape, np.float32)
+    return (m - lo) * np.float32(1.0 / span)
+
+
+def scale_to_max(m: np.ndarray) -> np.ndarray:
+    """Divide a non-negative map by its maximum (float32, [0, 1]); a zero map stays zero."""
+    m = np.asarray(m, dtype=np.float32)
+    top = float(m.max()) if m.size else 0.0
+    if not top > _FLAT:
+        return np.zeros(m.shape, np.float32)
+    return m * np.float32(1.0 / top)
+
+
+def check_image(img, name: str = "img") -> np.ndarray:
+    """Validate an RGB image for the attention channels and return it as float32.
+
+    Parameters
+    ----------
+    img : (H, W, 3) floating array with values in [0, 1]
+    name : str
+        The caller's name, used in the error message.
+
+    Raises
+    ------
+    ValueError
+        Wrong shape, non-floating dtype (e.g. uint8: divide by 255 first),
+        NaN/inf, or values outside [0, 1].
+    """
+    arr = np.asarray(img)
+    if arr.ndim != 3 or arr.shape[2] != 3:
+        raise ValueError(f"{name}: expected an (H, W, 3) RGB image, got shape {arr.shape}")
+    if arr.shape[0] < 1 or arr.shape[1] < 1:
+        raise ValueError(f"{name}: image is empty, shape {arr.shape}")
+    if not np.issubdtype(arr.dtype, np.floating):
+        raise ValueError(
+            f"{name}: expected a float image with values in [0, 1], got dtype {arr.dtype}"
+            " (convert uint8 images with img.astype(np.float32) / 255)"
+        )
+    arr = np.ascontiguousarray(arr, dtype=np.float32)
+    lo, hi = float(arr.min()), float(arr.max())
+    if not (np.isfinite(lo) and np.isfinite(hi)):
+        raise ValueError(f"{name}: image contains NaN or infinite values")
+    if lo < -1e-6 or hi > 1.0 + 1e-6:
+        raise ValueError(f"{name}: image values must lie in [0, 1], got range [{lo:.4g}, {hi:.4g}]")
+    return arr
+
+
+def normalize_map(m: np.ndarray, method: str = "maxima", iterations: int = 3) -> np.ndarray:
+    """Itti's map normalization operator N(.).
+
+    Both variants first scale the map to the fixed range [0, 1] (removing
+    amplitude differences between modalities), then promote maps with a few
+    strong peaks over maps with many comparable ones.
+
+    Parameters
+    ----------
+    m : (h, w) array
+    method : {"maxima", "iterative"}
+        ``"maxima"`` (default; Itti, Koch & Niebur 1998, also the first form
+        in Itti & Koch 2001): multiply by ``(1 - mean)**2``, where ``mean`` is
+        the average of the rival local maxima: 3x3 local maxima above 10% of
+        the range, except those within 2 pixels of the global maximum (its
+        own plateau).  A map with one peak keeps it; a map with many equal
+        peaks is crushed.
+        ``"iterative"``: Itti & Koch (2001), ``iterations`` rounds of
+        ``M <- |M + M * DoG - C_inh|_{>=0}``, where DoG is the difference of an
+        excitatory Gaussian (sigma 2% of the map width, gain 0.5**2) and an
+        inhibitory one (sigma 25%, gain 1.5**2), and C_inh = 0.02.  Peaks that
+        stand alone grow, crowded or uniform regions die out.  On our 16 x 16
+        scale-4 maps it kept the bar ends of orientation search displays
+        alive, so it is not the default.
+    iterations : int
+        Rounds of the iterative variant.
+
+    Returns
+    -------
+    (h, w) float32, non-negative, at most 1 for "maxima"; not rescaled
+    afterwards, since the surviving amplitude is what ranks maps when they
+    are summed.
+
+    Examples
+    --------
+    >>> one = np.zeros((16, 16), np.float32); one[8, 8] = 1.0
+    >>> float(normalize_map(one).max())
+    1.0
+    >>> two = one.copy(); two[2, 2] = 0.8
+    >>> round(float(normalize_map(two).max()), 2)
+    0.04
+    """
+    m = np.asarray(m, dtype=np.float32)
+    if m.ndim != 2:
+        raise ValueError(f"normalize_map expects a 2-D map, got shape {m.shape}")
+    m = to_unit(m)
+    if not m.any():
+        return m
+    if method == "maxima":
+        peaks = (m == cv2.dilate(m, np.ones((3, 3), np.uint8))) & (m > _PEAK_FLOOR)
+        rows, cols = np.nonzero(peaks)
+        top_r, top_c = np.unravel_index(int(np.argmax(m)), m.shape)
+        # The global maximum's own plateau or shoulder is not a rival peak.
+        rival = np.maximum(np.abs(rows - top_r), np.abs(cols - top_c)) > _PEAK_EXCLUSION
+        mean = float(m[rows[rival], cols[rival]].mean()) if rival.any() else 0.0
+        return m * np.float32((1.0 - mean) ** 2)
+    if method == "iterative":
+        width = max(m.shape)
+        sigma_ex, sigma_inh = _SIGMA_EX * width, _SIGMA_INH * width
+        for _ in range(iterations):
+            dog = _C_EX**2 * _gaussian(m, sigma_ex) - _C_INH**2 * _gaussian(m, sigma_inh)
+            m = np.maximum(m + dog - _GLOBAL_INH, 0.0, dtype=np.float32)
+        return m
+    raise ValueError(f"normalize_map method must be 'iterative' or 'maxima', got {method!r}")
+
+
+def scale_pairs(levels: int) -> list[tuple[int, int]]:
+    """The (center, surround) level pairs a pyramid of ``levels`` levels supports.
+
+    ``(c, c + d)`` for ``c in CENTERS``, ``d in DELTAS`` whose surround exists;
+    ``[(0, levels - 1)]`` if none does (shorter side below 32 px); ``[]`` for a
+    single level.
+
+    Examples
+    --------
+    >>> scale_pairs(9)
+    [(2, 5), (2, 6), (3, 6), (3, 7), (4, 7), (4, 8)]
+    >>> scale_pairs(4)
+    [(0, 3)]
+    """
+    pairs = [(c, c + d) for c in CENTERS for d in DELTAS if c + d < levels]
+    if not pairs and levels >= 2:
+        pairs = [(0, levels - 1)]
+    return pairs
+
+
+def levels_used(levels: int) -> set[int]:
+    """Pyramid levels that enter some center-surround pair (see :func:`scale_pairs`)."""
+    return {k for pair in scale_pairs(levels) for k in pair}
+
+
+def across_scale_sum(pyramid: Sequence[np.ndarray]) -> np.ndarray:
+    """Sum of N(|F(c) - F(s)|) over the center-surround pairs, at the center scale 4.
+
+    Parameters
+    ----------
+    pyramid : list of (h_k, w_k) float32, from :func:`gaussian_pyramid`; levels
+        outside :func:`levels_used` are not read and may be None.
+
+    Returns
+    -------
+    (h, w) float32 at the resolution of the coarsest center scale used
+    (scale 4 for images of 256 pixels; see :func:`scale_pairs`); a (1, 1)
+    zero map if the pyramid has a single level.
+    """
+    pairs = scale_pairs(len(pyramid))
+    if not pairs:
+        return np.zeros((1, 1), np.float32)
+    top = max(c for c, _ in pairs)
+    total = np.zeros(pyramid[top].shape, np.float32)
+    for c, s in pairs:
+        center = pyramid[c]
+        surround = upsample(pyramid[s], 2 ** (s - c), center.shape)
+        fmap = normalize_map(cv2.absdiff(center, surround))
+        for _ in range(top - c):
+            fmap = cv2.pyrDown(fmap)
+        total += fmap
+    return total
+
+
+def conspicuity_map(features: Sequence[np.ndarray], shape: tuple[int, int] | None = None) -> np.ndarray:
+    """Itti's conspicuity map of one channel made of several features.
+
+    ``to_unit(resize(N(sum_f N(across_scale_sum(pyramid(f))))))``: e.g. the
+    red-green and blue-yellow opponencies of the color channel, or the four
+    Gabor orientations.
+
+    Parameters
+    ----------
+    features : sequence of (H, W) float32 feature images of one shape
+    shape : (H, W), optional
+        Output size; the features' size by default.
+
+    Returns
+    -------
+    (H, W) float32 in [0, 1]
+    """
+    if not features:
+        raise ValueError("conspicuity_map needs at least one feature image")
+    h, w = features[0].shape[:2]
+    for f in features:
+        if f.shape != (h, w):
+            raise ValueError(f"feature images differ in shape: {(h, w)} and {f.shape}")
+    return conspicuity_from_pyramids([gaussian_pyramid(f) for f in features], shape or (h, w))
+
+
+def conspicuity_from_pyramids(
+    pyramids: Sequence[Sequence[np.ndarray]], shape: tuple[int, int]
+) -> np.ndarray:
+    """:func:`conspicuity_map` on ready-made feature pyramids (e.g. Gabor pyramids).
+
+    Parameters
+    ----------
+    pyramids : sequence of pyramids (lists of (h_k, w_k) float32), all of one geometry
+    shape : (H, W) output size
+
+    Returns
+    -------
+    (H, W) float32 in [0, 1]
+    """
+    total = None
+    for pyramid in pyramids:
+        small = normalize_map(across_scale_sum(pyramid))
+        total = small if total is None else total + small
+    total = normalize_map(total)
+    top = max((c for c, _ in scale_pairs(len(pyramids[0]))), default=0)
+    return to_unit(upsample(total, 2**top, shape))
+
+
+def center_surround_map(feature: np.ndarray) -> np.ndarray:
+    """Itti's center-surround conspicuity of a single feature image.
+
+    Gaussian pyramid, ``|F(c) - F(s)|`` for ``c in {2, 3, 4}``, ``s = c + d``,
+    ``d in {3, 4}``, each N(.)-normalized and summed at the resolution of
+    scale 4, N(.) again, resized back to the input size and scaled to [0, 1].
+
+    Parameters
+    ----------
+    feature : (H, W) float array
+
+    Returns
+    -------
+    (H, W) float32 in [0, 1]
+
+    Examples
+    --------
+    >>> f = np.zeros((128, 128), np.float32); f[50:70, 80:100] = 1.0
+    >>> m = center_surround_map(f)
+    >>> bool(np.unravel_index(m.argmax(), m.shape)[1] > 64)
+    True
+    """
+    feature = np.asarray(feature, dtype=np.float32)
+    if feature.ndim != 2:
+        raise ValueError(f"center_surround_map expects an (H, W) feature, got shape {feature.shape}")
+    if not np.isfinite(feature).all():
+        raise ValueError("center_surround_map: feature contains NaN or infinite values")
+    return conspicuity_map([feature])
