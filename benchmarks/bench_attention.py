@@ -48,9 +48,9 @@ def median_time(fn, repeats: int) -> tuple[float, float]:
     return statistics.median(walls), statistics.median(cpus)
 
 
-def channel_over_views(name, views, faces, vertex_saliency, pool):
+def channel_over_views(name, views, vertex_saliency, pool):
     if name == "curvature":
-        return list(pool.map(lambda v: attention.curvature(v, vertex_saliency, faces), views))
+        return list(pool.map(lambda v: attention.curvature(v, vertex_saliency), views))
     fn = channel_function(name)
     return list(pool.map(lambda v: fn(v.rgb), views))
 
@@ -67,7 +67,7 @@ def bench_channels(mesh_path: Path, size: int, repeats: int, threads: int) -> No
     with ThreadPoolExecutor(max_workers=threads) as pool:
         for name in attention.CHANNELS:
             rows.append((name, *median_time(
-                lambda: channel_over_views(name, views, mesh.faces, vertex_saliency, pool), repeats)))
+                lambda: channel_over_views(name, views, vertex_saliency, pool), repeats)))
     rows.append(("sum of channels", sum(r[1] for r in rows), sum(r[2] for r in rows)))
     rows.append(("saliency_views (8 channels + combination)", *median_time(
         lambda: attention.saliency_views(views, mesh, vertex_saliency=vertex_saliency, threads=threads), repeats)))

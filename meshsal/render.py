@@ -106,6 +106,7 @@ class View:
     depth : (H, W) float32, distance from the eye along the view direction; inf on background
     face_id : (H, W) int32, the face seen at each pixel; -1 on background
     bary : (H, W, 3) float32, barycentric weights of that face's three vertices
+    vertex_ids : (H, W, 3) int32, those three vertices (the face's corners); -1 on background
     mask : (H, W) bool, pixels that see the object
     camera : Camera
     center : (3,) float64, centre of the framed bounding sphere
@@ -118,6 +119,7 @@ class View:
     depth: np.ndarray
     face_id: np.ndarray
     bary: np.ndarray
+    vertex_ids: np.ndarray
     mask: np.ndarray
     camera: Camera
     center: np.ndarray
@@ -142,8 +144,8 @@ def view_rig() -> list[list[Camera]]:
     >>> rig = view_rig()
     >>> len(rig), len(rig[0])
     (18, 4)
-    >>> rig[0][0].direction.round(6).tolist()  # the first camera sits on +z
-    [0.0, 0.0, -1.0]
+    >>> bool(np.allclose(rig[0][0].direction, [0, 0, -1]))  # the first camera sits on +z
+    True
     """
     rig = []
     for i in range(N_SETS):
@@ -259,11 +261,14 @@ def _render_one(mesh, scene, normals, center, radius, camera, size) -> View:
     face_id[seen] = face
     bary = np.zeros((n, 3), np.float32)
     bary[seen] = np.stack([1.0 - u - v, u, v], axis=1)
+    vertex_ids = np.full((n, 3), -1, np.int32)
+    vertex_ids[seen] = mesh.faces[face]
     rgb = np.zeros((n, 3), np.float32)
     rgb[seen] = _shade(mesh, normals, face, bary[seen], directions[hits])
     mask = face_id >= 0
     return View(rgb=rgb.reshape(size, size, 3), depth=depth.reshape(size, size),
                 face_id=face_id.reshape(size, size), bary=bary.reshape(size, size, 3),
+                vertex_ids=vertex_ids.reshape(size, size, 3),
                 mask=mask.reshape(size, size), camera=camera, center=center, radius=radius,
                 eye=eye, pixel_size=float(pixel_size))
 

@@ -11,7 +11,7 @@ contrast channels.  Each image channel is a plain function
 >>> attention.intensity(img).shape
 (64, 64)
 
-``curvature(view, vertex_saliency, faces)`` renders per-vertex mesh saliency
+``curvature(view, vertex_saliency)`` renders per-vertex mesh saliency
 into a view, ``saliency(view, mesh)`` combines the eight channels and
 ``saliency_views(views, mesh)`` does so for many views in a thread pool.
 """

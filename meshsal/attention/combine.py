@@ -83,7 +83,7 @@ def image_channels(img: np.ndarray, names: Sequence[str] = IMAGE_CHANNELS) -> di
     return {name: channel_function(name)(img) for name in names}
 
 
-def curvature(view, vertex_saliency: np.ndarray, faces: np.ndarray) -> np.ndarray:
+def curvature(view, vertex_saliency: np.ndarray) -> np.ndarray:
     """Render per-vertex saliency into a view (the curvature channel).
 
     Each object pixel interpolates the values of the three vertices of the
@@ -95,11 +95,9 @@ def curvature(view, vertex_saliency: np.ndarray, faces: np.ndarray) -> np.ndarra
     Parameters
     ----------
     view : View
-        Uses ``view.face_id`` (H, W) int (-1 on background) and ``view.bary`` (H, W, 3).
+        Uses ``view.vertex_ids`` (H, W, 3) int (-1 on background) and ``view.bary`` (H, W, 3).
     vertex_saliency : (n,) float
         E.g. ``meshsal.mesh_saliency(mesh)``.
-    faces : (m, 3) int
-        The faces the view was rendered from (``mesh.faces``).
 
     Returns
     -------
@@ -108,35 +106,30 @@ def curvature(view, vertex_saliency: np.ndarray, faces: np.ndarray) -> np.ndarra
     Examples
     --------
     >>> from types import SimpleNamespace
-    >>> v = SimpleNamespace(face_id=np.array([[0, -1]]), bary=np.array([[[0.5, 0.5, 0.0], [0, 0, 0]]]))
-    >>> curvature(v, np.array([0.0, 1.0, 2.0]), np.array([[0, 1, 2]])).tolist()
+    >>> v = SimpleNamespace(vertex_ids=np.array([[[0, 1, 2], [-1, -1, -1]]]),
+    ...                     bary=np.array([[[0.5, 0.5, 0.0], [0, 0, 0]]]))
+    >>> curvature(v, np.array([0.0, 1.0, 2.0])).tolist()
     [[0.25, 0.0]]
     """
     values = np.asarray(vertex_saliency, dtype=np.float64)
-    faces = np.asarray(faces)
-    face_id = np.asarray(view.face_id)
+    vertex_ids = np.asarray(view.vertex_ids)
     if values.ndim != 1:
         raise ValueError(f"vertex_saliency must be a 1-D array with one value per vertex, got shape {values.shape}")
     if not np.isfinite(values).all():
         raise ValueError("vertex_saliency contains NaN or infinite values")
-    if faces.ndim != 2 or faces.shape[1] != 3:
-        raise ValueError(f"faces must be an (m, 3) array, got shape {faces.shape}")
-    if faces.size and int(faces.max()) >= values.size:
+    seen = vertex_ids[..., 0] >= 0
+    if seen.any() and int(vertex_ids.max()) >= values.size:
         raise ValueError(
-            f"vertex_saliency has {values.size} values but the faces index vertex {int(faces.max())}"
+            f"vertex_saliency has {values.size} values but the view shows vertex {int(vertex_ids.max())}"
         )
-    seen = face_id >= 0
-    if seen.any() and int(face_id.max()) >= len(faces):
-        raise ValueError(f"the view shows face {int(face_id.max())} but only {len(faces)} faces were given")
-    out = np.zeros(face_id.shape, np.float32)
+    out = np.zeros(seen.shape, np.float32)
     if values.size == 0:
         return out
     lo, span = float(values.min()), float(np.ptp(values))
     if not span > 0:
         return out
     scaled = ((values - lo) / span).astype(np.float32)
-    corners = faces[face_id[seen]]
-    out[seen] = np.einsum("kc,kc->k", scaled[corners], np.asarray(view.bary, np.float32)[seen])
+    out[seen] = np.einsum("kc,kc->k", scaled[vertex_ids[seen]], np.asarray(view.bary, np.float32)[seen])
     return np.clip(out, 0.0, 1.0)
 
 
@@ -279,7 +272,7 @@ def saliency(view, mesh, weights: Mapping[str, float] | None = None, vertex_sali
 
         vertex_saliency = mesh_saliency(mesh)
     channels = image_channels(view.rgb)
-    channels["curvature"] = curvature(view, vertex_saliency, mesh.faces)
+    channels["curvature"] = curvature(view, vertex_saliency)
     channels = {name: channels[name] for name in CHANNELS}
     return SaliencyResult(map=combine_maps(channels, view.mask, w), channels=channels)
 
