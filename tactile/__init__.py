@@ -1,0 +1,39 @@
+"""tactile: simulated 16x16 tactile imprints at surface points, their realism and selection.
+
+Points on a mesh (millimetres) -> a pad pressed at each point -> contour or
+pressure images (fast Embree path :func:`imprints`, exact reference
+:func:`imprint_exact`) -> perturbed acquisitions (:func:`acquire`) ->
+similarity-based selection (:func:`select_by_similarity`) -> imprint sets on
+disk (:class:`ImprintSet`).  Public names are loaded on first use, so that
+``import tactile`` stays cheap for the command line.
+"""
+
+import importlib
+
+_EXPORTS = {
+    "Sensor": "sensor",
+    "Poses": "sensor",
+    "sensor_poses": "sensor",
+    "imprint": "raycast",
+    "imprints": "raycast",
+    "imprint_exact": "section",
+    "imprints_exact": "section",
+    "Perturbation": "perturbation",
+    "acquire": "perturbation",
+    "select_by_similarity": "selection",
+    "ImprintSet": "imprint_set",
+}
+
+__all__ = sorted(_EXPORTS)
+
+
+def __getattr__(name):
+    if name in _EXPORTS:
+        value = getattr(importlib.import_module(f"{__name__}.{_EXPORTS[name]}"), name)
+        globals()[name] = value
+        return value
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
+def __dir__():
+    return __all__

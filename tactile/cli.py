@@ -1,0 +1,106 @@
+"""Command-line subcommands of the tactile package: ``imprints``."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+
+def register(subparsers) -> None:
+    """Add this package's subcommands to the ``visuotactile`` parser."""
+    from tactile.sensor import MODES, PLANES, Sensor
+
+    default = Sensor()
+    p = subparsers.add_parser(
+        "imprints", help="simulate the tactile imprints at interest points of a mesh",
+        description="Scale MESH to --size-mm, press a simulated 16x16 tactile pad at each point of POINTS "
+                    "(the points.json written by 'visuotactile points': positions and normals in the mesh "
+                    "file's units) and write the imprint set (.npz) and imprints.png, a labelled grid of "
+                    "the imprints, beside it.")
+    p.add_argument("mesh", type=Path, metavar="MESH", help="mesh file (OBJ, PLY, OFF, STL)")
+    p.add_argument("--points", type=Path, required=True, metavar="POINTS",
+                   help="points.json from 'visuotactile points'")
+    p.add_argument("--out", type=Path, required=True, metavar="SET.npz", help="imprint set to write")
+    p.add_argument("--size-mm", type=float, default=150.0,
+                   help="bounding-box diagonal the mesh is scaled to, in mm (default 150)")
+    p.add_argument("--mode", choices=MODES, default=default.mode,
+                   help=f"contour (the paper's image) or pressure (default {default.mode})")
+    p.add_argument("--plane", choices=PLANES, default=default.plane,
+                   help=f"how the pad plane is fitted (default {default.plane})")
+    p.add_argument("--pitch-mm", type=float, default=default.pitch_mm,
+                   help=f"taxel spacing in mm (default {default.pitch_mm})")
+    p.add_argument("--depth-mm", type=float, default=default.depth_mm,
+                   help=f"pressing depth beyond first contact in mm (default {default.depth_mm})")
+    p.add_argument("--supersample", type=int, default=default.supersample,
+                   help=f"rays per taxel side (default {default.supersample})")
+    p.set_defaults(func=_cmd_imprints)
+
+
+def read_points(path) -> tuple:
+    """Positions (k,3), unit normals (k,3) and ids (k,) from a points.json; ValueError naming the file."""
+    import json
+
+    import numpy as np
+
+    path = Path(path)
+    try:
+        document = json.loads(path.read_text())
+    except FileNotFoundError:
+        raise FileNotFoundError(f"{path}: points file not found") from None
+    except UnicodeDecodeError:
+        raise ValueError(f"{path}: points file is not UTF-8 text") from None
+    except json.JSONDecodeError as exc:
+        raise ValueError(f"{path}: malformed JSON at line {exc.lineno} column {exc.colno}: {exc.msg}") from None
+    if not isinstance(document, dict) or not isinstance(document.get("points"), list):
+        raise ValueError(f"{path}: expected an object with a 'points' list (as written by 'visuotactile points')")
+    items = document["points"]
+    if not items:
+        raise ValueError(f"{path}: the 'points' list is empty")
+    positions, normals, ids = [], [], []
+    for k, item in enumerate(items):
+        where = f"{path}: points[{k}]"
+        if not isinstance(item, dict):
+            raise ValueError(f"{where} is not an object")
+        for key, out in (("position", positions), ("normal", normals)):
+            value = item.get(key)
+            try:
+                vector = np.asarray(value, dtype=np.float64)
+            except (TypeError, ValueError):
+                vector = None
+            if vector is None or vector.shape != (3,) or not np.isfinite(vector).all():
+                raise ValueError(f"{where}: '{key}' must be three finite numbers, got {value!r}")
+            out.append(vector)
+        if np.linalg.norm(normals[-1]) < 1e-12:
+            raise ValueError(f"{where}: 'normal' is zero")
+        point_id = item.get("id", k + 1)
+        if isinstance(point_id, bool) or not isinstance(point_id, int):
+            raise ValueError(f"{where}: 'id' must be an integer, got {point_id!r}")
+        ids.append(point_id)
+    N = np.array(normals)
+    return np.array(positions), N / np.linalg.norm(N, axis=1, keepdims=True), np.array(ids, dtype=np.int64)
+
+
+def _cmd_imprints(args) -> int:
+    from meshsal import load_mesh, scale_to
+    from meshsal.atomic import write_png
+    from tactile.imprint_set import ImprintSet
+    from tactile.picture import imprint_grid
+    from tactile.raycast import imprints
+    from tactile.sensor import Sensor
+
+    if args.out.suffix != ".npz":
+        raise ValueError(f"--out must name a .npz file, got {args.out}")
+    sensor = Sensor(pitch_mm=args.pitch_mm, depth_mm=args.depth_mm, mode=args.mode,
+                    supersample=args.supersample, plane=args.plane)
+    source_positions, normals, ids = read_points(args.points)
+    mesh = scale_to(load_mesh(args.mesh), args.size_mm)
+    # A similarity only scales and shifts, so normals keep their direction.
+    positions = mesh.transform.apply(source_positions)
+    images = imprints(mesh, positions, normals, sensor)
+    result = ImprintSet(imprints=images, labels=[0] * len(images), object_names=(mesh.name or args.mesh.stem,),
+                        point_ids=ids, positions=positions, normals=normals, sensor=sensor,
+                        source=f"{args.mesh} at {args.points}, scaled to {args.size_mm:g} mm")
+    result.save(args.out)
+    picture = args.out.parent / "imprints.png"
+    write_png(picture, imprint_grid(images, [f"#{i}" for i in ids]))
+    print(f"wrote {len(images)} {sensor.mode} imprints of {args.mesh} to {args.out} and {picture}")
+    return 0

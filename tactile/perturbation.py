@@ -1,0 +1,210 @@
+"""Acquisition realism: a robot places the pad imperfectly and an ADC reads it.
+
+:func:`acquire` turns clean simulated imprints into plausible sensor
+readings.  Placement errors act on the geometry before slicing (position
+jitter in the tangent plane, tilt of the fitted pad normal, in-plane
+rotation); reading errors act on the image (the elastic cover's blur,
+per-taxel gain spread, additive noise, dead taxels, ADC quantization), in
+that order.  Gains and dead taxels belong to the device, so they are drawn
+once per call and shared by all its imprints.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, fields
+
+import numpy as np
+
+from meshsal.mesh import Mesh
+from tactile.raycast import imprints_at
+from tactile.sensor import Sensor, check_points, poses_from_normals, sensor_poses, tangent_frames
+
+__all__ = ["Perturbation", "acquire"]
+
+
+@dataclass(frozen=True)
+class Perturbation:
+    """How far an acquisition departs from the clean simulation.  All zero = clean.
+
+    Parameters
+    ----------
+    jitter_mm : float
+        Standard deviation of the pad position error along each tangent axis.
+    tilt_deg : float
+        Standard deviation of the pad normal's tilt away from the fitted
+        normal (the tilt direction is uniform).
+    rotation_deg : float
+        Standard deviation of the in-plane rotation (ignored when
+        ``uniform_rotation``).
+    uniform_rotation : bool
+        Draw the in-plane rotation uniformly over 360 degrees: the robot does
+        not control the pad's roll.
+    gain_spread : float
+        Relative standard deviation of each taxel's gain (a fixed map per device).
+    noise : float
+        Standard deviation of additive noise per reading, in full-scale units.
+    dead_fraction : float
+        Fraction of taxels reading zero, in [0, 1).
+    adc_bits : int
+        Resolution of the converter; 0 keeps readings continuous.
+    blur_mm : float
+        Standard deviation of the Gaussian spread of force through the
+        elastic cover.
+
+    Examples
+    --------
+    >>> Perturbation.none().is_clean
+    True
+    >>> Perturbation(noise=0.02, adc_bits=8).is_clean
+    False
+    """
+
+    jitter_mm: float = 0.0
+    tilt_deg: float = 0.0
+    rotation_deg: float = 0.0
+    uniform_rotation: bool = False
+    gain_spread: float = 0.0
+    noise: float = 0.0
+    dead_fraction: float = 0.0
+    adc_bits: int = 0
+    blur_mm: float = 0.0
+
+    def __post_init__(self):
+        for f in fields(self):
+            value = getattr(self, f.name)
+            if f.name == "uniform_rotation":
+                if not isinstance(value, (bool, np.bool_)):
+                    raise ValueError(f"Perturbation.uniform_rotation must be a bool, got {value!r}")
+                object.__setattr__(self, f.name, bool(value))
+            elif f.name == "adc_bits":
+                if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or not 0 <= value <= 24:
+                    raise ValueError(f"Perturbation.adc_bits must be an integer in [0, 24], got {value!r}")
+                object.__setattr__(self, f.name, int(value))
+            else:
+                try:
+                    value = float(value)
+                except (TypeError, ValueError):
+                    raise ValueError(f"Perturbation.{f.name} must be a number, got {value!r}") from None
+                if not (np.isfinite(value) and value >= 0):
+                    raise ValueError(f"Perturbation.{f.name} must be finite and non-negative, got {value}")
+                object.__setattr__(self, f.name, value)
+        if self.dead_fraction >= 1:
+            raise ValueError(f"Perturbation.dead_fraction must be below 1, got {self.dead_fraction}")
+
+    @classmethod
+    def none(cls) -> Perturbation:
+        """No perturbation: :func:`acquire` returns exactly the clean imprints."""
+        return cls()
+
+    @classmethod
+    def typical(cls) -> Perturbation:
+        """Plausible figures for a robot-held FSR pad (assumed, not measured).
+
+        1 mm placement error, 3 degree tilt, free roll, 10 % gain spread,
+        2 % noise, 1 % dead taxels, an 8-bit ADC and a 1 mm elastic cover blur.
+        """
+        return cls(jitter_mm=1.0, tilt_deg=3.0, uniform_rotation=True, gain_spread=0.1, noise=0.02,
+                   dead_fraction=0.01, adc_bits=8, blur_mm=1.0)
+
+    @property
+    def is_clean(self) -> bool:
+        """True when every field is zero (or off)."""
+        return self == Perturbation()
+
+    def to_dict(self) -> dict:
+        """The fields as a JSON-ready dict (inverse of ``Perturbation(**d)``)."""
+        return asdict(self)
+
+
+def _rng(rng) -> np.random.Generator:
+    if isinstance(rng, np.random.Generator):
+        return rng
+    if rng is None or isinstance(rng, (int, np.integer)):
+        return np.random.default_rng(rng)
+    raise ValueError(f"rng must be a numpy Generator, an integer seed or None, got {type(rng).__name__}")
+
+
+def _tilt(normals: np.ndarray, sd_deg: float, rng: np.random.Generator) -> np.ndarray:
+    up, right = tangent_frames(normals)
+    theta = np.deg2rad(sd_deg * rng.standard_normal(normals.shape[0]))[:, None]
+    phi = rng.uniform(0.0, 2.0 * np.pi, normals.shape[0])[:, None]
+    return np.cos(theta) * normals + np.sin(theta) * (np.cos(phi) * right + np.sin(phi) * up)
+
+
+def acquire(mesh: Mesh, positions, normals, sensor: Sensor | None = None, perturb: Perturbation | None = None,
+            rng=None, workers: int | None = None) -> np.ndarray:
+    """Simulated sensor readings at k points, with placement and reading errors.
+
+    Parameters
+    ----------
+    mesh : Mesh
+        In millimetres.
+    positions, normals : (k, 3) float64
+        Where the robot is told to touch, and the outward normals there.
+    sensor : Sensor, optional
+        Defaults to ``Sensor()``.
+    perturb : Perturbation, optional
+        Defaults to ``Perturbation.none()``, which gives exactly
+        ``tactile.imprints(mesh, positions, normals, sensor)``.
+    rng : numpy.random.Generator or int or None
+        Source of every random draw; an integer seeds a new generator, so
+        equal seeds give equal readings.
+    workers : int, optional
+        Ray-casting threads.
+
+    Returns
+    -------
+    (k, rows, cols) float32 in [0, 1]
+
+    Examples
+    --------
+    >>> from meshsal.mesh import Mesh
+    >>> plane = Mesh(vertices=[[-50, 0, -50], [50, 0, -50], [50, 0, 50], [-50, 0, 50]],
+    ...              faces=[[0, 2, 1], [0, 3, 2]])
+    >>> s = Sensor(mode="pressure")
+    >>> noisy = acquire(plane, [[0, 0, 0]], [[0, 1, 0]], s, Perturbation(noise=0.05, adc_bits=4), rng=1)
+    >>> bool((noisy == acquire(plane, [[0, 0, 0]], [[0, 1, 0]], s, Perturbation(noise=0.05, adc_bits=4), rng=1)).all())
+    True
+    """
+    sensor = Sensor() if sensor is None else sensor
+    perturb = Perturbation.none() if perturb is None else perturb
+    if not isinstance(perturb, Perturbation):
+        raise ValueError(f"perturb must be a Perturbation, got {type(perturb).__name__}")
+    rng = _rng(rng)
+    P, N, _ = check_points(positions, normals)
+    k = P.shape[0]
+    if k == 0:
+        return np.zeros((0, sensor.rows, sensor.cols), dtype=np.float32)
+
+    if perturb.jitter_mm > 0:
+        up, right = tangent_frames(N)
+        step = perturb.jitter_mm * rng.standard_normal((k, 2))
+        P = P + step[:, :1] * right + step[:, 1:] * up
+    if perturb.uniform_rotation:
+        angles = rng.uniform(0.0, 360.0, k)
+    else:
+        angles = perturb.rotation_deg * rng.standard_normal(k) if perturb.rotation_deg > 0 else np.zeros(k)
+    # The same pose chain as tactile.imprints, so a clean acquisition is bit-identical.
+    poses = sensor_poses(mesh, P, N, sensor, angles)
+    if perturb.tilt_deg > 0:
+        poses = poses_from_normals(P, _tilt(poses.normals, perturb.tilt_deg, rng), angles)
+    images = imprints_at(mesh, poses, sensor, workers)
+
+    if perturb.blur_mm > 0:
+        from scipy.ndimage import gaussian_filter
+
+        sigma = perturb.blur_mm / sensor.pitch_mm
+        images = gaussian_filter(images, sigma=(0.0, sigma, sigma), mode="constant", cval=0.0)
+    if perturb.gain_spread > 0:
+        gain = 1.0 + perturb.gain_spread * rng.standard_normal((sensor.rows, sensor.cols))
+        images = images * np.maximum(gain, 0.0)
+    if perturb.noise > 0:
+        images = images + perturb.noise * rng.standard_normal(images.shape)
+    images = np.clip(images, 0.0, 1.0)
+    if perturb.dead_fraction > 0:
+        dead = rng.random((sensor.rows, sensor.cols)) < perturb.dead_fraction
+        images = np.where(dead, 0.0, images)
+    if perturb.adc_bits > 0:
+        levels = float(2 ** perturb.adc_bits - 1)
+        images = np.round(images * levels) / levels
+    return images.astype(np.float32)

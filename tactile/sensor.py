@@ -1,0 +1,394 @@
+"""The simulated tactile sensor and where it sits on the surface.
+
+A :class:`Sensor` is a flat, rigid ``rows x cols`` pad of taxels.  A
+:class:`Poses` record places k pads: each pad is centred on the line through a
+touched point along the pad normal, and its image axes are the ``up`` (towards
+row 0) and ``right`` (towards the last column) tangent vectors.  The pad
+presses along ``-normal``.
+
+Both imprint paths (:mod:`tactile.raycast`, fast; :mod:`tactile.section`,
+exact) share these poses, the supersampled sample grid and the image
+conventions of :mod:`tactile.image`, so they differ only in how they slice
+the surface.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+
+import numpy as np
+
+from meshsal.mesh import Mesh
+
+__all__ = [
+    "MODES",
+    "PLANES",
+    "Sensor",
+    "Poses",
+    "tangent_frames",
+    "fit_normals",
+    "poses_from_normals",
+    "sensor_poses",
+    "sample_grid",
+    "check_points",
+]
+
+MODES = ("contour", "pressure")
+PLANES = ("pca", "paper")
+
+# The in-plane frame follows world +y (meshes are y-up) unless the normal is
+# within this angle of +-y, where the projection of y degenerates.
+_POLE_COS = float(np.cos(np.deg2rad(10.0)))
+
+
+@dataclass(frozen=True)
+class Sensor:
+    """A flat ``rows x cols`` force-resistive taxel array pressed into a surface.
+
+    Parameters
+    ----------
+    rows, cols : int
+        Taxels per side (the paper's sensor is 16 x 16).
+    pitch_mm : float
+        Taxel spacing.  The default, 2.0 mm (a 32 mm square pad), is the
+        spacing of fine piezoresistive (FSR) matrices of the Tekscan and
+        Sensitronics kind sold as 16 x 16 grids; those products range from
+        about 1.3 mm to well over 5 mm, so 2.0 mm is a representative
+        figure, not the datasheet value of one part: set it to your sensor's.
+    depth_mm : float
+        How far the pad is pressed in beyond its first contact: the deepest
+        of the paper's four slicing planes (the others are at 1/4, 2/4 and
+        3/4 of it).  3 mm shows all four contours on toy-sized (100-250 mm)
+        objects with curvature radii of a few centimetres.
+    mode : {"contour", "pressure"}
+        ``"contour"`` draws the four plane-surface intersection contours, the
+        paper's image; ``"pressure"`` fills the penetration depth, what a real
+        force-resistive array reports.
+    supersample : int
+        Samples per taxel side; images are area-averaged down to taxels.
+    plane : {"pca", "paper"}
+        How the pad orientation is found at a point; see :func:`fit_normals`.
+
+    Examples
+    --------
+    >>> s = Sensor()
+    >>> s.rows, s.cols, s.width_mm
+    (16, 16, 32.0)
+    >>> Sensor(mode="pressure", pitch_mm=1.5).height_mm
+    24.0
+    """
+
+    rows: int = 16
+    cols: int = 16
+    pitch_mm: float = 2.0
+    depth_mm: float = 3.0
+    mode: str = "contour"
+    supersample: int = 3
+    plane: str = "pca"
+
+    def __post_init__(self):
+        for name in ("rows", "cols", "supersample"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1:
+                raise ValueError(f"Sensor.{name} must be a positive integer, got {value!r}")
+            object.__setattr__(self, name, int(value))
+        if self.supersample > 16:
+            raise ValueError(f"Sensor.supersample must be at most 16, got {self.supersample}")
+        for name in ("pitch_mm", "depth_mm"):
+            value = getattr(self, name)
+            try:
+                value = float(value)
+            except (TypeError, ValueError):
+                raise ValueError(f"Sensor.{name} must be a number, got {value!r}") from None
+            if not (np.isfinite(value) and value > 0):
+                raise ValueError(f"Sensor.{name} must be finite and positive, got {value}")
+            object.__setattr__(self, name, value)
+        if self.mode not in MODES:
+            raise ValueError(f"Sensor.mode must be one of {MODES}, got {self.mode!r}")
+        if self.plane not in PLANES:
+            raise ValueError(f"Sensor.plane must be one of {PLANES}, got {self.plane!r}")
+
+    @property
+    def width_mm(self) -> float:
+        """Extent of the pad along its columns (the ``right`` axis)."""
+        return self.cols * self.pitch_mm
+
+    @property
+    def height_mm(self) -> float:
+        """Extent of the pad along its rows (the ``up`` axis)."""
+        return self.rows * self.pitch_mm
+
+    @property
+    def fit_radius_mm(self) -> float:
+        """Radius of the disc inscribed in the pad: the neighbourhood of the ``"pca"`` fit."""
+        return 0.5 * min(self.rows, self.cols) * self.pitch_mm
+
+    @property
+    def reach_mm(self) -> float:
+        """How far above the touched point the pad can meet the surface first.
+
+        Half the pad diagonal: surface rising more steeply than 45 degrees on
+        average across the pad is out of reach and contributes nothing.
+        """
+        return 0.5 * self.pitch_mm * float(np.hypot(self.rows, self.cols))
+
+    def to_dict(self) -> dict:
+        """The fields as a JSON-ready dict (inverse of ``Sensor(**d)``)."""
+        return asdict(self)
+
+
+@dataclass(frozen=True)
+class Poses:
+    """Where k sensor pads sit.
+
+    Attributes
+    ----------
+    centers : (k, 3) float64
+        The touched points; each pad's axis passes through its point.
+    normals : (k, 3) float64
+        Unit pad normals pointing out of the surface; pads press along ``-normal``.
+    ups : (k, 3) float64
+        Unit tangent directions of image row 0 (the top of the image).
+    rights : (k, 3) float64
+        Unit tangent directions of increasing column; ``(right, up, normal)``
+        is right-handed, so the image shows the surface as seen from outside.
+    """
+
+    centers: np.ndarray
+    normals: np.ndarray
+    ups: np.ndarray
+    rights: np.ndarray
+
+    def __len__(self) -> int:
+        return int(self.centers.shape[0])
+
+
+def _unit(v: np.ndarray) -> np.ndarray:
+    return v / np.linalg.norm(v, axis=-1, keepdims=True)
+
+
+def check_points(positions, normals, angles_deg=None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Validate touch points: (k,3) positions, (k,3) non-zero normals (unit on return), (k,) angles."""
+    P = np.asarray(positions, dtype=np.float64)
+    N = np.asarray(normals, dtype=np.float64)
+    if P.ndim != 2 or P.shape[1] != 3:
+        raise ValueError(f"positions must have shape (k, 3), got {P.shape}")
+    if N.shape != P.shape:
+        raise ValueError(f"normals must have the shape of positions {P.shape}, got {N.shape}")
+    if not (np.isfinite(P).all() and np.isfinite(N).all()):
+        raise ValueError("positions and normals must be finite")
+    length = np.linalg.norm(N, axis=1)
+    if (length < 1e-12).any():
+        raise ValueError(f"normals must be non-zero (zero normal at rows {np.flatnonzero(length < 1e-12)[:5].tolist()})")
+    A = np.zeros(P.shape[0]) if angles_deg is None else np.asarray(angles_deg, dtype=np.float64).reshape(-1)
+    if A.shape != (P.shape[0],):
+        raise ValueError(f"angles_deg must have shape ({P.shape[0]},), got {np.shape(angles_deg)}")
+    if not np.isfinite(A).all():
+        raise ValueError("angles_deg must be finite")
+    return P, N / length[:, None], A
+
+
+def tangent_frames(normals: np.ndarray, angles_deg=None) -> tuple[np.ndarray, np.ndarray]:
+    """Deterministic image axes ``(ups, rights)`` for unit normals, turned by ``angles_deg``.
+
+    At angle 0 the image's up is world +y projected onto the pad plane, so
+    imprints of a y-up object appear upright.  Within 10 degrees of the
+    poles (normal near +-y) it is -z for a normal near +y (looking down, the
+    back of the object is up) and +z near -y.  ``right = cross(up, normal)``.
+    A positive angle turns the pad's axes clockwise as seen from outside
+    (the new up is ``cos a * up + sin a * right``), so the image content turns
+    counter-clockwise: 90 degrees gives exactly ``np.rot90(image)`` (k=1) of
+    the unturned image on a square pad.
+
+    Parameters
+    ----------
+    normals : (k, 3) float64, unit
+    angles_deg : (k,) float64, optional
+
+    Returns
+    -------
+    ups, rights : (k, 3) float64
+
+    Examples
+    --------
+    >>> up, right = tangent_frames(np.array([[0.0, 0.0, 1.0]]))
+    >>> up.round(6).tolist(), right.round(6).tolist()
+    ([[0.0, 1.0, 0.0]], [[1.0, 0.0, 0.0]])
+    """
+    N = np.asarray(normals, dtype=np.float64)
+    ny = N[:, 1]
+    ref = np.zeros_like(N)
+    polar = np.abs(ny) > _POLE_COS
+    ref[~polar, 1] = 1.0
+    ref[polar, 2] = -np.sign(ny[polar])
+    up = _unit(ref - (ref * N).sum(1, keepdims=True) * N)
+    right = np.cross(up, N)
+    if angles_deg is not None:
+        a = np.deg2rad(np.asarray(angles_deg, dtype=np.float64))[:, None]
+        c, s = np.cos(a), np.sin(a)
+        up, right = c * up + s * right, c * right - s * up
+    return up, right
+
+
+def _vertex_area_vectors(V: np.ndarray, F: np.ndarray) -> np.ndarray:
+    """Per vertex, a third of the area-weighted normals of its faces (n, 3)."""
+    cross = np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]]) / 6.0
+    idx = F.reshape(-1)
+    return np.stack(
+        [np.bincount(idx, weights=np.repeat(cross[:, c], 3), minlength=V.shape[0]) for c in range(3)], axis=1
+    )
+
+
+def _surface_cells(V: np.ndarray, F: np.ndarray, size: float) -> tuple[np.ndarray, np.ndarray]:
+    """Vertex area vectors summed per cubic cell of side ``size`` and per normal direction.
+
+    Within a cell, vertices are split by the dominant signed axis of their
+    normal (six bins), so the two sides of a part thinner than a cell land
+    in different bins instead of cancelling.
+
+    Returns
+    -------
+    centroids : (c, 3) float64
+        Area-weighted centre of each non-empty (cell, bin).
+    vectors : (c, 3) float64
+        Summed area vectors (area times unit normal).
+    """
+    area = _vertex_area_vectors(V, F)
+    axis = np.abs(area).argmax(axis=1)
+    direction = 2 * axis + (area[np.arange(area.shape[0]), axis] < 0)
+    cell = np.floor((V - V.min(axis=0)) / size).astype(np.int64)
+    span = cell.max(axis=0) + 1
+    key = ((cell[:, 0] * span[1] + cell[:, 1]) * span[2] + cell[:, 2]) * 6 + direction
+    _, group = np.unique(key, return_inverse=True)
+    group = group.reshape(-1)
+    weight = np.linalg.norm(area, axis=1)
+
+    def total(values: np.ndarray) -> np.ndarray:
+        return np.stack([np.bincount(group, weights=values[:, c]) for c in range(3)], axis=1)
+
+    mass = np.bincount(group, weights=weight)
+    centroids = total(V * weight[:, None]) / np.maximum(mass, 1e-300)[:, None]
+    return centroids, total(area)
+
+
+def _fit_pca(V, F, P, N, radius: float) -> np.ndarray:
+    from scipy.spatial import cKDTree
+
+    # Cells an eighth of the radius across keep the neighbourhood sums cheap
+    # on dense meshes while blurring the disc's rim by well under a taxel.
+    centroids, vectors = _surface_cells(V, F, radius / 8.0)
+    pairs = cKDTree(P).sparse_distance_matrix(cKDTree(centroids), radius, output_type="ndarray")
+    i, a = pairs["i"], vectors[pairs["j"]]
+    facing = (a * N[i]).sum(axis=1) > 0
+    i, a = i[facing], a[facing]
+    total = np.stack([np.bincount(i, weights=a[:, c], minlength=P.shape[0]) for c in range(3)], axis=1)
+    length = np.linalg.norm(total, axis=1, keepdims=True)
+    return np.where(length > 1e-12, total / np.maximum(length, 1e-300), N)
+
+
+def _fit_paper(V, P, N) -> np.ndarray:
+    from scipy.spatial import cKDTree
+
+    k = min(8, V.shape[0])
+    _, nearest = cKDTree(V).query(P, k=k)
+    nearest = nearest.reshape(P.shape[0], k)
+    a, b = V[nearest[:, 0]], V[nearest[:, 1]]
+    fitted = N.copy()
+    done = np.zeros(P.shape[0], dtype=bool)
+    # The first non-collinear triple in order of distance: the nearest two and the next usable vertex.
+    for c in range(2, k):
+        e1, e2 = b - a, V[nearest[:, c]] - a
+        n = np.cross(e1, e2)
+        length = np.linalg.norm(n, axis=1)
+        ok = ~done & (length > 1e-9 * np.linalg.norm(e1, axis=1) * np.linalg.norm(e2, axis=1))
+        fitted[ok] = n[ok] / length[ok, None]
+        done |= ok
+    return fitted * np.where((fitted * N).sum(1) < 0, -1.0, 1.0)[:, None]
+
+
+def fit_normals(mesh: Mesh, positions, normals, sensor: Sensor) -> np.ndarray:
+    """Pad normals at touch points, by the sensor's ``plane`` rule.
+
+    ``"pca"``: the area-weighted mean normal of the surface within the
+    sensor's footprint (the pad's inscribed disc, radius
+    ``sensor.fit_radius_mm``, around the point), counting only surface that
+    faces the same side as the given normal so the far side of a thin part
+    does not cancel it: the orientation of the average plane a compliant pad
+    settles on.  Each vertex carries a third of its faces' area-weighted
+    normals; these are summed per cell an eighth of the radius across (and
+    per dominant normal direction), and the cells whose centre lies in the
+    disc are found with a KD-tree.
+    ``"paper"``: the normal of the plane through the three nearest mesh
+    vertices (the paper's quasi-tangent plane; further vertices are tried when
+    the nearest are collinear).  Both are oriented to agree with the given
+    normal, which is kept where the rule has nothing to work on (no vertex in
+    the disc on a very coarse mesh, or only collinear vertices).
+
+    Parameters
+    ----------
+    mesh : Mesh
+    positions, normals : (k, 3) float64
+    sensor : Sensor
+
+    Returns
+    -------
+    (k, 3) float64 unit normals.
+
+    Examples
+    --------
+    >>> m = Mesh(vertices=[[0, 0, 0], [10, 0, 0], [0, 10, 0]], faces=[[0, 1, 2]])
+    >>> fit_normals(m, [[1.0, 1.0, 0.0]], [[0.3, 0.0, 1.0]], Sensor()).round(6).tolist()
+    [[0.0, 0.0, 1.0]]
+    """
+    P, N, _ = check_points(positions, normals)
+    if mesh.n_faces == 0:
+        raise ValueError(f"mesh {mesh.name!r} has no faces")
+    if sensor.plane == "pca":
+        return _fit_pca(mesh.vertices, mesh.faces, P, N, sensor.fit_radius_mm)
+    return _fit_paper(mesh.vertices, P, N)
+
+
+def poses_from_normals(positions, normals, angles_deg=None) -> Poses:
+    """Poses centred on ``positions`` with the given pad normals, turned by ``angles_deg``."""
+    P, N, A = check_points(positions, normals, angles_deg)
+    up, right = tangent_frames(N, A)
+    return Poses(centers=P, normals=N, ups=up, rights=right)
+
+
+def sensor_poses(mesh: Mesh, positions, normals, sensor: Sensor, angles_deg=None) -> Poses:
+    """Fit the pad plane at each point (:func:`fit_normals`) and lay out its image axes.
+
+    Examples
+    --------
+    >>> m = Mesh(vertices=[[-50, 0, -50], [50, 0, -50], [0, 0, 50]], faces=[[0, 2, 1]])
+    >>> p = sensor_poses(m, [[0.0, 0.0, 0.0]], [[0.0, 1.0, 0.0]], Sensor())
+    >>> p.normals.round(6).tolist(), p.ups.round(6).tolist()
+    ([[0.0, 1.0, 0.0]], [[0.0, 0.0, -1.0]])
+    """
+    P, N, A = check_points(positions, normals, angles_deg)
+    return poses_from_normals(P, fit_normals(mesh, P, N, sensor), A)
+
+
+def sample_grid(sensor: Sensor) -> tuple[np.ndarray, np.ndarray]:
+    """In-plane coordinates of the supersampled grid's sample centres.
+
+    Returns
+    -------
+    xs : (cols * supersample,) float64
+        Offset of each sample column along ``right``:
+        ``(j + 0.5 - n/2) * pitch / supersample``.
+    ys : (rows * supersample,) float64
+        Offset of each sample row along ``up`` (row 0 at the top, positive).
+
+    The grid is symmetric about the pad centre, so on a square pad a 90 degree
+    turn permutes the samples exactly.
+
+    Examples
+    --------
+    >>> xs, ys = sample_grid(Sensor(rows=2, cols=2, pitch_mm=2.0, supersample=1))
+    >>> xs.tolist(), ys.tolist()
+    ([-1.0, 1.0], [1.0, -1.0])
+    """
+    step = sensor.pitch_mm / sensor.supersample
+    W, H = sensor.cols * sensor.supersample, sensor.rows * sensor.supersample
+    return (np.arange(W) + 0.5 - W / 2.0) * step, -(np.arange(H) + 0.5 - H / 2.0) * step

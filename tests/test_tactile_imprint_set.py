@@ -1,0 +1,143 @@
+"""Imprint sets on disk (round trip, damaged and foreign files) and the ``imprints`` command."""
+
+import json
+import re
+
+import numpy as np
+import pytest
+import tactile_shapes as shapes
+
+from tactile import ImprintSet, Perturbation, Sensor
+
+
+def small_set(perturbation=None, seed=None) -> ImprintSet:
+    rng = np.random.default_rng(0)
+    sensor = Sensor(rows=8, cols=12, mode="pressure", pitch_mm=1.5)
+    return ImprintSet(imprints=rng.random((5, 8, 12)), labels=[0, 0, 1, 2, 2], object_names=("cup", "hand", "cow"),
+                      point_ids=[1, 2, 1, 1, 2], positions=rng.normal(size=(5, 3)), normals=rng.normal(size=(5, 3)),
+                      sensor=sensor, perturbation=perturbation, seed=seed, source="test")
+
+
+@pytest.mark.parametrize("perturbation,seed", [(None, None), (Perturbation.typical(), 42)])
+def test_save_load_round_trip(tmp_path, perturbation, seed):
+    original = small_set(perturbation, seed)
+    path = tmp_path / "set.npz"
+    original.save(path)
+    loaded = ImprintSet.load(path)
+    for name in ("imprints", "labels", "point_ids", "positions", "normals"):
+        np.testing.assert_array_equal(getattr(loaded, name), getattr(original, name))
+        assert getattr(loaded, name).dtype == getattr(original, name).dtype
+    assert loaded.object_names == original.object_names
+    assert loaded.sensor == original.sensor and loaded.perturbation == perturbation
+    assert loaded.seed == seed and loaded.source == "test"
+    assert [p.name for p in tmp_path.iterdir()] == ["set.npz"]  # no temporary left behind
+
+
+def test_truncated_file_error_names_the_file(tmp_path):
+    path = tmp_path / "set.npz"
+    small_set().save(path)
+    data = path.read_bytes()
+    path.write_bytes(data[: len(data) // 2])
+    with pytest.raises(ValueError, match="set.npz.*(damaged|truncated)"):
+        ImprintSet.load(path)
+
+
+def test_foreign_files_are_refused(tmp_path):
+    foreign = tmp_path / "other.npz"
+    np.savez(foreign, weights=np.zeros(3))
+    with pytest.raises(ValueError, match="other.npz: not an imprint set"):
+        ImprintSet.load(foreign)
+    wrong_format = tmp_path / "fmt.npz"
+    np.savez(wrong_format, meta=np.array(json.dumps({"format": "something.else", "version": 1})))
+    with pytest.raises(ValueError, match="fmt.npz: not an imprint set"):
+        ImprintSet.load(wrong_format)
+    text = tmp_path / "notes.npz"
+    text.write_text("hello")
+    with pytest.raises(ValueError, match="notes.npz"):
+        ImprintSet.load(text)
+    with pytest.raises(OSError, match="missing.npz"):
+        ImprintSet.load(tmp_path / "missing.npz")
+
+
+def test_other_version_is_refused(tmp_path):
+    path = tmp_path / "v9.npz"
+    s = small_set()
+    meta = {"format": "visuotactile.ImprintSet", "version": 9}
+    np.savez(path, meta=np.array(json.dumps(meta)), imprints=s.imprints)
+    with pytest.raises(ValueError, match="v9.npz: imprint set version 9"):
+        ImprintSet.load(path)
+
+
+def test_inconsistent_fields_are_refused():
+    s = small_set()
+    with pytest.raises(ValueError, match="labels"):
+        ImprintSet(imprints=s.imprints, labels=[0, 0, 1, 2, 3], object_names=s.object_names, point_ids=s.point_ids,
+                   positions=s.positions, normals=s.normals, sensor=s.sensor)
+    with pytest.raises(ValueError, match="sensor"):
+        ImprintSet(imprints=s.imprints, labels=s.labels, object_names=s.object_names, point_ids=s.point_ids,
+                   positions=s.positions, normals=s.normals, sensor=Sensor())
+    with pytest.raises(ValueError, match="positions"):
+        ImprintSet(imprints=s.imprints, labels=s.labels, object_names=s.object_names, point_ids=s.point_ids,
+                   positions=s.positions[:3], normals=s.normals, sensor=s.sensor)
+
+
+def test_subset_keeps_names_and_fields():
+    s = small_set(Perturbation(noise=0.1), 3)
+    sub = s.subset(s.labels == 2)
+    assert len(sub) == 2 and sub.object_names == s.object_names and sub.seed == 3
+    np.testing.assert_array_equal(sub.point_ids, [1, 2])
+
+
+def write_points(path, mesh_scale, positions, normals):
+    records = [{"id": i + 1, "position": (np.asarray(p) / mesh_scale).tolist(), "normal": list(n)}
+               for i, (p, n) in enumerate(zip(positions, normals))]
+    path.write_text(json.dumps({"mesh": "sphere.obj", "points": records}))
+
+
+def test_imprints_command_writes_set_and_picture(tmp_path):
+    from classify.cli import main
+
+    # A sphere of radius 0.4 in file units; scaled to a 150 mm diagonal its radius is 150 / (2 sqrt 3).
+    sphere = shapes.sphere(radius=0.4, n=24)
+    shapes.write_obj(tmp_path / "sphere.obj", sphere)
+    radius_mm = 150.0 / (2.0 * np.sqrt(3.0))
+    scale = radius_mm / 0.4
+    top, side = [0.0, radius_mm, 0.0], [radius_mm, 0.0, 0.0]
+    write_points(tmp_path / "points.json", scale, [top, side], [[0, 1, 0], [1, 0, 0]])
+    out = tmp_path / "out" / "set.npz"
+    assert main(["imprints", str(tmp_path / "sphere.obj"), "--points", str(tmp_path / "points.json"),
+                 "--mode", "pressure", "--out", str(out)]) == 0
+    s = ImprintSet.load(out)
+    assert len(s) == 2 and s.sensor.mode == "pressure" and s.object_names == ("sphere",)
+    np.testing.assert_allclose(s.positions, [top, side], atol=1e-6)
+    np.testing.assert_array_equal(s.point_ids, [1, 2])
+    # A sphere looks the same everywhere: both imprints are the same centred disc.
+    assert s.imprints[0, 7:9, 7:9].min() > 0.9
+    np.testing.assert_allclose(s.imprints[0], s.imprints[1], atol=0.1)
+    import cv2
+
+    picture = cv2.imread(str(out.parent / "imprints.png"))
+    assert picture is not None and picture.shape[0] > 16 * 8 and picture.shape[1] > 2 * 16 * 8
+
+
+@pytest.mark.parametrize("content,message", [
+    (None, "points.json: points file not found"),
+    ("{not json", "points.json: malformed JSON at line 1"),
+    ('{"points": []}', "points.json: the 'points' list is empty"),
+    ('[1, 2]', "points.json: expected an object with a 'points' list"),
+    ('{"points": [{"position": [0, 1], "normal": [0, 1, 0]}]}', r"points.json: points\[0\]: 'position'"),
+    ('{"points": [{"position": [0, 1, 0], "normal": [0, 0, 0]}]}', r"points.json: points\[0\]: 'normal' is zero"),
+])
+def test_imprints_command_reports_bad_points_file(tmp_path, capsys, content, message):
+    from classify.cli import main
+
+    shapes.write_obj(tmp_path / "sphere.obj", shapes.sphere(radius=1.0, n=4))
+    points = tmp_path / "points.json"
+    if content is not None:
+        points.write_text(content)
+    out = tmp_path / "set.npz"
+    assert main(["imprints", str(tmp_path / "sphere.obj"), "--points", str(points), "--out", str(out)]) == 1
+    err = capsys.readouterr().err
+    assert "visuotactile imprints: error:" in err
+    assert re.search(message, err), err
+    assert not out.exists()
