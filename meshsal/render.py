@@ -34,6 +34,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .embree import embree_scene
 from .mesh import Mesh, bounding_sphere, vertex_normals
 
 __all__ = ["Camera", "View", "view_rig", "render", "render_views", "surface_points", "project"]
@@ -164,15 +165,6 @@ def view_rig() -> list[list[Camera]]:
             cameras.append(Camera(direction=-position, up=axis, set_index=i, view_index=VIEWS_PER_SET * i + k))
         rig.append(cameras)
     return rig
-
-
-def _scene(mesh: Mesh):
-    from embreex import rtcore_scene as rtcs
-    from embreex.mesh_construction import TriangleMesh
-
-    scene = rtcs.EmbreeScene()
-    TriangleMesh(scene, mesh.vertices.astype(np.float32), mesh.faces.astype(np.int32))
-    return scene
 
 
 def _rays(camera: Camera, center: np.ndarray, radius: float, size: int, cull: bool = True):
@@ -316,7 +308,7 @@ def render_views(mesh: Mesh, cameras, size: int = 256, threads: int | None = Non
     cameras = list(cameras)
     if mesh.n_faces == 0:
         raise ValueError(f"cannot render {mesh.name or 'mesh'}: it has no faces")
-    scene = _scene(mesh)
+    scene = embree_scene(mesh)
     normals = vertex_normals(mesh.vertices, mesh.faces).astype(np.float32)
     center, radius = bounding_sphere(mesh.vertices)
     radius = max(radius, 1e-12)
