@@ -31,7 +31,7 @@ _EXPORTS = {
     "interest_points": "points",
     "project_pixel_paper": "points",
 }
-_SUBMODULES = {"render", "toys", "attention", "progress", "atomic"}
+_SUBMODULES = {"render", "toys", "sdf", "attention", "embree", "progress", "atomic"}
 
 __all__ = sorted(_EXPORTS) + sorted(_SUBMODULES)
 

@@ -11,6 +11,7 @@ def register(subparsers) -> None:
     """Add meshsal's subcommands to the ``visuotactile`` parser."""
     _add_toys(subparsers)
     _add_render(subparsers)
+    _add_points(subparsers)
 
 
 def _add_toys(subparsers) -> None:
@@ -97,4 +98,86 @@ def _cmd_render(args) -> int:
     if maps:
         write_png(args.out / "saliency_sheet.png", contact_sheet(maps))
     print(f"wrote {len(views)} views of {args.mesh} to {args.out}")
+    return 0
+
+
+def _add_points(subparsers) -> None:
+    from .points import METHODS
+
+    p = subparsers.add_parser(
+        "points", help="choose interest points on a mesh by visual attention (or a baseline)",
+        description="Scale MESH to --size-mm, render the 72 views, compute their saliency and choose --n "
+                    "interest points (the paper's pipeline, or a baseline with --method). Writes "
+                    "saliency.ply (mesh saliency as vertex quality and colours), points.json and points.csv "
+                    "(ids from 1, in the mesh file's own units and frame), views.png (the best set's four "
+                    "views, saliency overlaid, points numbered) and contact_sheet.png (all 72 saliency maps).")
+    p.add_argument("mesh", type=Path, help="mesh file (OBJ, PLY, OFF, STL)")
+    p.add_argument("--out", required=True, type=Path, help="output folder")
+    p.add_argument("--n", type=int, default=15, help="number of points (default 15)")
+    p.add_argument("--method", choices=METHODS, default="attention", help="how to choose them (default attention)")
+    p.add_argument("--size-mm", type=float, default=150.0,
+                   help="scale the mesh to this bounding-box diagonal in mm first (default 150)")
+    p.add_argument("--min-spacing-mm", type=float, default=None,
+                   help="no two points closer than this, in mm after scaling: the sensor's half width "
+                        "(default 8%% of the diagonal, 12 mm at 150 mm)")
+    p.add_argument("--size", type=int, default=128, help="rendered view size in pixels (default 128)")
+    p.add_argument("--threshold", type=float, default=0.5,
+                   help="peaks and salient pixels exceed this fraction of their map's maximum (default 0.5)")
+    p.add_argument("--seed", type=int, default=0, help="seed of the random baselines (default 0)")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.set_defaults(func=_cmd_points)
+
+
+def _cmd_points(args) -> int:
+    import json
+
+    from . import overlay
+    from .atomic import write_png, write_text
+    from .curvature import mesh_saliency
+    from .io import load_mesh, save_ply
+    from .mesh import Similarity
+    from .points import attention_points, best_view_set, interest_points, saliency_maps
+    from .transform import scale_to
+
+    if args.size < 16:
+        raise ValueError(f"--size must be at least 16 pixels, got {args.size}")
+    mesh = scale_to(load_mesh(args.mesh), args.size_mm)
+    vertex_saliency = mesh_saliency(mesh)
+    views, maps = saliency_maps(mesh, size=args.size, vertex_saliency=vertex_saliency, quiet=args.quiet)
+    if args.method == "attention":
+        pts = attention_points(mesh, views, maps, vertex_saliency, n=args.n, min_spacing=args.min_spacing_mm,
+                               threshold=args.threshold)
+    else:
+        pts = interest_points(mesh, n=args.n, method=args.method, seed=args.seed,
+                              min_spacing=args.min_spacing_mm, threshold=args.threshold,
+                              vertex_saliency=vertex_saliency)
+
+    to_source = mesh.transform.to_source
+    top = float(vertex_saliency.max())
+    colors = overlay.colormap(vertex_saliency / top if top > 0 else vertex_saliency) / np.float32(255.0)
+    source_mesh = mesh.replace(vertices=to_source(mesh.vertices), vertex_colors=colors, transform=Similarity())
+    save_ply(args.out / "saliency.ply", source_mesh, quality=vertex_saliency)
+
+    positions = to_source(pts.positions)
+    records = [{"id": k + 1, "vertex": int(pts.vertex_ids[k]), "position": positions[k].tolist(),
+                "normal": pts.normals[k].tolist(), "score": float(pts.scores[k]), "votes": int(pts.votes[k]),
+                "views": list(pts.views[k])} for k in range(len(pts))]
+    settings = {"n": args.n, "method": args.method, "size_mm": args.size_mm, "view_size": args.size,
+                "threshold": args.threshold, "seed": args.seed,
+                "min_spacing": float(mesh.transform.length_to_source(pts.min_spacing)),
+                "best_set": pts.best_set}
+    document = {"mesh": str(args.mesh), "units": "source units of the mesh file", "settings": settings,
+                "points": records}
+    write_text(args.out / "points.json", json.dumps(document, indent=2) + "\n")
+    lines = ["id,vertex,x,y,z,nx,ny,nz,score,votes"]
+    for r in records:
+        lines.append(",".join([str(r["id"]), str(r["vertex"])] + [repr(float(v)) for v in r["position"]]
+                              + [repr(float(v)) for v in r["normal"]] + [repr(r["score"]), str(r["votes"])]))
+    write_text(args.out / "points.csv", "\n".join(lines) + "\n")
+
+    best = pts.best_set if pts.best_set >= 0 else best_view_set(maps)
+    write_png(args.out / "views.png", overlay.views_picture(views, maps, range(4 * best, 4 * best + 4),
+                                                            pts.positions))
+    write_png(args.out / "contact_sheet.png", overlay.contact_sheet(maps, [v.mask for v in views]))
+    print(f"wrote {len(pts)} {args.method} points of {args.mesh} to {args.out}")
     return 0
