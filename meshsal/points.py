@@ -1,0 +1,559 @@
+"""Interest points fused on the mesh from the saliency of 72 views, and the baselines.
+
+The paper's pipeline (Rouhafzay, Pedneault & Cretu, 2017), done on the mesh:
+
+1. render the 72 views of :func:`meshsal.render.view_rig` and compute each
+   one's saliency map (:func:`meshsal.attention.saliency`, masked to the
+   object; the mesh saliency of the curvature channel is computed once);
+2. choose the best set of 4 views: the highest average saliency level, where
+   a view's level is the accumulated saliency divided by the image's pixel
+   count (so a set that shows more salient surface wins);
+3. find the salient peaks of the best set's maps (local maxima above
+   ``threshold`` times the map's maximum) and map each one onto the surface
+   exactly through ``face_id`` and ``bary``;
+4. rank the peaks by votes, then by saliency value.  A view votes for a peak
+   when some vertex within ``min_spacing`` of it (along mesh edges) lies
+   under a salient pixel of that view (value above ``threshold`` times the
+   view's maximum); then non-maximum suppression: no two points closer than
+   ``min_spacing`` (Euclidean), each on a distinct nearest vertex;
+5. keep the top ``n``.
+
+``min_spacing`` is the tactile sensor's half width, in mesh units.  Its
+default, 8 % of the bounding-box diagonal, is 12 mm on an object scaled to
+a 150 mm diagonal: half the 24 mm width of a 16 x 16 sensor at 1.5 mm pitch.
+Every other length (views, mesh saliency) is relative to the mesh's size, so
+translating or uniformly scaling a mesh leaves the chosen vertices unchanged.
+
+When fewer than ``n`` points survive the suppression, the rest are filled
+from the peaks of the per-vertex mesh saliency (strongest first), then from
+all vertices in order of mesh saliency, always under the same spacing; a
+mesh too small to hold ``n`` points that far apart yields fewer.
+"""
+
+from __future__ import annotations
+
+import os
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass
+
+import numpy as np
+
+from .mesh import Mesh, face_normals, vertex_normals
+from .sampling import farthest_points, field_peaks, non_maximum_suppression, random_surface_points
+
+__all__ = [
+    "METHODS",
+    "InterestPoints",
+    "interest_points",
+    "default_min_spacing",
+    "saliency_maps",
+    "best_view_set",
+    "map_peaks",
+    "attention_points",
+    "project_pixel_paper",
+]
+
+METHODS = ("attention", "random", "uniform", "mesh_saliency", "curvature")
+SPACING_FRACTION = 0.08
+#: Candidates drawn per requested point by the random baseline (dart throwing).
+RANDOM_POOL = 64
+
+
+@dataclass(frozen=True, eq=False)
+class InterestPoints:
+    """Points chosen on a mesh, best first, in the mesh's own units and frame.
+
+    Attributes
+    ----------
+    vertex_ids : (k,) int64
+        The mesh vertex nearest each point (distinct).
+    positions : (k, 3) float64
+        Exact surface points (a peak's pixel mapped through face and
+        barycentric coordinates; a vertex for vertex-based methods).
+    normals : (k, 3) float64
+        Unit outward normals: vertex normals interpolated at the point.
+    scores : (k,) float64
+        The value the method ranks by: for "attention", the saliency-map value
+        at the point in the best set (a peak's own value; for filled points the
+        largest value over the pixels showing the vertex); mesh saliency for
+        "mesh_saliency", "random" and "uniform"; absolute mean curvature for
+        "curvature".
+    votes : (k,) int64
+        How many of the 72 views found the point salient ("attention"; 0 otherwise).
+    vertex_saliency : (n,) float64
+        Mesh saliency of every vertex (:func:`meshsal.curvature.mesh_saliency`).
+    views : tuple of tuples of int
+        For each point, the indices (0-71) of the views that voted for it.
+    method : str
+    best_set : int
+        Index (0-17) of the best set of 4 views; -1 for the baselines.
+    min_spacing : float
+        The spacing used, in mesh units.
+    """
+
+    vertex_ids: np.ndarray
+    positions: np.ndarray
+    normals: np.ndarray
+    scores: np.ndarray
+    votes: np.ndarray
+    vertex_saliency: np.ndarray
+    views: tuple
+    method: str
+    best_set: int
+    min_spacing: float
+
+    def __len__(self) -> int:
+        return int(self.vertex_ids.size)
+
+
+def default_min_spacing(mesh: Mesh) -> float:
+    """8 % of the bounding-box diagonal (a sensor's half width on a 150 mm object)."""
+    V = mesh.vertices
+    return SPACING_FRACTION * float(np.linalg.norm(V.max(axis=0) - V.min(axis=0)))
+
+
+def _check(mesh: Mesh, n, method, min_spacing, threshold) -> tuple[int, float]:
+    if method not in METHODS:
+        raise ValueError(f"unknown method {method!r}; expected one of {METHODS}")
+    if int(n) != n or n < 1:
+        raise ValueError(f"n must be a positive integer, got {n!r}")
+    if mesh.n_faces == 0:
+        raise ValueError(f"mesh {mesh.name!r} has no faces: no surface to put points on")
+    if not 0.0 <= threshold < 1.0:
+        raise ValueError(f"threshold must lie in [0, 1), got {threshold}")
+    spacing = default_min_spacing(mesh) if min_spacing is None else float(min_spacing)
+    if not (np.isfinite(spacing) and spacing >= 0):
+        raise ValueError(f"min_spacing must be a finite length >= 0, got {min_spacing}")
+    return int(n), spacing
+
+
+def _check_field(mesh: Mesh, vertex_saliency) -> np.ndarray:
+    field = np.asarray(vertex_saliency, dtype=np.float64)
+    if field.shape != (mesh.n_vertices,):
+        raise ValueError(f"vertex_saliency must have shape ({mesh.n_vertices},), got {field.shape}")
+    return field
+
+
+def _normals_at(mesh: Mesh, vn: np.ndarray, face_ids: np.ndarray, bary: np.ndarray) -> np.ndarray:
+    """Unit normals interpolated over faces; the face normal where they cancel."""
+    n = np.einsum("kc,kcd->kd", bary, vn[mesh.faces[face_ids]])
+    length = np.linalg.norm(n, axis=1, keepdims=True)
+    flat = face_normals(mesh.vertices, mesh.faces[face_ids])
+    return np.where(length > 1e-12, n / np.maximum(length, 1e-300), flat)
+
+
+def _nearest_corner(mesh: Mesh, face_ids: np.ndarray, bary: np.ndarray) -> np.ndarray:
+    return mesh.faces[face_ids, np.argmax(bary, axis=1)].astype(np.int64)
+
+
+@dataclass(frozen=True)
+class _Candidates:
+    """Points in priority order, with what is needed to report them."""
+
+    vertex_ids: np.ndarray
+    positions: np.ndarray
+    normals: np.ndarray
+    scores: np.ndarray
+
+
+def _vertex_candidates(mesh: Mesh, vn: np.ndarray, ids: np.ndarray, scores: np.ndarray) -> _Candidates:
+    ids = np.asarray(ids, dtype=np.int64)
+    return _Candidates(ids, mesh.vertices[ids], vn[ids], np.asarray(scores, dtype=np.float64))
+
+
+def _take(c: _Candidates, keep: np.ndarray) -> _Candidates:
+    return _Candidates(c.vertex_ids[keep], c.positions[keep], c.normals[keep], c.scores[keep])
+
+
+def _concat(parts) -> _Candidates:
+    return _Candidates(*(np.concatenate([getattr(p, f) for p in parts])
+                         for f in ("vertex_ids", "positions", "normals", "scores")))
+
+
+def _select(first: _Candidates, fill_order: list, n: int, spacing: float) -> _Candidates:
+    """Non-maximum suppression of ``first``, then of each fill source in turn, up to ``n``."""
+    chosen = _take(first, non_maximum_suppression(first.positions, spacing, n, ids=first.vertex_ids))
+    for make in fill_order:
+        if chosen.vertex_ids.size >= n:
+            break
+        more = make()
+        keep = non_maximum_suppression(more.positions, spacing, n - chosen.vertex_ids.size,
+                                       ids=more.vertex_ids, taken_points=chosen.positions,
+                                       taken_ids=chosen.vertex_ids)
+        chosen = _concat([chosen, _take(more, keep)])
+    return chosen
+
+
+def _saliency_fill(mesh: Mesh, vn: np.ndarray, vertex_saliency: np.ndarray, score_of) -> list:
+    """Fill sources: mesh-saliency peaks, then every used vertex by mesh saliency."""
+    def peaks():
+        ids = field_peaks(vertex_saliency, mesh.faces)
+        return _vertex_candidates(mesh, vn, ids, score_of(ids))
+
+    def everything():
+        used = np.unique(mesh.faces)
+        ids = used[np.lexsort((used, -vertex_saliency[used]))]
+        return _vertex_candidates(mesh, vn, ids, score_of(ids))
+
+    return [peaks, everything]
+
+
+def saliency_maps(mesh: Mesh, size: int = 128, vertex_saliency=None, quiet: bool = True,
+                  weights=None, threads: int | None = None):
+    """Render the 72 views of the rig and compute each one's saliency map.
+
+    Parameters
+    ----------
+    mesh : Mesh
+    size : int
+        Image size in pixels.
+    vertex_saliency : (n,) float64, optional
+        Mesh saliency for the curvature channel (computed when omitted).
+    quiet : bool
+        No progress bar on stderr.
+    weights : dict, optional
+        Channel weights of :func:`meshsal.attention.saliency`.
+    threads : int, optional
+        Worker threads (default: the CPU count).
+
+    Returns
+    -------
+    views : list of 72 View, in rig order (view ``4 * s + k`` is camera ``k`` of set ``s``)
+    maps : (72, size, size) float32 in [0, 1]
+    """
+    from .attention import saliency
+    from .curvature import mesh_saliency
+    from .progress import progress
+    from .render import render_views, view_rig
+
+    if vertex_saliency is None:
+        vertex_saliency = mesh_saliency(mesh)
+    cameras = [c for s in view_rig() for c in s]
+    views = render_views(mesh, cameras, size=size, threads=threads)
+
+    def one(view):
+        return saliency(view, mesh, weights=weights, vertex_saliency=vertex_saliency).map
+
+    workers = threads or os.cpu_count() or 1
+    with ThreadPoolExecutor(max_workers=workers) as pool:
+        maps = list(progress(pool.map(one, views), total=len(views), desc="saliency", quiet=quiet))
+    return views, np.stack(maps).astype(np.float32)
+
+
+def best_view_set(maps: np.ndarray, views_per_set: int = 4) -> int:
+    """Index of the set of views with the highest average saliency level.
+
+    A view's level is its map's sum over the image's pixel count; sets are
+    consecutive groups of ``views_per_set`` maps; ties go to the lower index.
+
+    Examples
+    --------
+    >>> maps = np.zeros((8, 4, 4), np.float32); maps[5, :2] = 1.0
+    >>> best_view_set(maps)
+    1
+    """
+    maps = np.asarray(maps, dtype=np.float64)
+    if maps.ndim != 3 or maps.shape[0] % views_per_set:
+        raise ValueError(f"expected (k * {views_per_set}, H, W) maps, got shape {maps.shape}")
+    level = maps.reshape(maps.shape[0], -1).mean(axis=1)
+    return int(np.argmax(level.reshape(-1, views_per_set).mean(axis=1)))
+
+
+def map_peaks(saliency_map: np.ndarray, mask: np.ndarray, threshold: float = 0.5, radius: int | None = None):
+    """Local maxima of a saliency map above ``threshold`` times its maximum.
+
+    A pixel is a peak when it equals the maximum of its ``(2 radius + 1)``
+    square neighbourhood, lies on the object and exceeds the threshold.
+
+    Parameters
+    ----------
+    saliency_map : (H, W) float
+    mask : (H, W) bool
+    threshold : float in [0, 1)
+    radius : int, optional
+        Neighbourhood radius in pixels; default ``max(1, H // 64)`` so that
+        the peaks do not depend on the image size.
+
+    Returns
+    -------
+    rows, cols : (k,) int64, strongest first (ties in raster order)
+
+    Examples
+    --------
+    >>> m = np.zeros((9, 9), np.float32); m[2, 3] = 1.0; m[6, 6] = 0.7; m[6, 2] = 0.2
+    >>> [r.tolist() for r in map_peaks(m, np.ones((9, 9), bool))]
+    [[2, 6], [3, 6]]
+    """
+    import cv2
+
+    m = np.asarray(saliency_map, dtype=np.float32)
+    top = float(m[mask].max()) if np.any(mask) else 0.0
+    if top <= 0:
+        return np.empty(0, np.int64), np.empty(0, np.int64)
+    r = max(1, m.shape[0] // 64) if radius is None else int(radius)
+    local_max = cv2.dilate(m, np.ones((2 * r + 1, 2 * r + 1), np.uint8))
+    rows, cols = np.nonzero((m >= local_max) & mask & (m > threshold * top))
+    order = np.lexsort((cols, rows, -m[rows, cols]))
+    return rows[order].astype(np.int64), cols[order].astype(np.int64)
+
+
+def _salient_vertices(mesh: Mesh, views, maps: np.ndarray, threshold: float):
+    """(72, n) sparse 0/1: the vertices of faces under each view's salient pixels."""
+    from scipy import sparse
+
+    rows, cols = [], []
+    for k, (view, m) in enumerate(zip(views, maps)):
+        hot = view.mask & (m > threshold * m.max()) if m.max() > 0 else np.zeros_like(view.mask)
+        verts = mesh.faces[view.face_id[hot]].ravel()
+        rows.append(np.full(verts.size, k))
+        cols.append(verts)
+    r, c = np.concatenate(rows), np.concatenate(cols)
+    # Repeated (view, vertex) pairs add up; only non-zero matters.
+    counts = sparse.csr_matrix((np.ones(r.size, np.float32), (r, c)), shape=(len(views), mesh.n_vertices))
+    counts.data[:] = 1.0
+    return counts
+
+
+def _edge_graph(mesh: Mesh):
+    from scipy import sparse
+
+    F = mesh.faces
+    a, b = F.ravel(), F[:, [1, 2, 0]].ravel()
+    length = np.linalg.norm(mesh.vertices[a] - mesh.vertices[b], axis=1)
+    # Zero-length edges would vanish from a sparse graph; keep them as tiny steps.
+    length = np.maximum(length, 1e-12 * max(float(length.max()), 1e-300))
+    n = mesh.n_vertices
+    return sparse.coo_matrix((np.r_[length, length], (np.r_[a, b], np.r_[b, a])), shape=(n, n)).tocsr()
+
+
+def _votes(graph, salient, vertex_ids: np.ndarray, radius: float, chunk: int = 32):
+    """Views voting for each vertex: some vertex within ``radius`` along edges is salient there."""
+    from scipy import sparse
+    from scipy.sparse.csgraph import dijkstra
+
+    found = []
+    for start in range(0, vertex_ids.size, chunk):
+        ids = vertex_ids[start:start + chunk]
+        near = np.isfinite(dijkstra(graph, indices=ids, limit=radius))
+        hits = (salient @ sparse.csr_matrix(near.T.astype(np.float32))).toarray() > 0
+        found.extend(tuple(np.flatnonzero(hits[:, j]).tolist()) for j in range(ids.size))
+    return np.array([len(f) for f in found], dtype=np.int64), tuple(found)
+
+
+def _best_set_values(mesh: Mesh, views, maps, set_views) -> np.ndarray:
+    """Per vertex, the largest best-set map value over pixels showing one of its faces."""
+    best = np.zeros(mesh.n_vertices)
+    for k in set_views:
+        hit = views[k].mask
+        corners = mesh.faces[views[k].face_id[hit]]
+        values = np.repeat(maps[k][hit].astype(np.float64), 3)
+        np.maximum.at(best, corners.ravel(), values)
+    return best
+
+
+def attention_points(mesh: Mesh, views, maps: np.ndarray, vertex_saliency: np.ndarray, n: int = 15,
+                     min_spacing: float | None = None, threshold: float = 0.5) -> InterestPoints:
+    """Steps 2-5 of the pipeline on views and saliency maps already computed.
+
+    Parameters
+    ----------
+    mesh : Mesh
+    views : list of 72 View, maps : (72, H, W) float32
+        From :func:`saliency_maps`.
+    vertex_saliency : (n_vertices,) float64
+    n : int
+    min_spacing : float, optional
+        The sensor's half width in mesh units (default :func:`default_min_spacing`).
+    threshold : float in [0, 1)
+        Peaks and salient pixels exceed ``threshold`` times their map's maximum.
+
+    Returns
+    -------
+    InterestPoints with ``method="attention"``.
+    """
+    n, spacing = _check(mesh, n, "attention", min_spacing, threshold)
+    vertex_saliency = _check_field(mesh, vertex_saliency)
+    maps = np.asarray(maps)
+    if maps.shape[0] != len(views):
+        raise ValueError(f"got {len(views)} views but {maps.shape[0]} saliency maps")
+    vn = vertex_normals(mesh.vertices, mesh.faces)
+    best = best_view_set(maps)
+    set_views = range(4 * best, 4 * best + 4)
+    faces, bary, scores = [], [], []
+    for k in set_views:
+        rows, cols = map_peaks(maps[k], views[k].mask, threshold)
+        faces.append(views[k].face_id[rows, cols].astype(np.int64))
+        bary.append(views[k].bary[rows, cols].astype(np.float64))
+        scores.append(maps[k][rows, cols].astype(np.float64))
+    faces, bary, scores = np.concatenate(faces), np.concatenate(bary), np.concatenate(scores)
+    bary /= bary.sum(axis=1, keepdims=True)
+    positions = np.einsum("kc,kcd->kd", bary, mesh.vertices[mesh.faces[faces]])
+    ids = _nearest_corner(mesh, faces, bary)
+
+    graph = _edge_graph(mesh)
+    salient = _salient_vertices(mesh, views, maps, threshold)
+    votes, _ = _votes(graph, salient, ids, spacing)
+    order = np.lexsort((np.arange(ids.size), -scores, -votes))
+    peaks = _Candidates(ids[order], positions[order], _normals_at(mesh, vn, faces[order], bary[order]),
+                        scores[order])
+    seen = _best_set_values(mesh, views, maps, set_views)
+    chosen = _select(peaks, _saliency_fill(mesh, vn, vertex_saliency, lambda i: seen[i]), n, spacing)
+    votes, found = _votes(graph, salient, chosen.vertex_ids, spacing)
+    return InterestPoints(vertex_ids=chosen.vertex_ids, positions=chosen.positions, normals=chosen.normals,
+                          scores=chosen.scores, votes=votes, vertex_saliency=vertex_saliency, views=found,
+                          method="attention", best_set=best, min_spacing=spacing)
+
+
+def interest_points(mesh: Mesh, n: int = 15, method: str = "attention", seed=0,
+                    min_spacing: float | None = None, size: int = 128, threshold: float = 0.5,
+                    quiet: bool = True, weights=None, vertex_saliency=None) -> InterestPoints:
+    """Choose ``n`` interest points on a mesh (module docstring for the pipeline).
+
+    Parameters
+    ----------
+    mesh : Mesh
+    n : int
+        How many points (fewer only if the mesh cannot hold ``n`` at ``min_spacing``).
+    method : {"attention", "random", "uniform", "mesh_saliency", "curvature"}
+        "attention": the paper's pipeline.  Baselines: "random", area-weighted
+        uniform surface samples in random order; "uniform", farthest-point
+        sampling of the vertices from a random start; "mesh_saliency", peaks
+        of Lee et al.'s mesh saliency; "curvature", peaks of absolute mean
+        curvature.  All keep the same minimum spacing.
+    seed : int
+        Seeds the random baselines (the attention pipeline is deterministic).
+    min_spacing : float, optional
+        No two points closer than this (mesh units): the sensor's half width.
+        Default 8 % of the bounding-box diagonal.
+    size : int
+        View size in pixels ("attention").
+    threshold : float in [0, 1)
+        Peak and salient-pixel threshold relative to each map's maximum.
+    quiet : bool
+        No progress bar on stderr.
+    weights : dict, optional
+        Channel weights of the attention model.
+    vertex_saliency : (n_vertices,) float64, optional
+        Precomputed mesh saliency.
+
+    Returns
+    -------
+    InterestPoints
+
+    Examples
+    --------
+    >>> import meshsal
+    >>> pts = meshsal.interest_points(meshsal.toys.make("cup"), n=15, size=64)
+    >>> pts.positions.shape, pts.normals.shape, len(pts.views)
+    ((15, 3), (15, 3), 15)
+    """
+    from .curvature import mean_curvature, mesh_saliency
+
+    n, spacing = _check(mesh, n, method, min_spacing, threshold)
+    if vertex_saliency is None:
+        vertex_saliency = mesh_saliency(mesh)
+    vertex_saliency = _check_field(mesh, vertex_saliency)
+    if method == "attention":
+        views, maps = saliency_maps(mesh, size=size, vertex_saliency=vertex_saliency, quiet=quiet,
+                                    weights=weights)
+        return attention_points(mesh, views, maps, vertex_saliency, n=n, min_spacing=spacing,
+                                threshold=threshold)
+
+    vn = vertex_normals(mesh.vertices, mesh.faces)
+    rng = np.random.default_rng(seed)
+    field = vertex_saliency
+    used = np.unique(mesh.faces)
+    if method == "random":
+        faces, bary = random_surface_points(mesh.vertices, mesh.faces, RANDOM_POOL * n, seed=rng)
+        ids = _nearest_corner(mesh, faces, bary)
+        positions = np.einsum("kc,kcd->kd", bary, mesh.vertices[mesh.faces[faces]])
+        first = _Candidates(ids, positions, _normals_at(mesh, vn, faces, bary), field[ids])
+    elif method == "uniform":
+        order = used[farthest_points(mesh.vertices[used], 4 * n, start=int(rng.integers(used.size)))]
+        first = _vertex_candidates(mesh, vn, order, field[order])
+    else:
+        if method == "curvature":
+            field = np.abs(mean_curvature(mesh.vertices, mesh.faces))
+        ids = field_peaks(field, mesh.faces)
+        first = _vertex_candidates(mesh, vn, ids, field[ids])
+    chosen = _select(first, _saliency_fill(mesh, vn, vertex_saliency, lambda i: field[i]), n, spacing)
+    return InterestPoints(vertex_ids=chosen.vertex_ids, positions=chosen.positions, normals=chosen.normals,
+                          scores=chosen.scores, votes=np.zeros(chosen.vertex_ids.size, np.int64),
+                          vertex_saliency=vertex_saliency, views=tuple(() for _ in range(chosen.vertex_ids.size)),
+                          method=method, best_set=-1, min_spacing=spacing)
+
+
+def _spherical(view):
+    """The paper's camera parameters: azimuth, elevation (y up), distance, roll, pixels per unit."""
+    cam = view.camera
+    e = view.eye - view.center
+    distance = float(np.linalg.norm(e))
+    e = e / distance
+    elevation = float(np.arcsin(np.clip(e[1], -1.0, 1.0)))
+    azimuth = float(np.arctan2(e[0], e[2]))
+    forward = -e
+    up_s = np.array([-np.sin(elevation) * np.sin(azimuth), np.cos(elevation),
+                     -np.sin(elevation) * np.cos(azimuth)])
+    roll = float(np.arctan2(np.cross(up_s, cam.up) @ forward, up_s @ cam.up))
+    return azimuth, elevation, distance, roll, 1.0 / view.pixel_size
+
+
+def project_pixel_paper(view, rows, cols, mesh: Mesh) -> np.ndarray:
+    """The paper's analytic 2-D to 3-D projection of pixels onto the mesh.
+
+    From the view's camera in spherical coordinates about the framed centre
+    (azimuth about +y, elevation, distance, plus the roll of the camera's up
+    vector about its axis) and the image scale in pixels per world unit, the
+    pixel centre is placed on the image plane and a ray perpendicular to that
+    plane (orthographic views; for perspective views, the ray from the eye
+    through that point) is intersected with the mesh by Embree.  The exact
+    alternative used by the pipeline is :func:`meshsal.render.surface_points`.
+
+    Parameters
+    ----------
+    view : View
+    rows, cols : int or (k,) int
+        Pixel indices (row 0 at the top).
+    mesh : Mesh
+        The rendered mesh.
+
+    Returns
+    -------
+    (k, 3) float64 surface points; NaN rows where the ray misses the mesh.
+    """
+    from embreex import rtcore_scene as rtcs
+    from embreex.mesh_construction import TriangleMesh
+
+    rows = np.atleast_1d(np.asarray(rows, dtype=np.float64))
+    cols = np.atleast_1d(np.asarray(cols, dtype=np.float64))
+    azimuth, elevation, distance, roll, ppu = _spherical(view)
+    e = np.array([np.cos(elevation) * np.sin(azimuth), np.sin(elevation), np.cos(elevation) * np.cos(azimuth)])
+    forward = -e
+    up_s = np.array([-np.sin(elevation) * np.sin(azimuth), np.cos(elevation),
+                     -np.sin(elevation) * np.cos(azimuth)])
+    up = np.cos(roll) * up_s + np.sin(roll) * np.cross(forward, up_s)
+    right = np.cross(forward, up)
+    eye = view.center + distance * e
+    half = view.size / 2.0
+    x = (cols + 0.5 - half) / ppu
+    y = (half - rows - 0.5) / ppu
+    if view.camera.projection == "orthographic":
+        origins = eye + x[:, None] * right + y[:, None] * up
+        directions = np.broadcast_to(forward, origins.shape)
+    else:
+        # The image plane through the centre, as the pixel size is measured there.
+        on_plane = view.center + x[:, None] * right + y[:, None] * up
+        origins = np.broadcast_to(eye, on_plane.shape)
+        directions = on_plane - eye
+        directions = directions / np.linalg.norm(directions, axis=1, keepdims=True)
+    scene = rtcs.EmbreeScene()
+    TriangleMesh(scene, mesh.vertices.astype(np.float32), mesh.faces.astype(np.int32))
+    hit = scene.run(np.ascontiguousarray(origins, np.float32), np.ascontiguousarray(directions, np.float32),
+                    output=1)
+    out = np.full((rows.size, 3), np.nan)
+    ok = hit["primID"] >= 0
+    f = hit["primID"][ok]
+    u, v = hit["u"][ok].astype(np.float64), hit["v"][ok].astype(np.float64)
+    corners = mesh.vertices[mesh.faces[f]]
+    out[ok] = (1 - u - v)[:, None] * corners[:, 0] + u[:, None] * corners[:, 1] + v[:, None] * corners[:, 2]
+    return out

@@ -1,0 +1,333 @@
+"""Interest points: planted features, invariances, baselines, spacing, the CLI and the paper's projection."""
+
+import json
+
+import igl
+import numpy as np
+import pytest
+
+from meshsal.mesh import Mesh
+from meshsal.points import (
+    METHODS,
+    attention_points,
+    best_view_set,
+    interest_points,
+    map_peaks,
+    project_pixel_paper,
+    saliency_maps,
+)
+from meshsal.sampling import farthest_points, field_peaks, non_maximum_suppression, random_surface_points
+
+SIZE = 64
+
+
+def icosphere(level):
+    t = (1 + 5 ** 0.5) / 2
+    V = np.array([[-1, t, 0], [1, t, 0], [-1, -t, 0], [1, -t, 0], [0, -1, t], [0, 1, t],
+                  [0, -1, -t], [0, 1, -t], [t, 0, -1], [t, 0, 1], [-t, 0, -1], [-t, 0, 1]], float)
+    F = np.array([[0, 11, 5], [0, 5, 1], [0, 1, 7], [0, 7, 10], [0, 10, 11], [1, 5, 9], [5, 11, 4],
+                  [11, 10, 2], [10, 7, 6], [7, 1, 8], [3, 9, 4], [3, 4, 2], [3, 2, 6], [3, 6, 8],
+                  [3, 8, 9], [4, 9, 5], [2, 4, 11], [6, 2, 10], [8, 6, 7], [9, 8, 1]])
+    V /= np.linalg.norm(V, axis=1, keepdims=True)
+    for _ in range(level):
+        V, F = igl.upsample(V, F)
+        V /= np.linalg.norm(V, axis=1, keepdims=True)
+    return V, F
+
+
+def unit(v):
+    v = np.asarray(v, float)
+    return v / np.linalg.norm(v)
+
+
+BUMP = unit([0.0, 0.6, 0.8])
+SPOT = unit([0.8, -0.2, -0.4])
+
+
+def planted_sphere(radius=50.0):
+    """A grey sphere with one bump and one red spot; returns the mesh and each vertex's angle to both."""
+    V, F = icosphere(4)
+    to_bump = np.arccos(np.clip(V @ BUMP, -1, 1))
+    to_spot = np.arccos(np.clip(V @ SPOT, -1, 1))
+    V = V * (1 + 0.15 * np.exp(-to_bump ** 2 / (2 * 0.1 ** 2)))[:, None]
+    C = np.full(V.shape, 0.6, np.float32)
+    C[to_spot < 0.2] = [0.9, 0.1, 0.1]
+    return Mesh(vertices=V * radius, faces=F, vertex_colors=C, name="planted"), to_bump, to_spot
+
+
+@pytest.fixture(scope="module")
+def planted():
+    mesh, to_bump, to_spot = planted_sphere()
+    return mesh, to_bump, to_spot, interest_points(mesh, n=15, size=SIZE)
+
+
+def pairwise_min(P):
+    d = np.linalg.norm(P[:, None] - P[None], axis=2)
+    return d[np.triu_indices(len(P), 1)].min()
+
+
+def distance_to_surface(points, mesh):
+    d2 = igl.point_mesh_squared_distance(np.asarray(points, float), mesh.vertices,
+                                         mesh.faces.astype(np.int64))[0]
+    return np.sqrt(d2)
+
+
+# ---------------------------------------------------------------- sampling blocks
+
+def test_random_surface_points_follow_area():
+    V = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1], [3, 0, 1], [0, 2, 1.]])
+    F = np.array([[0, 1, 2], [3, 4, 5]])  # areas 0.5 and 3
+    faces, bary = random_surface_points(V, F, 20000, seed=4)
+    assert abs(np.mean(faces == 1) - 3 / 3.5) < 0.01
+    assert np.all(bary >= 0) and np.allclose(bary.sum(axis=1), 1)
+    # Uniform inside the triangle: the mean of the barycentric weights is its centroid.
+    assert np.allclose(bary.mean(axis=0), 1 / 3, atol=0.01)
+    again = random_surface_points(V, F, 20000, seed=4)
+    assert np.array_equal(again[0], faces) and np.array_equal(again[1], bary)
+
+
+def test_farthest_points_spread_over_a_line():
+    P = np.c_[np.linspace(0, 1, 101), np.zeros(101), np.zeros(101)]
+    idx = farthest_points(P, 3, start=50)
+    assert idx.tolist()[0] == 50 and set(idx[1:].tolist()) == {0, 100}
+
+
+def test_field_peaks_finds_every_local_maximum():
+    GV, F = igl.triangulated_grid(20, 20)
+    f = np.exp(-np.sum((GV - [0.25, 0.25]) ** 2, axis=1) / 0.01) + 0.5 * np.exp(
+        -np.sum((GV - [0.75, 0.7]) ** 2, axis=1) / 0.01)
+    peaks = field_peaks(f, F)
+    assert len(peaks) == 2
+    assert np.allclose(GV[peaks[0]], [0.25, 0.25], atol=0.06)
+    assert np.allclose(GV[peaks[1]], [0.75, 0.7], atol=0.06)
+
+
+def test_non_maximum_suppression_keeps_order_and_spacing():
+    rng = np.random.default_rng(0)
+    P = rng.random((500, 3))
+    keep = non_maximum_suppression(P, 0.2)
+    assert keep[0] == 0 and np.all(np.diff(keep) > 0)
+    assert pairwise_min(P[keep]) >= 0.2
+    # Maximal: every dropped point is too close to a kept one.
+    d = np.linalg.norm(P[:, None] - P[keep][None], axis=2).min(axis=1)
+    assert np.all(d[np.setdiff1d(np.arange(500), keep)] < 0.2)
+    assert len(non_maximum_suppression(P, 0.2, n=3)) == 3
+
+
+def test_non_maximum_suppression_respects_taken_points_and_ids():
+    P = np.array([[0, 0, 0], [1, 0, 0], [2, 0, 0], [3, 0, 0.]])
+    keep = non_maximum_suppression(P, 0.5, ids=[7, 7, 8, 9], taken_points=[[3.1, 0, 0]], taken_ids=[8])
+    assert keep.tolist() == [0]
+    with pytest.raises(ValueError, match="min_spacing"):
+        non_maximum_suppression(P, -1.0)
+
+
+# ---------------------------------------------------------------- the attention pipeline
+
+def test_planted_bump_and_red_spot_are_among_top_three(planted):
+    mesh, to_bump, to_spot, pts = planted
+    top = pts.vertex_ids[:3]
+    assert to_bump[top].min() < 0.25, f"no top-3 point near the bump: {to_bump[top]}"
+    # The spot has a 0.2 rad radius; its colour edge is salient too.
+    assert to_spot[top].min() < 0.35, f"no top-3 point on the red spot: {to_spot[top]}"
+
+
+def test_points_lie_on_the_surface_with_unit_outward_normals(planted):
+    mesh, _, _, pts = planted
+    assert len(pts) == 15 and pts.method == "attention" and 0 <= pts.best_set < 18
+    assert distance_to_surface(pts.positions, mesh).max() < 1e-6 * 50
+    assert np.allclose(np.linalg.norm(pts.normals, axis=1), 1.0)
+    radial = pts.positions / np.linalg.norm(pts.positions, axis=1, keepdims=True)
+    assert np.all(np.einsum("ij,ij->i", pts.normals, radial) > 0.5)
+    # The vertex reported is a corner of the face the point lies on: within one edge length.
+    assert np.linalg.norm(mesh.vertices[pts.vertex_ids] - pts.positions, axis=1).max() < 0.1 * 50
+
+
+def test_points_are_distinct_spaced_and_votes_match_views(planted):
+    mesh, _, _, pts = planted
+    assert len(set(pts.vertex_ids.tolist())) == len(pts)
+    assert pairwise_min(pts.positions) >= pts.min_spacing
+    np.testing.assert_allclose(pts.min_spacing, 0.08 * np.linalg.norm(np.ptp(mesh.vertices, axis=0)))
+    assert pts.votes.dtype == np.int64 and np.all((pts.votes >= 0) & (pts.votes <= 72))
+    assert [len(v) for v in pts.views] == pts.votes.tolist()
+    assert all(0 <= k < 72 for v in pts.views for k in v)
+    assert pts.vertex_saliency.shape == (mesh.n_vertices,)
+    # The planted features are seen by many views: the best point's votes are high.
+    assert pts.votes.max() >= 10
+
+
+def test_translation_and_uniform_scale_keep_the_vertex_ids(planted):
+    mesh, _, _, pts = planted
+    moved = mesh.replace(vertices=mesh.vertices * 7.5 + [300.0, -120.0, 45.0])
+    other = interest_points(moved, n=15, size=SIZE)
+    assert other.vertex_ids.tolist() == pts.vertex_ids.tolist()
+    # Equal up to Embree's float32 barycentric coordinates.
+    np.testing.assert_allclose(other.positions, pts.positions * 7.5 + [300.0, -120.0, 45.0], atol=1e-4 * 375)
+    np.testing.assert_allclose(other.normals, pts.normals, atol=1e-4)
+
+
+def test_same_input_same_output(planted):
+    mesh, _, _, pts = planted
+    again = interest_points(mesh, n=15, size=SIZE)
+    assert again.vertex_ids.tolist() == pts.vertex_ids.tolist()
+    assert np.array_equal(again.positions, pts.positions) and np.array_equal(again.votes, pts.votes)
+
+
+def test_wide_spacing_fills_from_saliency_and_never_duplicates():
+    mesh, _, _ = planted_sphere()
+    views, maps = saliency_maps(mesh, size=SIZE)
+    from meshsal.curvature import mesh_saliency
+
+    vs = mesh_saliency(mesh)
+    # A 1.2-radius spacing leaves room for only a handful of points on a 50 mm sphere.
+    pts = attention_points(mesh, views, maps, vs, n=15, min_spacing=60.0)
+    assert 2 <= len(pts) < 15
+    assert len(set(pts.vertex_ids.tolist())) == len(pts)
+    assert pairwise_min(pts.positions) >= 60.0
+    # Zero spacing: 15 distinct vertices even where peaks crowd.
+    dense = attention_points(mesh, views, maps, vs, n=15, min_spacing=0.0)
+    assert len(dense) == 15 and len(set(dense.vertex_ids.tolist())) == 15
+
+
+# ---------------------------------------------------------------- baselines
+
+@pytest.mark.parametrize("method", [m for m in METHODS if m != "attention"])
+def test_baselines_return_n_distinct_spaced_points(method):
+    mesh, _, _ = planted_sphere()
+    pts = interest_points(mesh, n=12, method=method, seed=3)
+    assert len(pts) == 12 and pts.method == method and pts.best_set == -1
+    assert len(set(pts.vertex_ids.tolist())) == 12
+    assert pairwise_min(pts.positions) >= pts.min_spacing
+    assert distance_to_surface(pts.positions, mesh).max() < 1e-6 * 50
+    assert np.allclose(np.linalg.norm(pts.normals, axis=1), 1.0)
+    same = interest_points(mesh, n=12, method=method, seed=3, vertex_saliency=pts.vertex_saliency)
+    assert same.vertex_ids.tolist() == pts.vertex_ids.tolist()
+    spaced = interest_points(mesh, n=6, method=method, seed=3, min_spacing=30.0,
+                             vertex_saliency=pts.vertex_saliency)
+    assert len(spaced) == 6 and pairwise_min(spaced.positions) >= 30.0
+
+
+@pytest.mark.parametrize("method", ["random", "uniform"])
+def test_random_baselines_depend_on_the_seed(method):
+    mesh, _, _ = planted_sphere()
+    a = interest_points(mesh, n=10, method=method, seed=0)
+    b = interest_points(mesh, n=10, method=method, seed=1, vertex_saliency=a.vertex_saliency)
+    assert a.vertex_ids.tolist() != b.vertex_ids.tolist()
+
+
+def test_saliency_and_curvature_baselines_start_at_the_bump():
+    mesh, to_bump, _ = planted_sphere()
+    for method in ("mesh_saliency", "curvature"):
+        pts = interest_points(mesh, n=5, method=method)
+        assert to_bump[pts.vertex_ids[0]] < 0.15, method
+
+
+def test_bad_arguments_are_rejected():
+    mesh, _, _ = planted_sphere()
+    with pytest.raises(ValueError, match="unknown method"):
+        interest_points(mesh, method="magic")
+    with pytest.raises(ValueError, match="positive integer"):
+        interest_points(mesh, n=0, method="random")
+    with pytest.raises(ValueError, match="min_spacing"):
+        interest_points(mesh, method="random", min_spacing=-2.0)
+    with pytest.raises(ValueError, match="no faces"):
+        interest_points(Mesh(vertices=np.eye(3), faces=np.zeros((0, 3))), method="random")
+
+
+# ---------------------------------------------------------------- map helpers
+
+def test_best_view_set_picks_the_most_salient_set():
+    maps = np.zeros((72, 8, 8), np.float32)
+    maps[4 * 11 + 2] = 0.9
+    maps[4 * 5:4 * 5 + 4, :4] = 0.4  # 0.2 average per view: less than 0.9 / 4
+    assert best_view_set(maps) == 11
+    with pytest.raises(ValueError):
+        best_view_set(maps[:70])
+
+
+def test_map_peaks_thresholds_relative_to_the_maximum():
+    m = np.zeros((64, 64), np.float32)
+    m[10, 10], m[40, 50], m[50, 20] = 1.0, 0.6, 0.25
+    mask = np.ones_like(m, bool)
+    rows, cols = map_peaks(m, mask, threshold=0.5)
+    assert list(zip(rows.tolist(), cols.tolist())) == [(10, 10), (40, 50)]
+    mask[10, 10] = False
+    rows, cols = map_peaks(m, mask, threshold=0.5)
+    assert list(zip(rows.tolist(), cols.tolist())) == [(40, 50)]  # 0.25 < 0.5 * 0.6
+
+
+# ---------------------------------------------------------------- the paper's analytic projection
+
+@pytest.mark.parametrize("projection", ["orthographic", "perspective"])
+def test_project_pixel_paper_matches_face_id_mapping(projection):
+    from meshsal.render import Camera, render, surface_points, view_rig
+
+    mesh, _, _ = planted_sphere()
+    cameras = [view_rig()[0][0], view_rig()[9][3], view_rig()[17][1],
+               Camera(direction=[0.2, -0.9, 0.3], up=[0, 0, 1])]
+    for cam in cameras:
+        cam = Camera(direction=cam.direction, up=cam.up, projection=projection)
+        view = render(mesh, cam, size=48)
+        rows, cols = np.nonzero(view.mask)
+        paper = project_pixel_paper(view, rows, cols, mesh)
+        exact = surface_points(mesh, view, rows, cols)
+        assert not np.isnan(paper).any()
+        assert np.linalg.norm(paper - exact, axis=1).max() < view.pixel_size
+        # Background pixels miss the mesh.
+        assert np.isnan(project_pixel_paper(view, [0], [0], mesh)).all()
+
+
+# ---------------------------------------------------------------- the command line
+
+def test_cli_writes_every_file_in_the_source_frame(tmp_path, capsys):
+    from classify.cli import main
+    from meshsal.io import load_mesh, load_vertex_quality, save_ply
+
+    mesh, _, _ = planted_sphere(radius=0.4)
+    source = mesh.replace(vertices=mesh.vertices + [2.0, 1.0, -3.0])
+    path = tmp_path / "planted.ply"
+    save_ply(path, source)
+    out = tmp_path / "out"
+    assert main(["points", str(path), "--n", "6", "--size", "48", "--quiet", "--out", str(out)]) == 0
+    for name in ("saliency.ply", "points.json", "points.csv", "views.png", "contact_sheet.png"):
+        assert (out / name).is_file() and (out / name).stat().st_size > 0, name
+    quality = load_vertex_quality(out / "saliency.ply")
+    assert quality.shape == (source.n_vertices,) and np.ptp(quality) > 0
+    reloaded = load_mesh(out / "saliency.ply")
+    np.testing.assert_allclose(reloaded.vertices, source.vertices, atol=1e-5)
+    doc = json.loads((out / "points.json").read_text())
+    assert doc["mesh"] == str(path) and doc["settings"]["method"] == "attention"
+    pts = doc["points"]
+    assert [p["id"] for p in pts] == list(range(1, 7))
+    positions = np.array([p["position"] for p in pts])
+    assert distance_to_surface(positions, source).max() < 1e-6
+    assert np.allclose(np.linalg.norm([p["normal"] for p in pts], axis=1), 1.0)
+    np.testing.assert_allclose(doc["settings"]["min_spacing"], 0.08 * np.linalg.norm(np.ptp(source.vertices, 0)))
+    rows = (out / "points.csv").read_text().strip().splitlines()
+    assert rows[0].startswith("id,") and len(rows) == 7
+    np.testing.assert_allclose([float(v) for v in rows[1].split(",")[2:5]], positions[0])
+    assert "6 attention points" in capsys.readouterr().out
+
+
+def test_cli_baseline_and_progress(tmp_path, capsys):
+    from classify.cli import main
+    from meshsal.io import save_ply
+
+    mesh, _, _ = planted_sphere()
+    path = tmp_path / "s.ply"
+    save_ply(path, mesh)
+    assert main(["points", str(path), "--method", "uniform", "--n", "5", "--size", "32",
+                 "--out", str(tmp_path / "o")]) == 0
+    assert "saliency" in capsys.readouterr().err
+    assert len(json.loads((tmp_path / "o" / "points.json").read_text())["points"]) == 5
+
+
+def test_cli_bad_mesh_fails_with_the_loader_message(tmp_path, capsys):
+    from classify.cli import main
+
+    bad = tmp_path / "broken.obj"
+    bad.write_text("v 0 0 0\nv 1 0 0\nf 1 2 9\n")
+    assert main(["points", str(bad), "--quiet", "--out", str(tmp_path / "o")]) != 0
+    err = capsys.readouterr().err
+    assert "points" in err and "broken.obj" in err
+    assert not (tmp_path / "o" / "points.json").exists()
