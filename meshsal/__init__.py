@@ -31,7 +31,8 @@ _EXPORTS = {
     "interest_points": "points",
     "project_pixel_paper": "points",
 }
-_SUBMODULES = {"render", "toys", "sdf", "attention", "embree", "progress", "atomic"}
+_SUBMODULES = {"render", "toys", "sdf", "attention", "curvature", "points", "sampling", "overlay", "embree",
+               "io", "transform", "progress", "atomic"}
 
 __all__ = sorted(_EXPORTS) + sorted(_SUBMODULES)
 

@@ -54,21 +54,10 @@ def _to_uint8(image: np.ndarray) -> np.ndarray:
     return (np.clip(image, 0.0, 1.0) * 255.0 + 0.5).astype(np.uint8)
 
 
-def contact_sheet(images, columns: int = 12, gap: int = 2) -> np.ndarray:
-    """Tile equally sized (H,W) or (H,W,3) uint8 images into one RGB sheet, row-major."""
-    images = [np.repeat(im[..., None], 3, axis=2) if im.ndim == 2 else im for im in images]
-    h, w = images[0].shape[:2]
-    rows = -(-len(images) // columns)
-    sheet = np.full((rows * (h + gap) + gap, columns * (w + gap) + gap, 3), 255, np.uint8)
-    for k, im in enumerate(images):
-        r, c = divmod(k, columns)
-        sheet[gap + r * (h + gap): gap + r * (h + gap) + h, gap + c * (w + gap): gap + c * (w + gap) + w] = im
-    return sheet
-
-
 def _cmd_render(args) -> int:
     from .atomic import write_png
     from .io import load_mesh
+    from .overlay import tile
     from .progress import progress
     from .render import render_views, view_rig
 
@@ -77,26 +66,23 @@ def _cmd_render(args) -> int:
     mesh = load_mesh(args.mesh)
     cameras = [c for s in view_rig() for c in s]
     views = render_views(mesh, cameras, size=args.size)
-    vertex_saliency = None
+    results = [None] * len(views)
     if args.saliency:
-        from .curvature import mesh_saliency
+        from .attention import saliency_views
 
-        vertex_saliency = mesh_saliency(mesh)
+        results = saliency_views(views, mesh)
     maps = []
-    for view in progress(views, desc="render", quiet=args.quiet):
+    for view, result in progress(zip(views, results), total=len(views), desc="render", quiet=args.quiet):
         stem = f"view_{view.camera.set_index:02d}_{view.camera.view_index % 4}"
         write_png(args.out / f"{stem}.png", _to_uint8(view.rgb))
-        if args.saliency:
-            from .attention import saliency
-
-            result = saliency(view, mesh, vertex_saliency=vertex_saliency)
+        if result is not None:
             maps.append(_to_uint8(result.map))
             write_png(args.out / f"{stem}_saliency.png", maps[-1])
             for name, channel in result.channels.items():
                 write_png(args.out / f"{stem}_{name}.png", _to_uint8(channel))
-    write_png(args.out / "contact_sheet.png", contact_sheet([_to_uint8(v.rgb) for v in views]))
+    write_png(args.out / "contact_sheet.png", tile([_to_uint8(v.rgb) for v in views], columns=12))
     if maps:
-        write_png(args.out / "saliency_sheet.png", contact_sheet(maps))
+        write_png(args.out / "saliency_sheet.png", tile(maps, columns=12))
     print(f"wrote {len(views)} views of {args.mesh} to {args.out}")
     return 0
 

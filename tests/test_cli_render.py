@@ -28,6 +28,19 @@ def test_render_writes_72_views_and_a_contact_sheet(sphere_file, tmp_path, capsy
     assert "wrote 72 views" in capsys.readouterr().out
 
 
+def test_render_saliency_writes_the_map_and_eight_channels_per_view(sphere_file, tmp_path):
+    from meshsal.attention import CHANNELS
+
+    out = tmp_path / "views"
+    assert main(["render", str(sphere_file), "--out", str(out), "--size", "32", "--saliency", "--quiet"]) == 0
+    assert len(list(out.glob("view_*_saliency.png"))) == 72
+    for name in CHANNELS:
+        assert len(list(out.glob(f"view_*_{name}.png"))) == 72
+    saliency = cv2.imread(str(out / "view_00_0_saliency.png"), cv2.IMREAD_GRAYSCALE)
+    assert saliency.shape == (32, 32) and saliency[0, 0] == 0
+    assert (out / "saliency_sheet.png").exists()
+
+
 def test_render_shows_progress_on_stderr_unless_quiet(sphere_file, tmp_path, capsys):
     assert main(["render", str(sphere_file), "--out", str(tmp_path / "v"), "--size", "16"]) == 0
     assert "render [" in capsys.readouterr().err
@@ -62,7 +75,7 @@ def test_help_of_every_subcommand(capsys):
     with pytest.raises(SystemExit) as exit_info:
         main(["--help"])
     assert exit_info.value.code == 0
-    commands = ["toys", "render"]
+    commands = ["toys", "render", "points", "imprints", "experiment", "plan", "capture", "export"]
     for command in commands:
         with pytest.raises(SystemExit) as exit_info:
             main([command, "--help"])
