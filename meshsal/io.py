@@ -685,7 +685,7 @@ def load_mesh(path) -> Mesh:
 def save_ply(path, mesh: Mesh, quality=None) -> None:
     """Write a mesh as binary little-endian PLY, atomically.
 
-    Vertices are written as ``x y z`` float, followed by ``red green blue``
+    Vertices are written as ``x y z`` double, followed by ``red green blue``
     uchar when the mesh has vertex colors and by ``quality`` float when
     ``quality`` is given (MeshLab reads it as vertex quality; read it back
     with :func:`load_vertex_quality`).
@@ -707,7 +707,8 @@ def save_ply(path, mesh: Mesh, quality=None) -> None:
     array([0. , 0.5, 1. ])
     """
     n = mesh.n_vertices
-    fields = [("x", "<f4"), ("y", "<f4"), ("z", "<f4")]
+    # Doubles: float32 would fuse the near-coincident vertices marching cubes makes into degenerate faces.
+    fields = [("x", "<f8"), ("y", "<f8"), ("z", "<f8")]
     if mesh.vertex_colors is not None:
         fields += [("red", "u1"), ("green", "u1"), ("blue", "u1")]
     if quality is not None:
@@ -727,7 +728,7 @@ def save_ply(path, mesh: Mesh, quality=None) -> None:
     faces = np.empty(mesh.n_faces, dtype=[("n", "u1"), ("vertex_indices", "<i4", (3,))])
     faces["n"] = 3
     faces["vertex_indices"] = mesh.faces
-    types = {"<f4": "float", "u1": "uchar"}
+    types = {"<f8": "double", "<f4": "float", "u1": "uchar"}
     header = ["ply", "format binary_little_endian 1.0", "comment written by visuotactile"]
     header += [f"element vertex {n}"] + [f"property {types[t]} {name}" for name, t in fields]
     header += [f"element face {mesh.n_faces}", "property list uchar int vertex_indices", "end_header"]
