@@ -1,0 +1,339 @@
+"""Capture sessions in SQLite, and their export to a ``tactile.ImprintSet``.
+
+One session file holds the presses of any number of objects made with one
+sensor.  The database runs in WAL mode with full sync and every press is its
+own transaction, so a killed process or a pulled cable loses nothing already
+pressed; opening the same file again resumes the session.
+"""
+
+from __future__ import annotations
+
+import sqlite3
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from .press import Baseline, Press
+
+__all__ = ["FORMAT", "SCHEMA_VERSION", "Session", "PressRecord", "export_imprints", "resample"]
+
+FORMAT = "visuotactile-capture-session"
+SCHEMA_VERSION = 1
+
+_SCHEMA = """
+CREATE TABLE meta (key TEXT PRIMARY KEY, value TEXT NOT NULL);
+CREATE TABLE runs (
+    id INTEGER PRIMARY KEY,
+    started REAL NOT NULL,
+    port TEXT NOT NULL,
+    baud INTEGER NOT NULL,
+    protocol TEXT NOT NULL,
+    object TEXT NOT NULL,
+    baseline BLOB NOT NULL,
+    baseline_noise REAL NOT NULL,
+    threshold_on REAL NOT NULL,
+    threshold_off REAL NOT NULL
+);
+CREATE TABLE presses (
+    id INTEGER PRIMARY KEY,
+    run_id INTEGER NOT NULL REFERENCES runs(id),
+    object TEXT NOT NULL,
+    point_id INTEGER NOT NULL,
+    imprint BLOB NOT NULL,
+    raw BLOB NOT NULL,
+    peak_sum REAL NOT NULL,
+    seq_start INTEGER NOT NULL, seq_peak INTEGER NOT NULL, seq_end INTEGER NOT NULL,
+    t_start_us INTEGER NOT NULL, t_peak_us INTEGER NOT NULL, t_end_us INTEGER NOT NULL,
+    frames INTEGER NOT NULL,
+    host_time REAL NOT NULL,
+    frames_received INTEGER NOT NULL,
+    crc_errors INTEGER NOT NULL,
+    gaps INTEGER NOT NULL,
+    bytes_skipped INTEGER NOT NULL,
+    px REAL, py REAL, pz REAL,
+    ax REAL, ay REAL, az REAL
+);
+CREATE INDEX presses_object ON presses(object, point_id);
+"""
+
+
+@dataclass(frozen=True, eq=False)
+class PressRecord:
+    """One stored press, as read back from a session.
+
+    ``imprint`` is float32 ADC counts above the baseline, ``raw`` the uint16
+    peak frame; ``position`` (planning frame, mm, as in simulated imprint
+    sets) and ``approach`` come from the probe plan and are None when the
+    press was not planned.
+    """
+
+    id: int
+    run_id: int
+    object: str
+    point_id: int
+    imprint: np.ndarray
+    raw: np.ndarray
+    peak_sum: float
+    seq_peak: int
+    t_peak_us: int
+    host_time: float
+    frames_received: int
+    crc_errors: int
+    gaps: int
+    position: np.ndarray | None
+    approach: np.ndarray | None
+
+
+class Session:
+    """An open capture session (a SQLite file), created on first use.
+
+    Parameters
+    ----------
+    path : str or Path
+        The ``.sqlite`` file.
+    create : bool
+        Create the file when it does not exist; otherwise a missing file is
+        a ``FileNotFoundError``.
+
+    Examples
+    --------
+    >>> import tempfile, pathlib
+    >>> path = pathlib.Path(tempfile.mkdtemp()) / "s.sqlite"
+    >>> with Session(path) as s:
+    ...     s.ensure_sensor(16, 16)
+    ...     s.sensor
+    (16, 16)
+    """
+
+    def __init__(self, path, create: bool = True):
+        self.path = Path(path)
+        if not self.path.exists():
+            if not create:
+                raise FileNotFoundError(f"{self.path}: no such capture session")
+            self.path.parent.mkdir(parents=True, exist_ok=True)
+        try:
+            self._con = sqlite3.connect(self.path, isolation_level=None, timeout=10.0)
+        except sqlite3.Error as exc:
+            raise OSError(f"{self.path}: cannot open the session ({exc})") from None
+        try:
+            self._init()
+        except sqlite3.DatabaseError as exc:
+            self._con.close()
+            raise ValueError(f"{self.path}: not a capture session ({exc})") from None
+
+    def _init(self) -> None:
+        con = self._con
+        tables = {r[0] for r in con.execute("SELECT name FROM sqlite_master WHERE type='table'")}
+        if not tables:
+            con.execute("PRAGMA journal_mode=WAL")
+            with self._transaction():
+                for statement in _SCHEMA.split(";"):
+                    if statement.strip():
+                        con.execute(statement)
+                con.executemany("INSERT INTO meta VALUES (?, ?)",
+                                [("format", FORMAT), ("version", str(SCHEMA_VERSION)),
+                                 ("created", repr(time.time()))])
+        elif "meta" not in tables:
+            raise sqlite3.DatabaseError("it holds no visuotactile capture session")
+        meta = self._meta()
+        if meta.get("format") != FORMAT:
+            raise sqlite3.DatabaseError("it holds no visuotactile capture session")
+        if meta.get("version") != str(SCHEMA_VERSION):
+            raise sqlite3.DatabaseError(f"session version {meta.get('version')} is not the supported "
+                                        f"{SCHEMA_VERSION}")
+        con.execute("PRAGMA journal_mode=WAL")
+        # FULL: a press is on disk before the next one starts.
+        con.execute("PRAGMA synchronous=FULL")
+
+    def _meta(self) -> dict[str, str]:
+        return dict(self._con.execute("SELECT key, value FROM meta"))
+
+    def close(self) -> None:
+        self._con.close()
+
+    def __enter__(self) -> Session:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    @property
+    def sensor(self) -> tuple[int, int] | None:
+        """(rows, cols) of the session's sensor, or None before the first frame."""
+        meta = self._meta()
+        if "rows" not in meta:
+            return None
+        return int(meta["rows"]), int(meta["cols"])
+
+    def ensure_sensor(self, rows: int, cols: int) -> None:
+        """Record the sensor size on first use; afterwards insist on the same size."""
+        known = self.sensor
+        if known is None:
+            with self._transaction():
+                self._con.executemany("INSERT OR REPLACE INTO meta VALUES (?, ?)",
+                                      [("rows", str(int(rows))), ("cols", str(int(cols)))])
+        elif known != (rows, cols):
+            raise ValueError(f"{self.path}: the session was recorded with a {known[0]} x {known[1]} sensor "
+                             f"but the port sends {rows} x {cols} frames; use another --session for this sensor")
+
+    def start_run(self, port: str, baud: int, protocol: str, object_name: str, baseline: Baseline) -> int:
+        """Record the start of a capture run with its baseline; returns the run id."""
+        with self._transaction():
+            cur = self._con.execute(
+                "INSERT INTO runs (started, port, baud, protocol, object, baseline, baseline_noise,"
+                " threshold_on, threshold_off) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?)",
+                (time.time(), port, int(baud), protocol, object_name,
+                 np.ascontiguousarray(baseline.values, np.float32).tobytes(), baseline.noise,
+                 baseline.on, baseline.off))
+            return int(cur.lastrowid)
+
+    def add_press(self, run_id: int, object_name: str, point_id: int, press: Press, counters: dict,
+                  position=None, approach=None) -> int:
+        """Commit one press in its own transaction; returns its row id.
+
+        ``counters`` holds the parser's ``frames``, ``crc_errors``, ``gaps``
+        and ``bytes_skipped`` at the time of the press.
+        """
+        rows, cols = press.raw.shape
+        if self.sensor != (rows, cols):
+            raise ValueError(f"{self.path}: a {rows} x {cols} press does not fit the session's sensor {self.sensor}")
+        p = [None] * 3 if position is None else [float(x) for x in position]
+        a = [None] * 3 if approach is None else [float(x) for x in approach]
+        with self._transaction():
+            cur = self._con.execute(
+                "INSERT INTO presses (run_id, object, point_id, imprint, raw, peak_sum, seq_start, seq_peak,"
+                " seq_end, t_start_us, t_peak_us, t_end_us, frames, host_time, frames_received, crc_errors,"
+                " gaps, bytes_skipped, px, py, pz, ax, ay, az)"
+                " VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
+                (run_id, object_name, int(point_id),
+                 np.ascontiguousarray(press.imprint, np.float32).tobytes(),
+                 np.ascontiguousarray(press.raw, "<u2").tobytes(), float(press.peak_sum),
+                 press.seq_start, press.seq_peak, press.seq_end, press.t_start_us, press.t_peak_us,
+                 press.t_end_us, press.frames, time.time(), int(counters["frames"]),
+                 int(counters["crc_errors"]), int(counters["gaps"]), int(counters["bytes_skipped"]), *p, *a))
+            return int(cur.lastrowid)
+
+    def _transaction(self):
+        return _Transaction(self._con)
+
+    def point_ids(self, object_name: str) -> list[int]:
+        """Point ids already recorded for ``object_name``, in recording order."""
+        return [r[0] for r in self._con.execute(
+            "SELECT point_id FROM presses WHERE object = ? ORDER BY id", (object_name,))]
+
+    def presses(self, object_name: str | None = None) -> list[PressRecord]:
+        """All stored presses (of one object when given), in recording order."""
+        sensor = self.sensor
+        query = ("SELECT id, run_id, object, point_id, imprint, raw, peak_sum, seq_peak, t_peak_us, host_time,"
+                 " frames_received, crc_errors, gaps, px, py, pz, ax, ay, az FROM presses")
+        args: tuple = ()
+        if object_name is not None:
+            query += " WHERE object = ?"
+            args = (object_name,)
+        out = []
+        for r in self._con.execute(query + " ORDER BY id", args):
+            position = None if r[13] is None else np.array(r[13:16], dtype=np.float64)
+            approach = None if r[16] is None else np.array(r[16:19], dtype=np.float64)
+            out.append(PressRecord(
+                id=r[0], run_id=r[1], object=r[2], point_id=r[3],
+                imprint=np.frombuffer(r[4], np.float32).reshape(sensor).copy(),
+                raw=np.frombuffer(r[5], "<u2").reshape(sensor).astype(np.uint16),
+                peak_sum=r[6], seq_peak=r[7], t_peak_us=r[8], host_time=r[9], frames_received=r[10],
+                crc_errors=r[11], gaps=r[12], position=position, approach=approach))
+        return out
+
+
+class _Transaction:
+    """``BEGIN IMMEDIATE`` ... ``COMMIT``, rolled back on an exception."""
+
+    def __init__(self, con: sqlite3.Connection):
+        self._con = con
+
+    def __enter__(self):
+        self._con.execute("BEGIN IMMEDIATE")
+
+    def __exit__(self, exc_type, *rest):
+        self._con.execute("ROLLBACK" if exc_type else "COMMIT")
+
+
+def resample(imprint: np.ndarray, rows: int = 16, cols: int = 16) -> np.ndarray:
+    """Resample an imprint to ``rows`` x ``cols`` by area averaging (float32).
+
+    Examples
+    --------
+    >>> resample(np.ones((32, 32), np.float32)).shape
+    (16, 16)
+    """
+    import cv2
+
+    imprint = np.asarray(imprint, dtype=np.float32)
+    if imprint.shape == (rows, cols):
+        return imprint
+    return cv2.resize(imprint, (cols, rows), interpolation=cv2.INTER_AREA)
+
+
+def export_imprints(path, rows: int = 16, cols: int = 16, full_scale="session", sensor=None):
+    """Read a session as a ``tactile.ImprintSet``.
+
+    Parameters
+    ----------
+    path : str or Path
+        The session file.
+    rows, cols : int
+        Size of the exported imprints; other sensor sizes are resampled by
+        area averaging.
+    full_scale : "session", "imprint" or float
+        What maps to 1: "session" divides every imprint by the largest
+        baseline-subtracted reading of the whole session (the relative
+        force between presses is kept); "imprint" divides each imprint by
+        its own maximum (shape only, as when every press is pushed to the
+        same depth); a number gives the count for 1 directly (the ADC
+        maximum, e.g. 4095 for 12 bits).  Values are clipped to [0, 1].
+    sensor : tactile.Sensor, optional
+        Stored with the set; defaults to ``tactile.Sensor(rows=rows, cols=cols)``.
+
+    Returns
+    -------
+    tactile.ImprintSet
+        Labels index the sorted object names; positions and normals come
+        from the probe plan (planning frame in mm, normal = -approach) and
+        are NaN for unplanned presses.
+    """
+    import tactile
+
+    path = Path(path)
+    with Session(path, create=False) as session:
+        records = session.presses()
+    if not records:
+        raise ValueError(f"{path}: the session holds no presses")
+    imprints = np.stack([resample(r.imprint, rows, cols) for r in records])
+    if full_scale == "session":
+        scale = np.full(len(records), max(float(imprints.max()), 1e-12))
+    elif full_scale == "imprint":
+        scale = np.maximum(imprints.reshape(len(records), -1).max(axis=1), 1e-12)
+    else:
+        try:
+            value = float(full_scale)
+        except (TypeError, ValueError):
+            raise ValueError(f"full_scale must be 'session', 'imprint' or a positive number, "
+                             f"got {full_scale!r}") from None
+        if not value > 0:
+            raise ValueError(f"full_scale must be positive, got {value}")
+        scale = np.full(len(records), value)
+    imprints = np.clip(imprints / scale[:, None, None], 0.0, 1.0).astype(np.float32)
+    names = tuple(sorted({r.object for r in records}))
+    nan3 = np.full(3, np.nan)
+    return tactile.ImprintSet(
+        imprints=imprints,
+        labels=np.array([names.index(r.object) for r in records], dtype=np.int64),
+        object_names=names,
+        point_ids=np.array([r.point_id for r in records], dtype=np.int64),
+        positions=np.stack([nan3 if r.position is None else r.position for r in records]),
+        normals=np.stack([nan3 if r.approach is None else -r.approach for r in records]),
+        sensor=sensor if sensor is not None else tactile.Sensor(rows=rows, cols=cols),
+        perturbation=None,
+        seed=None,
+        source=str(path),
+    )
