@@ -8,19 +8,12 @@ from scipy.spatial import cKDTree
 from meshsal.curvature import gaussian_average, mean_curvature, mesh_saliency, vertex_areas
 from meshsal.mesh import Mesh
 
+import shapes
+
 
 def icosphere(level):
-    t = (1 + 5 ** 0.5) / 2
-    V = np.array([[-1, t, 0], [1, t, 0], [-1, -t, 0], [1, -t, 0], [0, -1, t], [0, 1, t],
-                  [0, -1, -t], [0, 1, -t], [t, 0, -1], [t, 0, 1], [-t, 0, -1], [-t, 0, 1]], float)
-    F = np.array([[0, 11, 5], [0, 5, 1], [0, 1, 7], [0, 7, 10], [0, 10, 11], [1, 5, 9], [5, 11, 4],
-                  [11, 10, 2], [10, 7, 6], [7, 1, 8], [3, 9, 4], [3, 4, 2], [3, 2, 6], [3, 6, 8],
-                  [3, 8, 9], [4, 9, 5], [2, 4, 11], [6, 2, 10], [8, 6, 7], [9, 8, 1]])
-    V /= np.linalg.norm(V, axis=1, keepdims=True)
-    for _ in range(level):
-        V, F = igl.upsample(V, F)
-        V /= np.linalg.norm(V, axis=1, keepdims=True)
-    return V, F
+    sphere = shapes.icosphere(subdivisions=level)
+    return sphere.vertices, sphere.faces
 
 
 def bumpy_sphere(direction, level=5, height=0.12, width=0.08):

@@ -18,21 +18,14 @@ from meshsal.points import (
 )
 from meshsal.sampling import farthest_points, field_peaks, non_maximum_suppression, random_surface_points
 
+import shapes
+
 SIZE = 64
 
 
 def icosphere(level):
-    t = (1 + 5 ** 0.5) / 2
-    V = np.array([[-1, t, 0], [1, t, 0], [-1, -t, 0], [1, -t, 0], [0, -1, t], [0, 1, t],
-                  [0, -1, -t], [0, 1, -t], [t, 0, -1], [t, 0, 1], [-t, 0, -1], [-t, 0, 1]], float)
-    F = np.array([[0, 11, 5], [0, 5, 1], [0, 1, 7], [0, 7, 10], [0, 10, 11], [1, 5, 9], [5, 11, 4],
-                  [11, 10, 2], [10, 7, 6], [7, 1, 8], [3, 9, 4], [3, 4, 2], [3, 2, 6], [3, 6, 8],
-                  [3, 8, 9], [4, 9, 5], [2, 4, 11], [6, 2, 10], [8, 6, 7], [9, 8, 1]])
-    V /= np.linalg.norm(V, axis=1, keepdims=True)
-    for _ in range(level):
-        V, F = igl.upsample(V, F)
-        V /= np.linalg.norm(V, axis=1, keepdims=True)
-    return V, F
+    sphere = shapes.icosphere(subdivisions=level)
+    return sphere.vertices, sphere.faces
 
 
 def unit(v):
