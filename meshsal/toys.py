@@ -34,7 +34,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from . import sdf
-from .mesh import Mesh
+from .mesh import Mesh, face_areas
 
 __all__ = ["NAMES", "make"]
 
@@ -42,6 +42,11 @@ NAMES = ("cow", "glasses", "cup", "hand", "plane", "dromedary")
 
 # Marching cubes output is decimated to at most this many faces.
 MAX_FACES = 40000
+
+# Every face's area exceeds this fraction of the squared bounding-box diagonal:
+# 10^4 times the 1e-14 below which meshsal.io.load_mesh drops a face as zero-area,
+# so a toy saved as PLY loads back unchanged.  The toys' smallest faces sit near 6e-8 or above.
+MIN_FACE_AREA = 1e-10
 
 
 @dataclass(frozen=True)
@@ -167,8 +172,8 @@ def _mesh(design: _Design):
     import pymeshlab
 
     field, lo, hi = _design_field(design)
+    # mesh_field's snapping keeps marching cubes free of the slivers it leaves near grid nodes.
     V, F = sdf.mesh_field(field, lo, hi, design.spacing)
-    # Quadric collapse also removes the slivers marching cubes leaves near grid nodes.
     ms = pymeshlab.MeshSet()
     ms.add_mesh(pymeshlab.Mesh(V, F.astype(np.int32)))
     ms.meshing_decimation_quadric_edge_collapse(
@@ -178,6 +183,9 @@ def _mesh(design: _Design):
     F = np.ascontiguousarray(ms.current_mesh().face_matrix(), dtype=np.int64)
     if len(igl.boundary_facets(F)[0]) or not igl.is_edge_manifold(F)[0]:
         raise RuntimeError("toy mesh is not closed and edge-manifold after decimation")
+    diagonal = np.linalg.norm(V.max(axis=0) - V.min(axis=0))
+    if face_areas(V, F).min() <= MIN_FACE_AREA * diagonal**2:
+        raise RuntimeError("toy mesh has a near-degenerate face after decimation")
     return V, F
 
 

@@ -43,11 +43,15 @@ def test_exact_primitives_have_unit_gradient(name):
 
 @pytest.mark.parametrize("name", sorted(EXACT))
 def test_exact_primitives_meshed_surface_lies_on_zero_set(name):
-    V, F = sdf.mesh_field(EXACT[name], [-10] * 3, [10] * 3, 0.25)
+    V, F = sdf.mesh_field(EXACT[name], [-10] * 3, [10] * 3, 0.25, snap=0.0)
     # Linear interpolation along grid edges: tiny errors, largest at sharp creases.
     err = np.abs(EXACT[name](V))
     assert np.median(err) < 0.01
     assert err.max() < 0.1
+    assert _signed_volume(V, F) > 0
+    # The default snapping moves the surface by at most snap * spacing more.
+    V, F = sdf.mesh_field(EXACT[name], [-10] * 3, [10] * 3, 0.25)
+    assert np.abs(EXACT[name](V)).max() < err.max() + 0.05 * 0.25 + 1e-3
     assert _signed_volume(V, F) > 0
 
 
@@ -215,6 +219,27 @@ def test_sample_grid_rejects_bad_arguments():
         sdf.sample_grid(lambda P: sdf.sphere(P, [0, 0, 0], 1.0), [0] * 3, [1] * 3, 0.0)
     with pytest.raises(ValueError, match="levels"):
         sdf.sample_grid(lambda P: sdf.sphere(P, [0, 0, 0], 1.0), [0] * 3, [1] * 3, 0.1, levels=-1)
+
+
+def test_mesh_field_snapping_removes_slivers_where_the_surface_meets_grid_nodes():
+    # Centred on a node with an integer radius, the capsule passes exactly through many nodes of the unit grid.
+    def field(P):
+        return sdf.capsule(P, [0, 0, -3], [0, 0, 3], 3.0)
+
+    V0, F0 = sdf.mesh_field(field, [-7] * 3, [7] * 3, 1.0, snap=0.0)
+    assert face_areas(V0, F0).min() < 1e-9
+    V, F = sdf.mesh_field(field, [-7] * 3, [7] * 3, 1.0, snap=0.05)
+    assert face_areas(V, F).min() > 0.5 * 0.05**2
+    assert len(F) == len(F0)  # same topology, only vertices moved
+    assert len(igl.boundary_facets(F)[0]) == 0 and igl.is_edge_manifold(F)[0]
+    # The surface moves by at most snap * spacing, plus linear interpolation error.
+    assert np.abs(field(V)).max() < 0.05 + 0.02
+
+
+def test_mesh_field_rejects_a_bad_snap():
+    for snap in (-0.1, 0.5):
+        with pytest.raises(ValueError, match="snap"):
+            sdf.mesh_field(lambda P: sdf.sphere(P, [0, 0, 0], 3.0), [-5] * 3, [5] * 3, 1.0, snap=snap)
 
 
 def test_mesh_field_refuses_a_surface_cut_by_the_grid():

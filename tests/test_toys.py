@@ -1,10 +1,13 @@
 """The six procedural toys: closed manifold meshes at toy size, painted, deterministic."""
 
+import warnings
+
 import igl
 import numpy as np
 import pytest
 
-from meshsal import toys
+from meshsal import load_mesh, toys
+from meshsal.io import MeshRepairWarning, save_ply
 from meshsal.mesh import face_areas
 
 
@@ -58,6 +61,28 @@ def test_outward_orientation_and_no_degenerate_faces(toy, name):
     assert volume > 0
     assert face_areas(V, F).min() > 0
     assert len(np.unique(F)) == m.n_vertices  # no unreferenced vertices
+
+
+@pytest.mark.parametrize("name", toys.NAMES)
+def test_every_face_area_clears_the_documented_margin(toy, name):
+    m = toy(name)
+    diagonal = np.linalg.norm(m.vertices.max(axis=0) - m.vertices.min(axis=0))
+    assert face_areas(m.vertices, m.faces).min() / diagonal**2 > toys.MIN_FACE_AREA
+    # The margin itself sits far above the loader's zero-area threshold.
+    assert toys.MIN_FACE_AREA >= 1e3 * 1e-14
+
+
+@pytest.mark.parametrize("name", toys.NAMES)
+def test_saved_toy_loads_back_without_repair(toy, tmp_path, name):
+    m = toy(name)
+    path = tmp_path / f"{name}.ply"
+    save_ply(path, m)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", MeshRepairWarning)
+        back = load_mesh(path)
+    assert (back.n_vertices, back.n_faces) == (m.n_vertices, m.n_faces)
+    np.testing.assert_array_equal(back.faces, m.faces)
+    np.testing.assert_allclose(back.vertices, m.vertices, rtol=0, atol=1e-4)
 
 
 @pytest.mark.parametrize("name", toys.NAMES)
