@@ -1,0 +1,324 @@
+"""Mierswa's evolutionary SVM: the SVM dual solved by an evolution strategy.
+
+The paper's recognition used RapidMiner's *Evolutionary SVM* operator
+(I. Mierswa, "Evolutionary learning with kernels: a generic solution for large
+margin problems", GECCO 2006), which keeps the kernel SVM's dual problem
+
+    maximize   W(a) = sum(a) - 1/2 a^T Q a,   Q_ij = y_i y_j k(x_i, x_j)
+    subject to 0 <= a_i <= C,   sum(a * y) = 0
+
+but replaces the SMO solver by an evolution strategy: candidate coefficient
+vectors are mutated at random, repaired into the feasible set, and selected
+by the fitness W(a) alone.
+
+The strategy here is a (mu + lambda)-ES:
+
+* each parent carries its own step size ``sigma`` (a fraction of C),
+  self-adapted log-normally in every offspring (``sigma' = sigma *
+  exp(tau * N(0, 1))``);
+* a mutation draws ``pairs`` random pairs of coefficients (i, j) and moves
+  ``a_i`` by ``sigma' * C * N(0, 1)`` and ``a_j`` by ``-y_i y_j`` times the
+  same amount, which keeps ``sum(a * y) = 0`` exactly; the repair clips the
+  move so both coefficients stay inside the box [0, C];
+* fitness is exact and cheap: every parent keeps the gradient ``1 - Q a``, so
+  an offspring's W follows from a few kernel entries instead of a full
+  quadratic form, and the whole population of every one-vs-rest problem is
+  evaluated in one vectorised step over a single shared kernel matrix;
+* plus-selection keeps the best ``mu`` of parents and offspring, so W never
+  decreases; the run stops after ``max_generations`` or when no offspring has
+  improved any parent for ``patience`` generations.
+
+The bias b is the mean of ``y_i - sum_j a_j y_j k(x_j, x_i)`` over the free
+support vectors (0 < a_i < C), or the middle of the feasible interval when
+there are none, as in LIBSVM.
+"""
+
+from __future__ import annotations
+
+import numbers
+
+import numpy as np
+from sklearn.base import BaseEstimator, ClassifierMixin
+from sklearn.metrics.pairwise import rbf_kernel
+from sklearn.utils.validation import check_is_fitted
+
+__all__ = ["EvolutionarySVM", "solve_dual", "as_matrix"]
+
+
+def as_matrix(X, name="X"):
+    """Imprints as rows of a float64 matrix: (N, d) stays, (N, rows, cols) is flattened row-major.
+
+    Every classifier of this package accepts either shape, so an
+    ``ImprintSet.imprints`` array can be passed as it is.
+
+    Examples
+    --------
+    >>> as_matrix(np.zeros((2, 16, 16))).shape
+    (2, 256)
+    """
+    X = np.asarray(X, dtype=np.float64)
+    if X.ndim < 2:
+        raise ValueError(f"{name} must have shape (N, features) or (N, rows, cols), got {X.shape}")
+    X = X.reshape(len(X), -1)
+    if X.shape[0] == 0 or X.shape[1] == 0:
+        raise ValueError(f"{name} is empty: shape {X.shape}")
+    if not np.all(np.isfinite(X)):
+        raise ValueError(f"{name} contains NaN or infinite values")
+    return X
+
+
+def solve_dual(K, Y, C=1.0, mu=4, lam=64, pairs=1, max_generations=3000, patience=300,
+               sigma0=0.5, seed=0):
+    """Solve several SVM duals sharing one kernel matrix with a (mu+lambda)-ES.
+
+    Parameters
+    ----------
+    K : (n, n) float64
+        Kernel matrix of the training samples.
+    Y : (p, n) float64
+        One row of +-1 labels per binary problem (one-vs-rest: one per class).
+    C : float
+        Box constraint.
+    mu, lam : int
+        Parents and offspring per generation (per problem).
+    pairs : int
+        Coefficient pairs moved by one mutation.
+    max_generations, patience : int
+        Stop after this many generations, or after ``patience`` generations
+        without improvement.
+    sigma0 : float
+        Initial step size as a fraction of C.
+    seed : int
+        Seed of the strategy's random generator.
+
+    Returns
+    -------
+    alpha : (p, n) float64
+        The best coefficient vector found for each problem; every row is
+        feasible (inside [0, C], ``alpha @ y == 0``).
+    fitness : (p,) float64
+        Its dual objective W.
+    generations : int
+        Generations run.
+
+    Examples
+    --------
+    >>> K = np.exp(-np.subtract.outer(np.arange(4.0), np.arange(4.0)) ** 2)
+    >>> a, w, _ = solve_dual(K, np.array([[1.0, 1.0, -1.0, -1.0]]), C=10.0)
+    >>> bool(abs(a[0] @ [1, 1, -1, -1]) < 1e-9 and w[0] > 0)
+    True
+    """
+    K = np.asarray(K, dtype=np.float64)
+    Y = np.atleast_2d(np.asarray(Y, dtype=np.float64))
+    p, n = Y.shape
+    rng = np.random.default_rng(seed)
+    tau = 1.0 / np.sqrt(2.0 * pairs)
+    m = 2 * pairs
+
+    A = np.zeros((p, mu, n))             # parents' coefficients, all start at a = 0
+    G = np.ones((p, mu, n))              # gradient 1 - Q a (Q a = y * (K @ (a * y)))
+    F = np.zeros((p, mu))                # fitness W(a)
+    S = np.full((p, mu), float(sigma0))  # self-adapted step sizes
+    rows = np.arange(p)[:, None]
+    stall = 0
+    generation = 0
+    for generation in range(1, max_generations + 1):
+        parent = rng.integers(0, mu, size=(p, lam))
+        sigma = np.clip(S[rows, parent] * np.exp(tau * rng.standard_normal((p, lam))), 1e-6, 1.0)
+        idx = rng.integers(0, n, size=(p, lam, m))
+        i, j = idx[..., 0::2], idx[..., 1::2]                      # (p, lam, pairs)
+        same = i == j
+        prob, par = rows[..., None], parent[..., None]           # broadcast to (p, lam, pairs)
+        yi, yj = Y[prob, i], Y[prob, j]
+        ai, aj = A[prob, par, i], A[prob, par, j]
+        step = sigma[..., None] * C * rng.standard_normal(i.shape)
+        # Repair: moving a_i by t moves a_j by -y_i y_j t; clip t to keep both in [0, C].
+        s = -yi * yj
+        lo_i, hi_i = -ai, C - ai
+        lo_j = np.where(s > 0, -aj, aj - C)
+        hi_j = np.where(s > 0, C - aj, aj)
+        step = np.clip(step, np.maximum(lo_i, lo_j), np.minimum(hi_i, hi_j))
+        step[same] = 0.0
+        # Pairs inside one offspring must not share a coefficient, or the deltas would add up.
+        if pairs > 1:
+            flat = idx.reshape(p, lam, m)
+            srt = np.sort(flat, axis=2)
+            clash = (np.diff(srt, axis=2) == 0).any(axis=2)
+            step[clash] = 0.0
+        delta = np.concatenate([step, s * step], axis=2)          # moves of coefficients (i..., j...)
+        coords = np.concatenate([i, j], axis=2)
+        yc = np.concatenate([yi, yj], axis=2)
+        g = G[prob, par, coords]
+        # W(a + d) - W(a) = g.d - 1/2 d^T Q d over the few touched coordinates.
+        Ksub = K[coords[..., :, None], coords[..., None, :]]       # (p, lam, m, m)
+        qd = yc * np.einsum("plab,plb->pla", Ksub, yc * delta)
+        gain = (g * delta).sum(2) - 0.5 * (delta * qd).sum(2)
+        cand_F = np.concatenate([F, F[rows, parent] + gain], axis=1)
+        best = np.argsort(-cand_F, axis=1, kind="stable")[:, :mu]
+        improved = (cand_F[rows, best].max(1) > F.max(1) + 1e-12).any()
+        from_child = best >= mu
+        child = np.where(from_child, best - mu, 0)
+        src = np.where(from_child, parent[rows, child], best)
+        newA = A[rows, src]
+        newG = G[rows, src]
+        newS = np.where(from_child, sigma[rows, child], S[rows, np.minimum(best, mu - 1)])
+        if from_child.any():
+            pp, mm = np.nonzero(from_child)
+            cc = child[pp, mm]
+            cidx = coords[pp, cc]                                  # (q, m)
+            cdel = delta[pp, cc]
+            newA[pp[:, None], mm[:, None], cidx] += cdel
+            np.clip(newA, 0.0, C, out=newA)
+            # G -= Q[:, c] * d_c  with Q[:, c] = y * y_c * K[:, c]
+            yq = Y[pp]                                             # (q, n)
+            kcols = K[:, cidx].transpose(1, 0, 2)                  # (q, n, m)
+            newG[pp, mm] -= yq * np.einsum("qnm,qm->qn", kcols, yq[np.arange(len(pp))[:, None], cidx] * cdel)
+        A, G, S = newA, newG, newS
+        F = cand_F[rows, best]
+        stall = 0 if improved else stall + 1
+        if stall >= patience:
+            break
+    top = np.argmax(F, axis=1)
+    return A[np.arange(p), top], F[np.arange(p), top], generation
+
+
+class EvolutionarySVM(ClassifierMixin, BaseEstimator):
+    """Kernel SVM whose dual is solved by an evolution strategy, one-vs-rest over classes.
+
+    Parameters
+    ----------
+    C : float
+        Box constraint, as in :class:`sklearn.svm.SVC`.
+    gamma : float or "scale"
+        RBF kernel width ``k(x, z) = exp(-gamma |x - z|^2)``; ``"scale"`` is
+        ``1 / (n_features * X.var())`` as in SVC.
+    mu, lam, pairs, max_generations, patience, sigma0 :
+        The strategy's settings (see :func:`solve_dual`).
+    random_state : int
+        Seed of the strategy.
+
+    Attributes
+    ----------
+    classes_ : (n_classes,) labels
+    support_vectors_ : (n_sv, d) training samples with a non-zero coefficient in any problem
+    dual_coef_ : (n_problems, n_sv) ``a_i * y_i`` per one-vs-rest problem
+    intercept_ : (n_problems,) biases
+    fitness_ : (n_problems,) dual objective reached
+    n_generations_ : int
+
+    Notes
+    -----
+    Two classes give one binary problem; more give one problem per class
+    (that class +1, the rest -1) and ``predict`` takes the class with the
+    largest decision value.  ``predict_proba`` is the softmax of the one-vs-rest
+    decision values (for two classes, of ``(-f, f)``): monotone in them, so its
+    argmax is ``predict``, and never exactly 0 or 1, so posteriors of several
+    touches can be multiplied.  It is not calibrated.
+
+    Inputs are (N, d) vectors or (N, rows, cols) imprints, flattened.
+
+    Examples
+    --------
+    >>> rng = np.random.default_rng(0)
+    >>> X = np.r_[rng.normal(0, 1, (20, 2)), rng.normal(4, 1, (20, 2))]
+    >>> y = np.repeat([0, 1], 20)
+    >>> EvolutionarySVM(C=1.0).fit(X, y).score(X, y)
+    1.0
+    """
+
+    def __init__(self, C=1.0, gamma="scale", mu=4, lam=64, pairs=2, max_generations=600,
+                 patience=60, sigma0=0.5, random_state=0):
+        self.C = C
+        self.gamma = gamma
+        self.mu = mu
+        self.lam = lam
+        self.pairs = pairs
+        self.max_generations = max_generations
+        self.patience = patience
+        self.sigma0 = sigma0
+        self.random_state = random_state
+
+    def _check_params(self):
+        if not (isinstance(self.C, numbers.Real) and self.C > 0):
+            raise ValueError(f"EvolutionarySVM: C must be a positive number, got {self.C!r}")
+        if not (self.gamma == "scale" or (isinstance(self.gamma, numbers.Real) and self.gamma > 0)):
+            raise ValueError(f"EvolutionarySVM: gamma must be 'scale' or a positive number, got {self.gamma!r}")
+        for name in ("mu", "lam", "pairs", "max_generations", "patience"):
+            value = getattr(self, name)
+            if not (isinstance(value, numbers.Integral) and value >= 1):
+                raise ValueError(f"EvolutionarySVM: {name} must be a positive integer, got {value!r}")
+
+    def fit(self, X, y):
+        """Fit one dual per one-vs-rest problem; X is (N, d) or (N, rows, cols)."""
+        self._check_params()
+        X = as_matrix(X)
+        y = np.asarray(y)
+        if y.shape != (len(X),):
+            raise ValueError(f"EvolutionarySVM: y must have shape ({len(X)},), got {y.shape}")
+        self.classes_, codes = np.unique(y, return_inverse=True)
+        if len(self.classes_) < 2:
+            raise ValueError("EvolutionarySVM: needs samples of at least two classes")
+        if self.gamma == "scale":
+            var = X.var()
+            self._gamma = 1.0 / (X.shape[1] * var) if var > 0 else 1.0
+        else:
+            self._gamma = float(self.gamma)
+        K = rbf_kernel(X, gamma=self._gamma)
+        if len(self.classes_) == 2:
+            Y = np.where(codes == 1, 1.0, -1.0)[None]
+        else:
+            Y = np.where(codes[None, :] == np.arange(len(self.classes_))[:, None], 1.0, -1.0)
+        alpha, self.fitness_, self.n_generations_ = solve_dual(
+            K, Y, C=float(self.C), mu=self.mu, lam=self.lam, pairs=self.pairs,
+            max_generations=self.max_generations, patience=self.patience,
+            sigma0=self.sigma0, seed=self.random_state)
+        self.intercept_ = np.array([_bias(K, a, yy, float(self.C)) for a, yy in zip(alpha, Y)])
+        used = (alpha > 0).any(axis=0)
+        self.support_ = np.flatnonzero(used)
+        self.support_vectors_ = X[used]
+        self.dual_coef_ = (alpha * Y)[:, used]
+        self.n_features_in_ = X.shape[1]
+        return self
+
+    def decision_function(self, X):
+        """(N,) for two classes (positive means ``classes_[1]``), else (N, n_classes)."""
+        check_is_fitted(self, "dual_coef_")
+        X = as_matrix(X)
+        if X.shape[1] != self.n_features_in_:
+            raise ValueError(f"EvolutionarySVM: X has {X.shape[1]} features, the model was fitted with {self.n_features_in_}")
+        if len(self.support_vectors_):
+            f = rbf_kernel(X, self.support_vectors_, gamma=self._gamma) @ self.dual_coef_.T + self.intercept_
+        else:
+            f = np.tile(self.intercept_, (len(X), 1))
+        return f[:, 0] if len(self.classes_) == 2 else f
+
+    def predict(self, X):
+        f = self.decision_function(X)
+        if f.ndim == 1:
+            return self.classes_[(f > 0).astype(int)]
+        return self.classes_[np.argmax(f, axis=1)]
+
+    def predict_proba(self, X):
+        """Softmax of the one-vs-rest decision values (see Notes)."""
+        f = self.decision_function(X)
+        if f.ndim == 1:
+            f = np.stack([-f, f], axis=1)
+        z = np.exp(f - f.max(axis=1, keepdims=True))
+        return z / z.sum(axis=1, keepdims=True)
+
+
+def _bias(K, alpha, y, C):
+    """The SVM bias: mean over free support vectors, else the middle of the feasible range."""
+    grad = y - K @ (alpha * y)          # y_i - sum_j a_j y_j k_ij, equal to b at free SVs
+    eps = 1e-8 * C
+    free = (alpha > eps) & (alpha < C - eps)
+    if free.any():
+        return float(grad[free].mean())
+    # KKT bounds: at a = 0, y_i f_i >= 1; at a = C, y_i f_i <= 1.
+    up = ((y > 0) & (alpha <= eps)) | ((y < 0) & (alpha >= C - eps))
+    lo = ((y < 0) & (alpha <= eps)) | ((y > 0) & (alpha >= C - eps))
+    hi_b = grad[lo].min() if lo.any() else np.inf
+    lo_b = grad[up].max() if up.any() else -np.inf
+    if np.isfinite(hi_b) and np.isfinite(lo_b):
+        return float((hi_b + lo_b) / 2)
+    return float(hi_b if np.isfinite(hi_b) else lo_b if np.isfinite(lo_b) else 0.0)

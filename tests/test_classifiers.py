@@ -1,0 +1,126 @@
+"""The five classifiers: separable data, the evolutionary SVM against SVC, the estimator contract."""
+
+import numpy as np
+import pytest
+from sklearn.base import clone
+from sklearn.datasets import load_digits
+from sklearn.model_selection import train_test_split
+from sklearn.svm import SVC
+
+import classify
+from classify.evolutionary_svm import solve_dual
+
+
+def _separable_imprints(n_per_class=30, n_classes=4, seed=0):
+    """Each class lights its own 4x4 block of a 16x16 image; noise elsewhere stays well below."""
+    rng = np.random.default_rng(seed)
+    X, y = [], []
+    for c in range(n_classes):
+        img = rng.uniform(0, 0.2, (n_per_class, 16, 16))
+        r, q = divmod(c, 4)
+        img[:, 4 * r:4 * r + 4, 4 * q:4 * q + 4] += rng.uniform(0.6, 0.8, (n_per_class, 4, 4))
+        X.append(img)
+        y.append(np.full(n_per_class, c))
+    return np.concatenate(X).astype(np.float32), np.concatenate(y)
+
+
+@pytest.mark.parametrize("name", classify.NAMES)
+def test_each_classifier_separates_planted_classes(name):
+    X, y = _separable_imprints(seed=1)
+    Xt, yt = _separable_imprints(n_per_class=20, seed=2)
+    model = classify.make(name).fit(X, y)           # (N, 16, 16) accepted as is
+    assert model.score(Xt.reshape(len(Xt), -1), yt) >= 0.99
+    proba = model.predict_proba(Xt)
+    assert proba.shape == (len(Xt), 4)
+    np.testing.assert_allclose(proba.sum(axis=1), 1.0, atol=1e-9)
+    np.testing.assert_array_equal(model.classes_[np.argmax(proba, axis=1)], model.predict(Xt))
+
+
+@pytest.mark.parametrize("name", classify.NAMES)
+def test_estimator_contract_clone_and_params(name):
+    model = classify.make(name)
+    params = model.get_params()
+    twin = clone(model)
+    assert twin.get_params() == params
+    X, y = _separable_imprints(n_per_class=12, n_classes=3, seed=3)
+    a = clone(model).fit(X, y).predict(X)
+    b = clone(model).fit(X, y).predict(X)
+    np.testing.assert_array_equal(a, b)             # seeded: same input, same output
+
+
+def test_make_rejects_unknown_names_and_parameters():
+    with pytest.raises(ValueError, match="knn, naive_bayes, decision_tree, evolutionary_svm, deep"):
+        classify.make("svm")
+    with pytest.raises(ValueError, match="no parameter n_neighbours"):
+        classify.make("knn", n_neighbours=3)
+
+
+def test_deep_is_a_network_with_two_hidden_layers_and_early_stopping():
+    params = classify.make("deep").get_params()
+    assert len(params["hidden_layer_sizes"]) >= 2 and params["early_stopping"] is True
+
+
+def test_knn_inner_cv_picks_larger_k_on_label_noise():
+    # Two Gaussian clouds with 20 % flipped labels: 1-NN copies the noise, larger k averages it out.
+    rng = np.random.default_rng(0)
+    X = np.r_[rng.normal(0, 1, (100, 2)), rng.normal(2.5, 1, (100, 2))]
+    y = np.repeat([0, 1], 100)
+    flip = rng.random(200) < 0.2
+    y = np.where(flip, 1 - y, y)
+    model = classify.make("knn").fit(X, y)
+    assert model.k_ > 1
+    assert model.cv_scores_[model.k_] >= model.cv_scores_[1]
+
+
+def test_knn_without_enough_samples_for_inner_cv_uses_smallest_k():
+    model = classify.make("knn", ks=(3, 1)).fit([[0.0], [1.0]], [0, 1])
+    assert model.k_ == 1
+    assert model.predict([[0.9]])[0] == 1
+
+
+def test_bad_inputs_have_clear_messages():
+    with pytest.raises(ValueError, match="shape"):
+        classify.make("knn").fit(np.zeros(5), np.zeros(5))
+    with pytest.raises(ValueError, match="NaN"):
+        classify.make("evolutionary_svm").fit(np.full((4, 2), np.nan), [0, 0, 1, 1])
+    with pytest.raises(ValueError, match="C must be"):
+        classify.make("evolutionary_svm", C=-1.0).fit(np.zeros((4, 2)), [0, 0, 1, 1])
+    with pytest.raises(ValueError, match="two classes"):
+        classify.make("evolutionary_svm").fit(np.zeros((4, 2)), [0, 0, 0, 0])
+
+
+def test_evolutionary_svm_matches_svc_on_digits():
+    digits = load_digits()
+    idx = np.random.default_rng(0).permutation(len(digits.target))[:500]
+    Xtr, Xte, ytr, yte = train_test_split(digits.data[idx], digits.target[idx], test_size=0.4,
+                                          random_state=0, stratify=digits.target[idx])
+    svc = SVC(kernel="rbf", C=1.0, gamma="scale").fit(Xtr, ytr).score(Xte, yte)
+    es = classify.make("evolutionary_svm", C=1.0, gamma="scale").fit(Xtr, ytr).score(Xte, yte)
+    assert abs(es - svc) <= 0.02, (es, svc)
+
+
+def test_evolution_strategy_reaches_the_dual_optimum_of_svc():
+    rng = np.random.default_rng(5)
+    X = np.r_[rng.normal(0, 1, (60, 3)), rng.normal(1.5, 1, (60, 3))]
+    y = np.repeat([-1.0, 1.0], 60)
+    C, gamma = 2.0, 0.3
+    K = np.exp(-gamma * ((X[:, None] - X[None]) ** 2).sum(-1))
+    svc = SVC(C=C, gamma=gamma).fit(X, y)
+    a_svc = np.zeros(len(X))
+    a_svc[svc.support_] = np.abs(svc.dual_coef_[0])
+    w_svc = a_svc.sum() - 0.5 * (a_svc * y) @ K @ (a_svc * y)
+    alpha, w, _ = solve_dual(K, y[None], C=C, max_generations=4000, patience=400)
+    assert np.all(alpha >= 0) and np.all(alpha <= C)
+    assert abs(alpha[0] @ y) < 1e-9
+    w_check = alpha[0].sum() - 0.5 * (alpha[0] * y) @ K @ (alpha[0] * y)
+    assert w[0] == pytest.approx(w_check, rel=1e-9)    # incremental fitness stays exact
+    assert w[0] >= 0.995 * w_svc
+    assert w[0] <= w_svc + 1e-6                        # SVC's optimum bounds every feasible point
+
+
+def test_evolutionary_svm_two_classes_decision_sign_follows_classes():
+    X = np.array([[0.0], [0.2], [3.0], [3.2]])
+    model = classify.make("evolutionary_svm", C=10.0).fit(X, ["a", "a", "b", "b"])
+    f = model.decision_function(np.array([[0.1], [3.1]]))
+    assert f.shape == (2,) and f[0] < 0 < f[1]
+    assert list(model.predict([[0.1], [3.1]])) == ["a", "b"]
