@@ -27,11 +27,22 @@ def plane_depths(sensor: Sensor) -> np.ndarray:
 
 
 def area_average(images: np.ndarray, sensor: Sensor) -> np.ndarray:
-    """Average each ``supersample x supersample`` block: (k, H, W) -> (k, rows, cols) float32."""
+    """Average each ``supersample x supersample`` block: (k, H, W) -> (k, rows, cols) float32.
+
+    Examples
+    --------
+    >>> area_average(np.arange(16.0).reshape(1, 4, 4), Sensor(rows=2, cols=2, supersample=2)).tolist()
+    [[[2.5, 4.5], [10.5, 12.5]]]
+    """
     s = sensor.supersample
-    k = images.shape[0]
-    blocks = images.reshape(k, sensor.rows, s, sensor.cols, s)
-    return blocks.mean(axis=(2, 4), dtype=np.float64).astype(np.float32)
+    # Strided slice sums: far cheaper than a mean over the short block axes.
+    cols = np.asarray(images, dtype=np.float64)[:, :, 0::s].copy()
+    for j in range(1, s):
+        cols += images[:, :, j::s]
+    total = cols[:, 0::s].copy()
+    for j in range(1, s):
+        total += cols[:, j::s]
+    return (total / (s * s)).astype(np.float32)
 
 
 def pressure_image(depth: np.ndarray, sensor: Sensor) -> np.ndarray:
@@ -44,9 +55,7 @@ def pressure_image(depth: np.ndarray, sensor: Sensor) -> np.ndarray:
     [[[0.375]]]
     """
     d = sensor.depth_mm
-    with np.errstate(invalid="ignore"):
-        p = np.clip((d - np.asarray(depth, dtype=np.float64)) / d, 0.0, 1.0)
-    return area_average(np.nan_to_num(p, nan=0.0), sensor)
+    return area_average(np.clip((d - np.asarray(depth, dtype=np.float64)) / d, 0.0, 1.0), sensor)
 
 
 def contour_lines(depth: np.ndarray, sensor: Sensor) -> np.ndarray:
@@ -60,18 +69,41 @@ def contour_lines(depth: np.ndarray, sensor: Sensor) -> np.ndarray:
     Returns
     -------
     (k, H, W) float32 with values in {0, 1/4, 2/4, 3/4, 1}.
+
+    Examples
+    --------
+    >>> h = np.array([[[0.0, 0.0, 2.0, np.inf]]])
+    >>> (contour_lines(h, Sensor(depth_mm=4.0)) * 4).astype(int).tolist()
+    [[[0, 1, 4, 0]]]
     """
     h = np.asarray(depth)
-    padded = np.pad(h, ((0, 0), (1, 1), (1, 1)), mode="edge")
-    lines = np.zeros(h.shape, dtype=np.float32)
-    for k, level in enumerate(plane_depths(sensor), start=1):
-        inside = padded <= level
-        core = inside[:, 1:-1, 1:-1]
-        edge = core & ~(
-            inside[:, :-2, 1:-1] & inside[:, 2:, 1:-1] & inside[:, 1:-1, :-2] & inside[:, 1:-1, 2:]
-        )
-        lines[edge] = k / PLANES
-    return lines
+    # Planes that miss each sample: plane k reaches it when ``k > above``.
+    above = np.zeros(h.shape, dtype=np.uint8)
+    for level in plane_depths(sensor):
+        above += h > level
+    # The deepest plane a neighbour escapes; beyond the grid the neighbour is
+    # the sample itself, which never makes a contour, so 0 stands in for it.
+    escape = np.zeros_like(above)
+    np.maximum(escape[:, 1:], above[:, :-1], out=escape[:, 1:])
+    np.maximum(escape[:, :-1], above[:, 1:], out=escape[:, :-1])
+    np.maximum(escape[:, :, 1:], above[:, :, :-1], out=escape[:, :, 1:])
+    np.maximum(escape[:, :, :-1], above[:, :, 1:], out=escape[:, :, :-1])
+    plane = np.where(above < escape, escape, 0)
+    return plane.astype(np.float32) / np.float32(PLANES)
+
+
+def _dilate(images: np.ndarray, width: int) -> np.ndarray:
+    """Gray-level dilation of (k, H, W) images by a ``width`` x ``width`` square (odd), zero outside."""
+    out = images.copy()
+    for axis in (1, 2):
+        src = out.copy()
+        for o in range(1, width // 2 + 1):
+            lo = [slice(None)] * 3
+            hi = [slice(None)] * 3
+            lo[axis], hi[axis] = slice(None, -o), slice(o, None)
+            np.maximum(out[tuple(hi)], src[tuple(lo)], out=out[tuple(hi)])
+            np.maximum(out[tuple(lo)], src[tuple(hi)], out=out[tuple(lo)])
+    return out
 
 
 def finish_contours(lines: np.ndarray, sensor: Sensor) -> np.ndarray:
@@ -82,8 +114,5 @@ def finish_contours(lines: np.ndarray, sensor: Sensor) -> np.ndarray:
     a gray-level dilation with an odd square (``2 * (supersample // 2) + 1``
     samples), symmetric so that turning the pad permutes the image exactly.
     """
-    from scipy.ndimage import maximum_filter
-
     w = 2 * (sensor.supersample // 2) + 1
-    wide = maximum_filter(np.asarray(lines, dtype=np.float32), size=(1, w, w), mode="constant", cval=0.0)
-    return area_average(wide, sensor)
+    return area_average(_dilate(np.asarray(lines, dtype=np.float32), w), sensor)

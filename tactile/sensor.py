@@ -230,21 +230,46 @@ def tangent_frames(normals: np.ndarray, angles_deg=None) -> tuple[np.ndarray, np
     return up, right
 
 
-def _vertex_area_vectors(V: np.ndarray, F: np.ndarray) -> np.ndarray:
-    """Per vertex, a third of the area-weighted normals of its faces (n, 3)."""
-    cross = np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]]) / 6.0
-    idx = F.reshape(-1)
-    return np.stack(
-        [np.bincount(idx, weights=np.repeat(cross[:, c], 3), minlength=V.shape[0]) for c in range(3)], axis=1
-    )
+# The pca fit works on component-major (3, n) vertex arrays: on large meshes
+# their contiguous rows make the gathers and reductions several times faster
+# than on (n, 3) rows of three.
+
+def _vertex_area_vectors(Vt: np.ndarray, F: np.ndarray) -> np.ndarray:
+    """Per vertex, a third of the area-weighted normals of its faces, (3, n) from (3, n) vertices."""
+    Ft = F.T.astype(np.intp)
+    x, y, z = np.take(Vt, Ft, axis=1)
+    ax, ay, az = x[1] - x[0], y[1] - y[0], z[1] - z[0]
+    bx, by, bz = x[2] - x[0], y[2] - y[0], z[2] - z[0]
+    corners, n = Ft.reshape(-1), Vt.shape[1]
+    return np.stack([np.bincount(corners, weights=np.tile(c, 3), minlength=n)
+                     for c in (ay * bz - az * by, az * bx - ax * bz, ax * by - ay * bx)]) / 6.0
 
 
-def _surface_cells(V: np.ndarray, F: np.ndarray, size: float) -> tuple[np.ndarray, np.ndarray]:
-    """Vertex area vectors summed per cubic cell of side ``size`` and per normal direction.
+def _cells_near(cell: np.ndarray, P: np.ndarray, origin: np.ndarray, size: float, radius: float):
+    """Mask of the vertices whose cell ((3, n) integer coordinates, side ``size``) comes within
+    ``radius`` of a point; None when the points' cells outnumber half the vertices (most are near then).
+    """
+    reach = int(np.ceil(radius / size)) + 1
+    steps = np.stack(np.meshgrid(*[np.arange(-reach, reach + 1)] * 3, indexing="ij"), axis=-1).reshape(-1, 3)
+    # A cell o steps away from the point's cell is at least (|o| - 1) sides away.
+    steps = steps[np.linalg.norm(np.maximum(np.abs(steps) - 1, 0), axis=1) * size <= radius]
+    if 2 * P.shape[0] * steps.shape[0] >= cell.shape[1]:
+        return None
+    span = cell.max(axis=1) + 1
+    around = (np.floor((P - origin) / size).astype(np.int64)[:, None, :] + steps).reshape(-1, 3)
+    around = around[((around >= 0) & (around < span)).all(axis=1)].T
+    return np.isin((cell[0] * span[1] + cell[1]) * span[2] + cell[2],
+                   (around[0] * span[1] + around[1]) * span[2] + around[2])
 
-    Within a cell, vertices are split by the dominant signed axis of their
-    normal (six bins), so the two sides of a part thinner than a cell land
-    in different bins instead of cancelling.
+
+def _surface_cells(Vt: np.ndarray, area: np.ndarray, cell: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Vertex area vectors summed per cell and per normal direction.
+
+    ``Vt``, ``area`` and ``cell`` are (3, n): vertices, their area vectors
+    and their integer cell coordinates (non-negative).  Within a cell,
+    vertices are split by the dominant signed axis of their normal (six
+    bins), so the two sides of a part thinner than a cell land in different
+    bins instead of cancelling.
 
     Returns
     -------
@@ -253,22 +278,18 @@ def _surface_cells(V: np.ndarray, F: np.ndarray, size: float) -> tuple[np.ndarra
     vectors : (c, 3) float64
         Summed area vectors (area times unit normal).
     """
-    area = _vertex_area_vectors(V, F)
-    axis = np.abs(area).argmax(axis=1)
-    direction = 2 * axis + (area[np.arange(area.shape[0]), axis] < 0)
-    cell = np.floor((V - V.min(axis=0)) / size).astype(np.int64)
-    span = cell.max(axis=0) + 1
-    key = ((cell[:, 0] * span[1] + cell[:, 1]) * span[2] + cell[:, 2]) * 6 + direction
+    ax, ay, az = np.abs(area)
+    axis = np.where((ax >= ay) & (ax >= az), 0, np.where(ay >= az, 1, 2))
+    direction = 2 * axis + (np.choose(axis, area) < 0)
+    span = cell.max(axis=1) + 1
+    key = ((cell[0] * span[1] + cell[1]) * span[2] + cell[2]) * 6 + direction
     _, group = np.unique(key, return_inverse=True)
     group = group.reshape(-1)
-    weight = np.linalg.norm(area, axis=1)
-
-    def total(values: np.ndarray) -> np.ndarray:
-        return np.stack([np.bincount(group, weights=values[:, c]) for c in range(3)], axis=1)
-
+    weight = np.sqrt(np.einsum("in,in->n", area, area))
     mass = np.bincount(group, weights=weight)
-    centroids = total(V * weight[:, None]) / np.maximum(mass, 1e-300)[:, None]
-    return centroids, total(area)
+    centroids = np.stack([np.bincount(group, weights=v * weight) for v in Vt], axis=1)
+    vectors = np.stack([np.bincount(group, weights=a) for a in area], axis=1)
+    return centroids / np.maximum(mass, 1e-300)[:, None], vectors
 
 
 def _fit_pca(V, F, P, N, radius: float) -> np.ndarray:
@@ -276,7 +297,22 @@ def _fit_pca(V, F, P, N, radius: float) -> np.ndarray:
 
     # Cells an eighth of the radius across keep the neighbourhood sums cheap
     # on dense meshes while blurring the disc's rim by well under a taxel.
-    centroids, vectors = _surface_cells(V, F, radius / 8.0)
+    size = radius / 8.0
+    Vt = np.ascontiguousarray(V.T)
+    origin = Vt.min(axis=1)
+    cell = np.floor((Vt - origin[:, None]) / size).astype(np.int64)
+    # A cell's centroid lies in the cell, so only whole cells that come
+    # within the radius of a point matter: a few points need only the
+    # vertices near them, and get the result of the whole mesh.
+    keep = _cells_near(cell, P, origin, size, radius)
+    if keep is None:
+        centroids, vectors = _surface_cells(Vt, _vertex_area_vectors(Vt, F), cell)
+    elif keep.any():
+        touching = keep[F[:, 0]] | keep[F[:, 1]] | keep[F[:, 2]]
+        area = _vertex_area_vectors(Vt, F[touching])[:, keep]
+        centroids, vectors = _surface_cells(Vt[:, keep], area, cell[:, keep])
+    else:
+        return N
     pairs = cKDTree(P).sparse_distance_matrix(cKDTree(centroids), radius, output_type="ndarray")
     i, a = pairs["i"], vectors[pairs["j"]]
     facing = (a * N[i]).sum(axis=1) > 0
@@ -317,7 +353,8 @@ def fit_normals(mesh: Mesh, positions, normals, sensor: Sensor) -> np.ndarray:
     settles on.  Each vertex carries a third of its faces' area-weighted
     normals; these are summed per cell an eighth of the radius across (and
     per dominant normal direction), and the cells whose centre lies in the
-    disc are found with a KD-tree.
+    disc are found with a KD-tree.  A few points on a large mesh only build
+    the cells near them, with the same result.
     ``"paper"``: the normal of the plane through the three nearest mesh
     vertices (the paper's quasi-tangent plane; further vertices are tried when
     the nearest are collinear).  Both are oriented to agree with the given

@@ -220,3 +220,80 @@ def test_fast_path_agrees_with_exact_sections_on_shared_meshes(shared_mesh, name
     scores = np.array([ncc(a, b) for a, b in zip(fast, exact)])
     assert np.median(scores) >= 0.9, np.sort(scores)
     assert np.percentile(scores, 10) >= 0.7, np.sort(scores)
+
+
+def test_prebuilt_scene_gives_the_same_imprints_and_a_foreign_scene_is_refused():
+    from meshsal.embree import embree_scene
+
+    surface = shapes.bumps()
+    P = np.array([[3.0, 0.0, 2.0], [-10.0, 0.0, 5.0]])
+    N = np.tile([0.0, 1.0, 0.0], (2, 1))
+    sensor = Sensor(mode="pressure")
+    scene = embree_scene(surface)
+    np.testing.assert_array_equal(tactile.imprints(surface, P, N, sensor, scene=scene),
+                                  tactile.imprints(surface, P, N, sensor))
+    np.testing.assert_array_equal(tactile.imprint(surface, P[0], N[0], sensor, scene=scene),
+                                  tactile.imprint(surface, P[0], N[0], sensor))
+    # The scene of the mesh before scaling, and of another mesh, are caught.
+    scaled = surface.replace(vertices=surface.vertices * 1.5)
+    with pytest.raises(ValueError, match="scene does not hold mesh"):
+        tactile.imprints(scaled, P, N, sensor, scene=scene)
+    with pytest.raises(ValueError, match="scene does not hold mesh"):
+        tactile.imprints(shapes.sphere(20.0), P, N, sensor, scene=scene)
+    with pytest.raises(ValueError, match="Embree scene"):
+        tactile.imprints(surface, P, N, sensor, scene="scene")
+
+
+def test_thread_chunks_do_not_change_the_imprints():
+    surface = shapes.bumps()
+    rng = np.random.default_rng(4)
+    P = np.column_stack([rng.uniform(-20, 20, 40), np.zeros(40), rng.uniform(-20, 20, 40)])
+    N = np.tile([0.0, 1.0, 0.0], (40, 1))
+    angles = rng.uniform(0, 360, 40)
+    one = tactile.imprints(surface, P, N, Sensor(), angles, workers=1)
+    np.testing.assert_array_equal(tactile.imprints(surface, P, N, Sensor(), angles, workers=3), one)
+    for i in (0, 17, 39):
+        np.testing.assert_array_equal(tactile.imprint(surface, P[i], N[i], Sensor(), angles[i]), one[i])
+
+
+def test_pad_whose_centre_is_off_the_edge_still_sees_the_surface_under_it():
+    # The plane ends at x = 100; the pad centre is 5 mm beyond it, so its
+    # centre rays meet nothing and the columns over the plane carry the imprint.
+    plane = shapes.plane(size=200.0)
+    img = tactile.imprint(plane, [105.0, 0.0, 0.0], [0.0, 1.0, 0.0], Sensor(mode="pressure", plane="paper"))
+    x, _ = taxel_centres(Sensor())
+    # At the +y pole the image's up is -z and its right +x: x_world = 105 + x.
+    over = 105.0 + x < 100.0 - 1.0
+    beyond = 105.0 + x > 100.0 + 1.0
+    assert over.sum() == 16 * 5 and beyond.sum() == 16 * 10
+    np.testing.assert_allclose(img[over], 1.0, atol=1e-5)
+    np.testing.assert_allclose(img[beyond], 0.0)
+
+
+def test_pca_fit_of_a_few_points_equals_their_fit_in_a_large_batch():
+    # A few points look only at the surface near them; a large batch sums
+    # over the whole mesh: both must give the same planes.
+    surface = shapes.bumps(n=120)
+    rng = np.random.default_rng(9)
+    P = np.column_stack([rng.uniform(-30, 30, 12), np.zeros(12), rng.uniform(-30, 30, 12)])
+    N = np.tile([0.0, 1.0, 0.0], (12, 1)) + rng.normal(scale=0.2, size=(12, 3))
+    batch = sensor_poses(surface, P, N, Sensor()).normals
+    for i in range(12):
+        np.testing.assert_allclose(sensor_poses(surface, P[i:i + 1], N[i:i + 1], Sensor()).normals[0], batch[i],
+                                   atol=1e-12)
+
+
+def test_contour_lines_match_their_definition_plane_by_plane():
+    from tactile.image import contour_lines, plane_depths
+
+    rng = np.random.default_rng(2)
+    sensor = Sensor(depth_mm=2.0)
+    depth = np.round(rng.uniform(0.0, 2.6, (3, 20, 24)), 1)  # ties with the plane depths included
+    depth[depth > 2.2] = np.inf
+    expected = np.zeros(depth.shape, dtype=np.float32)
+    padded = np.pad(depth, ((0, 0), (1, 1), (1, 1)), mode="edge")
+    for k, level in enumerate(plane_depths(sensor), start=1):
+        inside = padded <= level
+        neighbours_inside = (inside[:, :-2, 1:-1] & inside[:, 2:, 1:-1] & inside[:, 1:-1, :-2] & inside[:, 1:-1, 2:])
+        expected[inside[:, 1:-1, 1:-1] & ~neighbours_inside] = k / 4
+    np.testing.assert_array_equal(contour_lines(depth, sensor), expected)
