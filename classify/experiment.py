@@ -301,15 +301,18 @@ def _object_data(mesh, index, method, cfg, code, cache_dir):
         N = np.asarray(pts.normals, np.float64)
         k = len(P)
         sensor = cfg["sensor"]
-        # One acquire call per stack: one Embree scene and one seeded generator each.
+        # One Embree scene for all stacks, one seeded generator per stack.
+        scene = meshsal.embree.embree_scene(mesh)
         reps = cfg["per_point"]
         paper = tactile.acquire(mesh, np.repeat(P, reps, axis=0), np.repeat(N, reps, axis=0), sensor,
-                                cfg["paper_perturbation"], np.random.default_rng([cfg["seed"], index]))
+                                cfg["paper_perturbation"], np.random.default_rng([cfg["seed"], index]),
+                                scene=scene)
         angles = np.asarray(cfg["angles"], np.float64)
         train = tactile.imprints(mesh, np.repeat(P, len(angles), axis=0), np.repeat(N, len(angles), axis=0),
-                                 sensor, angles_deg=np.tile(angles, k))
+                                 sensor, angles_deg=np.tile(angles, k), scene=scene)
         test = tactile.acquire(mesh, np.tile(P, (cfg["repeats"], 1)), np.tile(N, (cfg["repeats"], 1)), sensor,
-                               cfg["retouch_perturbation"], np.random.default_rng([cfg["seed"], 104729, index]))
+                               cfg["retouch_perturbation"], np.random.default_rng([cfg["seed"], 104729, index]),
+                               scene=scene)
         return {"vertex_ids": np.asarray(pts.vertex_ids, np.int64), "positions": P, "normals": N,
                 "paper": np.asarray(paper, np.float32), "paper_points": np.repeat(np.arange(k), reps),
                 "train": np.asarray(train, np.float32), "train_points": np.repeat(np.arange(k), len(angles)),

@@ -132,7 +132,7 @@ def _tilt(normals: np.ndarray, sd_deg: float, rng: np.random.Generator) -> np.nd
 
 
 def acquire(mesh: Mesh, positions, normals, sensor: Sensor | None = None, perturb: Perturbation | None = None,
-            rng=None, workers: int | None = None) -> np.ndarray:
+            rng=None, workers: int | None = None, scene=None) -> np.ndarray:
     """Simulated sensor readings at k points, with placement and reading errors.
 
     Parameters
@@ -151,6 +151,9 @@ def acquire(mesh: Mesh, positions, normals, sensor: Sensor | None = None, pertur
         equal seeds give equal readings.
     workers : int, optional
         Ray-casting threads.
+    scene : optional
+        ``meshsal.embree.embree_scene(mesh)``: pass the same mesh's scene to
+        amortize the BVH build over many acquisitions.
 
     Returns
     -------
@@ -188,7 +191,7 @@ def acquire(mesh: Mesh, positions, normals, sensor: Sensor | None = None, pertur
     poses = sensor_poses(mesh, P, N, sensor, angles)
     if perturb.tilt_deg > 0:
         poses = poses_from_normals(P, _tilt(poses.normals, perturb.tilt_deg, rng), angles)
-    images = imprints_at(mesh, poses, sensor, workers)
+    images = imprints_at(mesh, poses, sensor, workers, scene=scene)
 
     if perturb.blur_mm > 0:
         from scipy.ndimage import gaussian_filter
