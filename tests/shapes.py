@@ -1,4 +1,4 @@
-"""Small meshes with known geometry, built in memory for tests."""
+"""Small meshes with known geometry, built in memory for tests (the tactile ones in millimetres)."""
 
 import numpy as np
 
@@ -25,3 +25,96 @@ def icosphere(radius: float = 1.0, subdivisions: int = 3, center=(0.0, 0.0, 0.0)
         F = np.concatenate([np.stack(x, 1) for x in ([a, ab, ca], [ab, b, bc], [ca, bc, c], [ab, bc, ca])])
     V = V / np.linalg.norm(V, axis=1, keepdims=True) * radius + np.asarray(center, dtype=np.float64)
     return Mesh(vertices=V, faces=F, name="icosphere")
+
+def _grid(n: int) -> tuple[np.ndarray, np.ndarray]:
+    """Unit square split into n x n quads: (n+1)^2 (u, v) points and 2 n^2 triangles."""
+    u, v = np.meshgrid(np.linspace(0.0, 1.0, n + 1), np.linspace(0.0, 1.0, n + 1), indexing="ij")
+    idx = np.arange((n + 1) ** 2).reshape(n + 1, n + 1)
+    a, b, c, d = idx[:-1, :-1], idx[1:, :-1], idx[1:, 1:], idx[:-1, 1:]
+    F = np.concatenate([np.stack([a, b, c], -1).reshape(-1, 3), np.stack([a, c, d], -1).reshape(-1, 3)])
+    return np.stack([u.ravel(), v.ravel()], 1), F
+
+
+def _orient(V: np.ndarray, F: np.ndarray, outward) -> np.ndarray:
+    """Flip faces whose normal disagrees with ``outward(centroids) -> (m,3)``."""
+    T = V[F]
+    n = np.cross(T[:, 1] - T[:, 0], T[:, 2] - T[:, 0])
+    flip = (n * outward(T.mean(axis=1))).sum(axis=1) < 0
+    F = F.copy()
+    F[flip] = F[flip][:, ::-1]
+    return F
+
+
+def _weld(V: np.ndarray, F: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    _, first, inverse = np.unique(np.round(V, 9), axis=0, return_index=True, return_inverse=True)
+    return V[first], inverse.reshape(-1)[F]
+
+
+def plane(size: float = 200.0, n: int = 10) -> Mesh:
+    """The square |x|, |z| <= size/2 at y = 0, facing +y."""
+    uv, F = _grid(n)
+    V = np.stack([(uv[:, 0] - 0.5) * size, np.zeros(len(uv)), (uv[:, 1] - 0.5) * size], 1)
+    return Mesh(vertices=V, faces=_orient(V, F, lambda c: np.array([0.0, 1.0, 0.0])), name="plane")
+
+
+def _box_points(n: int) -> tuple[np.ndarray, np.ndarray]:
+    uv, F = _grid(n)
+    uv = 2.0 * uv - 1.0
+    Vs, Fs = [], []
+    for axis in range(3):
+        for side in (-1.0, 1.0):
+            V = np.zeros((len(uv), 3))
+            V[:, axis] = side
+            V[:, (axis + 1) % 3], V[:, (axis + 2) % 3] = uv[:, 0], uv[:, 1]
+            Fs.append(F + sum(len(v) for v in Vs))
+            Vs.append(V)
+    return _weld(np.concatenate(Vs), np.concatenate(Fs))
+
+
+def box(half: float = 30.0, n: int = 60) -> Mesh:
+    """The closed cube |x|, |y|, |z| <= half, each face an n x n grid."""
+    V, F = _box_points(n)
+    V = V * half
+    return Mesh(vertices=V, faces=_orient(V, F, lambda c: c), name="box")
+
+
+def sphere(radius: float = 40.0, n: int = 40, center=(0.0, 0.0, 0.0)) -> Mesh:
+    """A closed sphere: a cube grid pushed onto the sphere (poles at the face centres, +-y among them)."""
+    V, F = _box_points(n)
+    V = V / np.linalg.norm(V, axis=1, keepdims=True) * radius
+    F = _orient(V, F, lambda c: c)
+    return Mesh(vertices=V + np.asarray(center, dtype=np.float64), faces=F, name="sphere")
+
+
+def cylinder(radius: float = 20.0, length: float = 120.0, around: int = 256, along: int = 12) -> Mesh:
+    """An open tube of the given radius around the x axis, |x| <= length/2, normals outward."""
+    uv, F = _grid(along)
+    t = np.linspace(0.0, 2.0 * np.pi, around, endpoint=False)
+    x = np.linspace(-length / 2, length / 2, along + 1)
+    X, T = np.meshgrid(x, t, indexing="ij")
+    V = np.stack([X.ravel(), radius * np.cos(T.ravel()), radius * np.sin(T.ravel())], 1)
+    idx = np.arange(V.shape[0]).reshape(along + 1, around)
+    a, b = idx[:-1], idx[1:]
+    c, d = np.roll(b, -1, axis=1), np.roll(a, -1, axis=1)
+    F = np.concatenate([np.stack([a, b, c], -1).reshape(-1, 3), np.stack([a, c, d], -1).reshape(-1, 3)])
+    return Mesh(vertices=V, faces=_orient(V, F, lambda c: c * [0.0, 1.0, 1.0]), name="cylinder")
+
+
+def bumps(size: float = 80.0, n: int = 80, seed: int = 0) -> Mesh:
+    """A y-up height field of random Gaussian bumps and dents, with no symmetry."""
+    rng = np.random.default_rng(seed)
+    uv, F = _grid(n)
+    x, z = (uv[:, 0] - 0.5) * size, (uv[:, 1] - 0.5) * size
+    y = np.zeros_like(x)
+    for _ in range(12):
+        cx, cz = rng.uniform(-20, 20, 2)
+        y += rng.uniform(-3, 3) * np.exp(-((x - cx) ** 2 + (z - cz) ** 2) / (2 * rng.uniform(3, 8) ** 2))
+    V = np.stack([x, y, z], 1)
+    return Mesh(vertices=V, faces=_orient(V, F, lambda c: np.array([0.0, 1.0, 0.0])), name="bumps")
+
+
+def write_obj(path, mesh: Mesh) -> None:
+    """A plain Wavefront OBJ of the mesh (for command-line tests)."""
+    lines = [f"v {x!r} {y!r} {z!r}" for x, y, z in mesh.vertices.tolist()]
+    lines += [f"f {a + 1} {b + 1} {c + 1}" for a, b, c in mesh.faces.tolist()]
+    path.write_text("\n".join(lines) + "\n")

@@ -8,28 +8,7 @@ import pytest
 
 from hw.plan import load_plan, make_plan, matrix_from_quaternion, quaternion_from_matrix, save_plan
 from meshsal.mesh import Mesh, Similarity
-
-
-def uv_sphere(radius=1.0, center=(0.0, 0.0, 0.0), n_lat=24, n_lon=48):
-    """A closed UV sphere, outward-facing triangles."""
-    lat = np.linspace(0, np.pi, n_lat + 1)[1:-1]
-    lon = np.linspace(0, 2 * np.pi, n_lon, endpoint=False)
-    ring = np.stack([np.outer(np.sin(lat), np.cos(lon)), np.outer(np.cos(lat), np.ones_like(lon)),
-                     np.outer(np.sin(lat), np.sin(lon))], axis=-1).reshape(-1, 3)
-    V = np.vstack([[0, 1, 0], ring, [0, -1, 0]])
-    faces = []
-    top, bottom = 0, len(V) - 1
-
-    def idx(i, j):
-        return 1 + i * n_lon + j % n_lon
-
-    for j in range(n_lon):
-        faces.append([top, idx(0, j + 1), idx(0, j)])
-        faces.append([bottom, idx(n_lat - 2, j), idx(n_lat - 2, j + 1)])
-        for i in range(n_lat - 2):
-            faces.append([idx(i, j), idx(i, j + 1), idx(i + 1, j)])
-            faces.append([idx(i, j + 1), idx(i + 1, j + 1), idx(i + 1, j)])
-    return Mesh(vertices=V * radius + np.asarray(center), faces=np.array(faces), name="sphere")
+from shapes import icosphere
 
 
 def test_quaternion_round_trip_on_random_rotations():
@@ -47,7 +26,7 @@ def test_quaternion_round_trip_on_random_rotations():
 def test_plan_on_a_sphere_in_metres(tmp_path):
     # A 5 cm sphere stored in metres, off the origin: the plan must come back in metres, in the file's frame.
     center = np.array([0.3, -0.1, 0.2])
-    mesh = uv_sphere(radius=0.05, center=center)
+    mesh = icosphere(radius=0.05, center=center)
     plan = make_plan(mesh, n=6, method="uniform", size_mm=150.0, source="ball.obj")
     assert len(plan.points) == 6 and plan.mesh == "ball.obj"
     diagonal_m = np.linalg.norm(mesh.vertices.max(0) - mesh.vertices.min(0))

@@ -5,7 +5,7 @@ import re
 
 import numpy as np
 import pytest
-import tactile_shapes as shapes
+import shapes
 
 from tactile import ImprintSet, Perturbation, Sensor
 

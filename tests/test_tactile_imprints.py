@@ -2,7 +2,7 @@
 
 import numpy as np
 import pytest
-import tactile_shapes as shapes
+import shapes
 
 import tactile
 from tactile import Sensor
