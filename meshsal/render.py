@@ -167,42 +167,61 @@ def view_rig() -> list[list[Camera]]:
     return rig
 
 
-def _rays(camera: Camera, center: np.ndarray, radius: float, size: int, cull: bool = True):
-    """The rays of the pixels whose centre ray can meet the bounding sphere (all pixels if not ``cull``).
+def _pixel_grid(camera: Camera, size: int, cull: bool = True):
+    """Pixels whose centre ray can meet the framed bounding sphere (all pixels if not ``cull``).
 
-    Returns ``pixels`` (k,) flat pixel indices, ``origins`` and ``directions``
-    (k, 3) float32, the eye, the pixel size, and the factor turning a hit
-    distance into depth along the view direction ((k,) or None when 1).
+    Depends only on the projection, view angle, margin and size, so views
+    that share those share the grid.  Returns ``pixels`` (k,) flat indices
+    and ``xy`` (k, 2) float32 image-plane coordinates in [-1, 1] (y up).
     """
-    half = radius * (1.0 + camera.margin)
-    d, up, right = camera.direction, camera.up, camera.right
-    offsets = (np.arange(size) + 0.5) / size * 2.0 - 1.0  # pixel centres in [-1, 1]
+    offsets = (np.arange(size) + 0.5) / size * 2.0 - 1.0  # pixel centres
     if camera.projection == "orthographic":
         disk = 1.0 / (1.0 + camera.margin)
     else:
-        tan_half = np.tan(np.deg2rad(camera.fov_deg) / 2.0)
-        sin_sphere = np.sin(np.deg2rad(camera.fov_deg) / 2.0) / (1.0 + camera.margin)
-        disk = np.tan(np.arcsin(sin_sphere)) / tan_half
+        half_angle = np.deg2rad(camera.fov_deg) / 2.0
+        disk = np.tan(np.arcsin(np.sin(half_angle) / (1.0 + camera.margin))) / np.tan(half_angle)
     # Rays outside the sphere's image disk cannot hit: skipping them saves a quarter of the work.
     inside = offsets[None, :] ** 2 + offsets[:, None] ** 2 <= (disk**2 * (1.0 + 1e-9) if cull else np.inf)
     pixels = np.flatnonzero(inside)
-    x = offsets[pixels % size].astype(np.float32)[:, None]
-    y = -offsets[pixels // size].astype(np.float32)[:, None]
-    right32, up32 = right.astype(np.float32), up.astype(np.float32)
+    xy = np.stack([offsets[pixels % size], -offsets[pixels // size]], axis=1).astype(np.float32)
+    return pixels, xy
+
+
+def _rays(camera: Camera, center: np.ndarray, radius: float, xy: np.ndarray):
+    """Rays through the image-plane points ``xy`` (from :func:`_pixel_grid`).
+
+    Returns ``origins`` and ``directions`` (k, 3) float32, the eye, and the
+    factor turning a hit distance into depth along the view direction ((k,),
+    or None when it is 1).
+    """
+    half = radius * (1.0 + camera.margin)
+    d = camera.direction
+    basis = np.stack([camera.right, camera.up])
     if camera.projection == "orthographic":
         eye = center - d * 2.0 * radius
-        origins = eye.astype(np.float32) + half * (x * right32 + y * up32)
+        origins = xy @ (half * basis).astype(np.float32)
+        origins += eye.astype(np.float32)
         directions = np.empty_like(origins)
         directions[:] = d
-        return pixels, origins, directions, eye, 2 * half / size, None
-    distance = radius / sin_sphere
-    eye = center - d * distance
-    directions = (d + tan_half * (x * right32 + y * up32)).astype(np.float32)
+        return origins, directions, eye, None
+    half_angle = np.deg2rad(camera.fov_deg) / 2.0
+    eye = center - d * half / np.sin(half_angle)
+    directions = xy @ (np.tan(half_angle) * basis).astype(np.float32)
+    directions += d.astype(np.float32)
     depth_factor = 1.0 / np.linalg.norm(directions, axis=1)
     directions *= depth_factor[:, None]
     origins = np.empty_like(directions)
     origins[:] = eye
-    return pixels, origins, directions, eye, 2.0 * distance * tan_half / size, depth_factor
+    return origins, directions, eye, depth_factor
+
+
+def _pixel_size(camera: Camera, radius: float, size: int) -> float:
+    """World units per pixel (at the centre's depth for a perspective camera)."""
+    half = radius * (1.0 + camera.margin)
+    if camera.projection == "orthographic":
+        return 2.0 * half / size
+    half_angle = np.deg2rad(camera.fov_deg) / 2.0
+    return 2.0 * half / np.sin(half_angle) * np.tan(half_angle) / size
 
 
 def _sample_texture(texture: np.ndarray, uv: np.ndarray) -> np.ndarray:
@@ -221,25 +240,26 @@ def _sample_texture(texture: np.ndarray, uv: np.ndarray) -> np.ndarray:
     return (top * (1 - fy) + bottom * fy) / 255.0
 
 
-def _shade(mesh: Mesh, normals: np.ndarray, faces: np.ndarray, bary: np.ndarray,
+def _shade(mesh: Mesh, normals: np.ndarray, faces: np.ndarray, corners: np.ndarray, bary: np.ndarray,
            ray_dirs: np.ndarray) -> np.ndarray:
     """Lambert shading of the hits from a headlight plus ambient, times the surface colour."""
-    corners = mesh.faces[faces]
-    n = np.einsum("kc,kcd->kd", bary, normals[corners])
+    # np.take gathers several times faster than fancy indexing here, the renderer's hot loop.
+    n = np.einsum("kc,kcd->kd", bary, np.take(normals, corners, axis=0))
     # Open meshes show their inside: light both sides rather than render them black.
     lambert = np.abs(np.einsum("kd,kd->k", n, ray_dirs)) / np.maximum(np.linalg.norm(n, axis=1), 1e-12)
     light = (AMBIENT + (1.0 - AMBIENT) * lambert)[:, None]
     if mesh.texture is not None and mesh.uv is not None:
-        albedo = _sample_texture(mesh.texture, np.einsum("kc,kcd->kd", bary, mesh.uv[faces]))
+        albedo = _sample_texture(mesh.texture, np.einsum("kc,kcd->kd", bary, np.take(mesh.uv, faces, axis=0)))
     elif mesh.vertex_colors is not None:
-        albedo = np.einsum("kc,kcd->kd", bary, mesh.vertex_colors[corners])
+        albedo = np.einsum("kc,kcd->kd", bary, np.take(mesh.vertex_colors, corners, axis=0))
     else:
         albedo = np.full((faces.size, 3), DEFAULT_GRAY, np.float32)
     return np.clip(albedo * light, 0.0, 1.0).astype(np.float32)
 
 
-def _render_one(mesh, scene, normals, center, radius, camera, size) -> View:
-    pixels, origins, directions, eye, pixel_size, depth_factor = _rays(camera, center, radius, size)
+def _render_one(mesh, scene, normals, center, radius, camera, size, grid) -> View:
+    pixels, xy = grid
+    origins, directions, eye, depth_factor = _rays(camera, center, radius, xy)
     hit = scene.run(origins, directions, output=1)
     hits = hit["primID"] >= 0
     seen = pixels[hits]
@@ -251,18 +271,20 @@ def _render_one(mesh, scene, normals, center, radius, camera, size) -> View:
     depth[seen] = tfar if depth_factor is None else tfar * depth_factor[hits]
     face_id = np.full(n, -1, np.int32)
     face_id[seen] = face
+    bary_hit = np.stack([1.0 - u - v, u, v], axis=1)
     bary = np.zeros((n, 3), np.float32)
-    bary[seen] = np.stack([1.0 - u - v, u, v], axis=1)
+    bary[seen] = bary_hit
+    corners = np.take(mesh.faces, face, axis=0)
     vertex_ids = np.full((n, 3), -1, np.int32)
-    vertex_ids[seen] = mesh.faces[face]
+    vertex_ids[seen] = corners
     rgb = np.zeros((n, 3), np.float32)
-    rgb[seen] = _shade(mesh, normals, face, bary[seen], directions[hits])
+    rgb[seen] = _shade(mesh, normals, face, corners, bary_hit, directions[hits])
     mask = face_id >= 0
     return View(rgb=rgb.reshape(size, size, 3), depth=depth.reshape(size, size),
                 face_id=face_id.reshape(size, size), bary=bary.reshape(size, size, 3),
                 vertex_ids=vertex_ids.reshape(size, size, 3),
                 mask=mask.reshape(size, size), camera=camera, center=center, radius=radius,
-                eye=eye, pixel_size=float(pixel_size))
+                eye=eye, pixel_size=_pixel_size(camera, radius, size))
 
 
 def _check_size(size) -> int:
@@ -313,8 +335,15 @@ def render_views(mesh: Mesh, cameras, size: int = 256, threads: int | None = Non
     center, radius = bounding_sphere(mesh.vertices)
     radius = max(radius, 1e-12)
 
+    grids = {}
+    for camera in cameras:
+        framing = (camera.projection, camera.fov_deg, camera.margin)
+        if framing not in grids:
+            grids[framing] = _pixel_grid(camera, size)
+
     def one(camera):
-        return _render_one(mesh, scene, normals, center, radius, camera, size)
+        grid = grids[(camera.projection, camera.fov_deg, camera.margin)]
+        return _render_one(mesh, scene, normals, center, radius, camera, size, grid)
 
     workers = threads or os.cpu_count() or 1
     if workers == 1 or len(cameras) == 1:
