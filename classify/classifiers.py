@@ -38,7 +38,6 @@ from classify.evolutionary_svm import EvolutionarySVM, as_matrix
 __all__ = ["NAMES", "make", "as_matrix", "KNN", "NaiveBayes", "DecisionTree", "EvolutionarySVM", "DeepNet"]
 
 
-
 class _Flatten:
     """Mixin: flatten (N, rows, cols) inputs before the wrapped estimator sees them."""
 

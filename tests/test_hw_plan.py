@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from hw.plan import load_plan, make_plan, matrix_from_quaternion, quaternion_from_matrix, save_plan
-from meshsal.mesh import Mesh, Similarity
+from meshsal.mesh import Similarity
 from shapes import icosphere
 
 
