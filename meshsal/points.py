@@ -38,6 +38,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .embree import embree_scene
 from .mesh import Mesh, face_normals, vertex_normals
 from .sampling import farthest_points, field_peaks, non_maximum_suppression, random_surface_points
 
@@ -521,9 +522,6 @@ def project_pixel_paper(view, rows, cols, mesh: Mesh) -> np.ndarray:
     -------
     (k, 3) float64 surface points; NaN rows where the ray misses the mesh.
     """
-    from embreex import rtcore_scene as rtcs
-    from embreex.mesh_construction import TriangleMesh
-
     rows = np.atleast_1d(np.asarray(rows, dtype=np.float64))
     cols = np.atleast_1d(np.asarray(cols, dtype=np.float64))
     azimuth, elevation, distance, roll, ppu = _spherical(view)
@@ -546,9 +544,7 @@ def project_pixel_paper(view, rows, cols, mesh: Mesh) -> np.ndarray:
         origins = np.broadcast_to(eye, on_plane.shape)
         directions = on_plane - eye
         directions = directions / np.linalg.norm(directions, axis=1, keepdims=True)
-    scene = rtcs.EmbreeScene()
-    TriangleMesh(scene, mesh.vertices.astype(np.float32), mesh.faces.astype(np.int32))
-    hit = scene.run(np.ascontiguousarray(origins, np.float32), np.ascontiguousarray(directions, np.float32),
+    hit = embree_scene(mesh).run(np.ascontiguousarray(origins, np.float32), np.ascontiguousarray(directions, np.float32),
                     output=1)
     out = np.full((rows.size, 3), np.nan)
     ok = hit["primID"] >= 0
