@@ -541,7 +541,7 @@ def _pymeshlab_load(path: Path):
     return ms  # the caller keeps the MeshSet alive: its meshes die with it
 
 
-def _load_texture(path: Path, declared: _Declared, notes: list):
+def _load_texture(declared: _Declared, notes: list):
     """The (H,W,3) uint8 RGB texture the OBJ's faces use, or None (with a note why)."""
     import cv2
 
@@ -655,7 +655,7 @@ def load_mesh(path) -> Mesh:
     notes = list(declared.notes)
     texture = UV = None
     if declared.textures:
-        texture = _load_texture(path, declared, notes)
+        texture = _load_texture(declared, notes)
         if texture is not None and pm.has_wedge_tex_coord():
             UV = np.asarray(pm.wedge_tex_coord_matrix(), dtype=np.float32).reshape(-1, 3, 2)
         else:

@@ -367,7 +367,7 @@ def surface_points(mesh: Mesh, view: View, rows, cols) -> np.ndarray:
 
 
 def project(view: View, points: np.ndarray) -> np.ndarray:
-    """Image coordinates (row, col), (k, 2) float64, of world points; pixel centres at half-integers + 0.5.
+    """Image coordinates (row, col), (k, 2) float64, of world points; pixel centres at half-integers.
 
     Pixel ``(i, j)`` covers ``[i, i+1) x [j, j+1)``, so a point seen at the
     centre of pixel (i, j) projects to (i + 0.5, j + 0.5).

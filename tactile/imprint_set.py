@@ -143,9 +143,11 @@ class ImprintSet:
         damaged, truncated, foreign or of another version."""
         path = Path(path)
         try:
-            with np.load(path, allow_pickle=False) as archive:
-                if not hasattr(archive, "files"):
-                    raise ValueError(f"{path}: not an imprint set (a bare .npy array, not an .npz archive)")
+            archive = np.load(path, allow_pickle=False)
+            # A bare .npy file loads as an array, which is no context manager.
+            if not hasattr(archive, "files"):
+                raise ValueError(f"{path}: not an imprint set (a bare .npy array, not an .npz archive)")
+            with archive:
                 if "meta" not in archive.files:
                     raise ValueError(f"{path}: not an imprint set (no 'meta' entry; "
                                      f"arrays found: {', '.join(archive.files) or 'none'})")

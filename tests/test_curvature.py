@@ -70,7 +70,10 @@ def test_mean_curvature_of_cylinder_is_half_inverse_radius():
 
 
 def brute_force_average(V, f, w, sigma, max_cells=None):
-    """The definition itself: Gaussian weights over KD-tree pairs within 2 sigma."""
+    """The definition itself: Gaussian weights over KD-tree pairs within 2 sigma.
+
+    ``max_cells`` is ignored: it is there so this can stand in for ``gaussian_average``.
+    """
     D = cKDTree(V).sparse_distance_matrix(cKDTree(V), 2 * sigma, output_type="coo_matrix")
     k = np.exp(-D.data ** 2 / (2 * sigma ** 2)) * w[D.col]
     return np.bincount(D.row, k * f[D.col], len(V)) / np.bincount(D.row, k, len(V))

@@ -57,6 +57,10 @@ def test_foreign_files_are_refused(tmp_path):
         ImprintSet.load(text)
     with pytest.raises(OSError, match="missing.npz"):
         ImprintSet.load(tmp_path / "missing.npz")
+    bare = tmp_path / "array.npy"
+    np.save(bare, np.zeros(3))
+    with pytest.raises(ValueError, match="array.npy: not an imprint set"):
+        ImprintSet.load(bare)
 
 
 def test_other_version_is_refused(tmp_path):
