@@ -27,7 +27,7 @@ import numpy as np
 from sklearn.base import BaseEstimator, ClassifierMixin
 from sklearn.model_selection import StratifiedKFold
 from sklearn.naive_bayes import GaussianNB
-from sklearn.neighbors import KNeighborsClassifier
+from sklearn.neighbors import NearestNeighbors
 from sklearn.neural_network import MLPClassifier
 from sklearn.tree import DecisionTreeClassifier
 from sklearn.utils.validation import check_is_fitted
@@ -89,7 +89,7 @@ class KNN(ClassifierMixin, BaseEstimator):
         fewer than 2 samples in some class no search is possible and the
         smallest k is used).
     metric : str
-        Distance, as in :class:`sklearn.neighbors.KNeighborsClassifier`.
+        Distance, as in :class:`sklearn.neighbors.NearestNeighbors`.
     random_state : int
         Seed of the inner fold shuffle.
 
@@ -99,6 +99,24 @@ class KNN(ClassifierMixin, BaseEstimator):
         The chosen k (ties go to the smaller k).
     cv_scores_ : dict k -> mean inner accuracy
     classes_ : labels
+    scale_ : float
+        Distance scale of the posterior: the median distance from a
+        training imprint to its nearest other training imprint.
+
+    Notes
+    -----
+    The posterior is the neighbours' vote made soft by distance, so that
+    it carries evidence beyond the winner even at k = 1 (where plain vote
+    fractions are one-hot and multiplying the posteriors of several
+    touches, as ``classify.experiment`` does, only repeats ties)::
+
+        p_c = (v_c + s_c / 2) / (k + 1 / 2),    s = softmax_c(-d_c / scale_)
+
+    with ``v_c`` the votes of class c among the k nearest neighbours and
+    ``d_c`` the distance to the nearest training imprint of class c.  The
+    distance term sums to less than one vote, so the prediction (its
+    argmax) is the majority vote; a tied vote goes to the class with the
+    nearest imprint.
 
     Examples
     --------
@@ -132,34 +150,69 @@ class KNN(ClassifierMixin, BaseEstimator):
             split = StratifiedKFold(folds, shuffle=True, random_state=self.random_state)
             for train, test in split.split(X, codes):
                 usable = [k for k in ks if k <= len(train)]
-                nn = KNeighborsClassifier(n_neighbors=usable[-1], metric=self.metric).fit(X[train], codes[train])
+                if not usable:
+                    continue
+                nn = NearestNeighbors(n_neighbors=usable[-1], metric=self.metric).fit(X[train])
                 order = nn.kneighbors(X[test], return_distance=False)
                 neighbour_codes = codes[train][order]
+                class_nn = _per_class_neighbours(X[train], codes[train], len(self.classes_), self.metric)
+                dist = _class_distances(class_nn, X[test])
                 for k in usable:
-                      hits[k] += int(np.sum(_vote(neighbour_codes[:, :k], len(self.classes_)) == codes[test]))
+                    # The argmax does not depend on the scale, so the fold's own is not needed.
+                    proba = _posterior(neighbour_codes[:, :k], dist, 1.0)
+                    hits[k] += int(np.sum(np.argmax(proba, axis=1) == codes[test]))
             self.cv_scores_ = {k: hits[k] / len(X) for k in ks}
             self.k_ = max(ks, key=lambda k: (self.cv_scores_[k], -k))
         else:
             self.k_ = ks[0]
         self.k_ = min(self.k_, len(X))
-        self.model_ = KNeighborsClassifier(n_neighbors=self.k_, metric=self.metric).fit(X, codes)
+        self.model_ = NearestNeighbors(n_neighbors=self.k_, metric=self.metric).fit(X)
+        self.codes_ = codes
+        self.class_neighbours_ = _per_class_neighbours(X, codes, len(self.classes_), self.metric)
+        self.scale_ = _distance_scale(self.model_, X)
         self.n_features_in_ = X.shape[1]
         return self
 
     def predict_proba(self, X):
-        """Fraction of the k neighbours in each class (columns follow ``classes_``)."""
+        """Votes of the k neighbours softened by distance (see Notes; columns follow ``classes_``)."""
         check_is_fitted(self, "model_")
-        return self.model_.predict_proba(as_matrix(X))
+        X = as_matrix(X)
+        order = self.model_.kneighbors(X, return_distance=False)
+        return _posterior(self.codes_[order], _class_distances(self.class_neighbours_, X), self.scale_)
 
     def predict(self, X):
         return self.classes_[np.argmax(self.predict_proba(X), axis=1)]
 
 
-def _vote(neighbour_codes, n_classes):
-    """Majority label of each row of neighbour codes (ties to the smaller code)."""
-    counts = np.zeros((len(neighbour_codes), n_classes))
-    np.add.at(counts, (np.arange(len(neighbour_codes))[:, None], neighbour_codes), 1.0)
-    return np.argmax(counts, axis=1)
+_SOFT = 0.5  # weight of the distance term: under one vote, so it never overturns a majority
+
+
+def _per_class_neighbours(X, codes, n_classes, metric):
+    """One 1-nearest-neighbour index per class code."""
+    return [NearestNeighbors(n_neighbors=1, metric=metric).fit(X[codes == c]) for c in range(n_classes)]
+
+
+def _class_distances(class_neighbours, X):
+    """(n, n_classes) distance from each row of X to the nearest training sample of each class."""
+    return np.column_stack([nn.kneighbors(X)[0][:, 0] for nn in class_neighbours])
+
+
+def _distance_scale(model, X):
+    """Median distance from a training sample to its nearest other one (1.0 when undefined or zero)."""
+    if len(X) < 2:
+        return 1.0
+    scale = float(np.median(model.kneighbors(X, n_neighbors=2)[0][:, 1]))
+    return scale if scale > 0 else 1.0
+
+
+def _posterior(neighbour_codes, class_dist, scale):
+    """(votes + _SOFT * softmax(-class_dist / scale)) / (k + _SOFT), rows of ``neighbour_codes`` (n, k)."""
+    n, k = neighbour_codes.shape
+    votes = np.zeros(class_dist.shape)
+    np.add.at(votes, (np.arange(n)[:, None], neighbour_codes), 1.0)
+    soft = np.exp(-(class_dist - class_dist.min(axis=1, keepdims=True)) / scale)
+    soft /= soft.sum(axis=1, keepdims=True)
+    return (votes + _SOFT * soft) / (k + _SOFT)
 
 
 _FACTORIES = {

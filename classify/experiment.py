@@ -36,6 +36,9 @@ Protocols
     posteriors over k distinct points of one object (a sum of logs, each
     posterior floored at ``1e-3`` so that one zero cannot veto a class;
     ``touch_sequences_per_object`` random point subsets per object, repeat and k).
+    The kNN's posterior is its vote softened by distance (``classify.KNN``),
+    so at k = 1 conflicting touches are decided by how firmly each one
+    matched, not by the class order.
 
 Statistics: each cell's ``mean`` and ``std`` are over repeats (per repeat, the
 rate over all its test imprints or touch sequences), ``ci_low``/``ci_high``

@@ -50,20 +50,12 @@ def register(subparsers) -> None:
 def _cmd_export(args) -> int:
     from .session import export_imprints
 
-    full_scale = args.full_scale if args.full_scale in ("session", "imprint") else _number(args.full_scale)
-    imprint_set = export_imprints(args.session, rows=args.rows, cols=args.cols, full_scale=full_scale)
+    imprint_set = export_imprints(args.session, rows=args.rows, cols=args.cols, full_scale=args.full_scale)
     imprint_set.save(args.out)
     counts = ", ".join(f"{name} {int((imprint_set.labels == i).sum())}"
                        for i, name in enumerate(imprint_set.object_names))
     print(f"export: {len(imprint_set.labels)} imprints ({counts}) -> {args.out}", file=sys.stderr)
     return 0
-
-
-def _number(text: str) -> float:
-    try:
-        return float(text)
-    except ValueError:
-        raise ValueError(f"--full-scale must be 'session', 'imprint' or a number, got {text!r}") from None
 
 
 def _cmd_plan(args) -> int:

@@ -127,7 +127,6 @@ class Session:
         con = self._con
         tables = {r[0] for r in con.execute("SELECT name FROM sqlite_master WHERE type='table'")}
         if not tables:
-            con.execute("PRAGMA journal_mode=WAL")
             with self._transaction():
                 for statement in _SCHEMA.split(";"):
                     if statement.strip():

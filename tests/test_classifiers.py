@@ -78,6 +78,25 @@ def test_knn_without_enough_samples_for_inner_cv_uses_smallest_k():
     assert model.predict([[0.9]])[0] == 1
 
 
+def test_knn_posterior_keeps_the_majority_and_breaks_a_tied_vote_by_distance():
+    X = [[0.0], [0.1], [1.0], [1.1]]
+    y = ["a", "a", "b", "b"]
+    two = classify.make("knn", ks=(2,)).fit(X, y)
+    # 0.6 has one neighbour of each object; b's imprint (0.4 away) is nearer than a's (0.5 away).
+    assert two.k_ == 2 and list(two.predict([[0.6], [0.4]])) == ["b", "a"]
+    three = classify.make("knn", ks=(3,)).fit(X, y)
+    # Neighbours of 0.9: 1.0, 1.1 (b) and 0.1 (a): the majority b wins, and b's vote share stays on top.
+    proba = three.predict_proba([[0.9]])[0]
+    assert list(three.predict([[0.9]])) == ["b"] and proba[1] > 0.5 > proba[0] > 0
+    np.testing.assert_allclose(proba.sum(), 1.0)
+
+
+def test_knn_with_every_k_larger_than_the_inner_folds_still_fits():
+    # 2 inner folds of 2 training samples each: k = 3 cannot be scored there, so it is the only choice.
+    model = classify.make("knn", ks=(3,)).fit([[0.0], [0.1], [1.0], [1.1]], [0, 0, 1, 1])
+    assert model.k_ == 3 and model.predict([[1.05]])[0] == 1
+
+
 def test_bad_inputs_have_clear_messages():
     with pytest.raises(ValueError, match="shape"):
         classify.make("knn").fit(np.zeros(5), np.zeros(5))

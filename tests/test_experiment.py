@@ -7,6 +7,7 @@ from concurrent.futures import ThreadPoolExecutor
 import numpy as np
 import pytest
 
+import classify
 import tactile
 from classify import experiment
 from classify.cli import main
@@ -125,6 +126,19 @@ def test_touch_fusion_multiplies_posteriors():
     assert all(sorted(row) == list(range(6)) for row in seq.tolist())
 
 
+def test_two_one_nearest_neighbour_touches_agree_or_let_the_firmer_one_decide():
+    # 1-NN on a line: object 0 at 0, object 1 at 10.  A touch at 4.9 is (barely) object 0, one at 9
+    # firmly object 1, one at 0.5 firmly object 0.  One-hot posteriors would tie the conflicting pair
+    # and hand it to the lowest index, 0.
+    model = classify.make("knn", ks=(1,)).fit([[0.0], [0.2], [10.0], [10.2]], [0, 0, 1, 1])
+    proba = model.predict_proba([[4.9], [9.0], [0.5]])
+    assert model.k_ == 1 and model.predict([[4.9], [9.0], [0.5]]).tolist() == [0, 1, 0]
+    assert 0.0 < proba[0, 1] < proba[0, 0] < 1.0                   # the ambiguous touch keeps some doubt
+    assert experiment.combine_touches(proba, [[0, 1], [1, 0]]).tolist() == [1, 1]   # conflict: the firmer touch
+    assert experiment.combine_touches(proba, [[0, 2], [2, 0]]).tolist() == [0, 0]   # agreement
+    assert experiment.combine_touches(proba, [[0], [1]]).tolist() == [0, 1]         # single touches: predictions
+
+
 def test_summary_is_a_student_t_interval():
     mean, std, lo, hi = experiment.summarize([80.0, 90.0])
     assert mean == 85.0 and std == pytest.approx(np.sqrt(50))
@@ -191,7 +205,8 @@ def test_real_imprint_set_gives_table_2(tmp_path, capsys):
     assert main(["experiment", "--real", str(path), "--repeats", "2", "--out", str(out), "--quiet"]) == 0
     printed = capsys.readouterr().out
     assert "Table 2" in printed and "| classifier | 3 objects, no selection | 3 objects, selection |" in printed
-    rows = list(csv.DictReader(open(out / "results.csv")))
+    with open(out / "results.csv") as fh:
+        rows = list(csv.DictReader(fh))
     assert len(rows) == 5 * 2 and all(r["method"] == "real" for r in rows)
     knn = [r for r in rows if r["classifier"] == "knn" and r["selection"] == "false"][0]
     assert float(knn["mean"]) == 100.0

@@ -90,10 +90,11 @@ def test_plan_simdevice_capture_export_chain(tmp_path):
         assert "15 presses stored" in cap.stderr
     finally:
         sim.terminate()
-        sim.wait(10)
+        sim.communicate(timeout=10)                                   # reaps it and closes its pipes
     assert main(["export", str(session), "--out", str(out)]) == 0
     real = ImprintSet.load(out)
-    sent = np.load(truth)
+    with np.load(truth) as data:
+        sent = {name: data[name] for name in data.files}
     plan = load_plan(plan_path)
     assert real.object_names == ("cup",) and real.imprints.shape == (15, 16, 16)
     assert real.point_ids.tolist() == [p.id for p in plan.points] == sent["point_ids"].tolist()
