@@ -225,7 +225,7 @@ def test_killed_capture_keeps_every_completed_press_and_resumes(tmp_path):
         try:
             assert _wait_for(lambda: len(stored(session)) >= 3), "no presses stored"
             proc.send_signal(signal.SIGKILL)
-            err = proc.communicate(timeout=10)[1]
+            err = proc.communicate(timeout=30)[1]
         finally:
             proc.kill()
         before = stored(session)
@@ -240,7 +240,7 @@ def test_killed_capture_keeps_every_completed_press_and_resumes(tmp_path):
         try:
             assert _wait_for(lambda: len(stored(session)) >= len(before) + 2), "no presses after resuming"
             proc.send_signal(signal.SIGINT)
-            err = proc.communicate(timeout=10)[1]
+            err = proc.communicate(timeout=30)[1]
         finally:
             proc.kill()
         assert proc.returncode == 0, err
