@@ -269,10 +269,8 @@ def _load_objects(objects, size_mm):
     for item in objects:
         if isinstance(item, meshsal.Mesh):
             mesh = item
-        elif isinstance(item, str) and item in toys.NAMES and not Path(item).exists():
-            mesh = toys.make(item, seed=0)
         else:
-            mesh = meshsal.load_mesh(item)
+            mesh = toys.load_object(item)
             if not mesh.name:
                 mesh = mesh.replace(name=Path(item).stem)
         meshes.append(meshsal.scale_to(mesh, diagonal_mm=size_mm))

@@ -59,7 +59,9 @@ def _cmd_export(args) -> int:
 
 
 def _cmd_plan(args) -> int:
-    from .plan import load_object, make_plan, save_plan
+    from meshsal.toys import load_object
+
+    from .plan import make_plan, save_plan
 
     mesh = load_object(args.mesh)
     plan = make_plan(mesh, n=args.n, method=args.method, size_mm=args.size_mm, seed=args.seed, quiet=args.quiet,

@@ -150,14 +150,6 @@ def matrix_from_quaternion(q) -> np.ndarray:
     ])
 
 
-def load_object(name: str):
-    """A mesh file, or a toy when ``name`` is one of ``meshsal.toys.NAMES``."""
-    import meshsal
-    from meshsal import toys
-
-    return toys.make(name) if name in toys.NAMES else meshsal.load_mesh(name)
-
-
 def make_plan(mesh, n: int = 15, method: str = "attention", size_mm: float = 150.0, sensor=None, seed: int = 0,
               quiet: bool = True, source: str = "") -> Plan:
     """Plan one press per interest point of ``mesh``.

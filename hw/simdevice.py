@@ -302,8 +302,9 @@ def main(argv: list[str] | None = None) -> int:
     try:
         import meshsal
         import tactile
+        from meshsal.toys import load_object
 
-        from .plan import load_object, load_plan
+        from .plan import load_plan
 
         plan = load_plan(args.points) if args.points else None
         mesh = meshsal.scale_to(load_object(args.object), plan.size_mm if plan is not None else args.size_mm)

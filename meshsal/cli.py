@@ -42,7 +42,7 @@ def _add_render(subparsers) -> None:
         description="Render MESH from the 72 viewpoints of the rig (18 sets of 4 views 90 degrees apart) "
                     "as PNG files view_SS_K.png, plus contact_sheet.png. With --saliency, also each "
                     "view's saliency map and its eight channel maps.")
-    p.add_argument("mesh", type=Path, help="mesh file (OBJ, PLY, OFF, STL)")
+    p.add_argument("mesh", type=Path, help="mesh file (OBJ, PLY, OFF, STL) or a toy name (cow, glasses, ...)")
     p.add_argument("--out", required=True, type=Path, help="output folder")
     p.add_argument("--size", type=int, default=256, help="image size in pixels (default 256)")
     p.add_argument("--saliency", action="store_true", help="also write saliency and channel maps")
@@ -56,14 +56,14 @@ def _to_uint8(image: np.ndarray) -> np.ndarray:
 
 def _cmd_render(args) -> int:
     from .atomic import write_png
-    from .io import load_mesh
     from .overlay import tile
     from .progress import progress
     from .render import render_views, view_rig
+    from .toys import load_object
 
     if args.size < 16:
         raise ValueError(f"--size must be at least 16 pixels, got {args.size}")
-    mesh = load_mesh(args.mesh)
+    mesh = load_object(args.mesh)
     cameras = [c for s in view_rig() for c in s]
     views = render_views(mesh, cameras, size=args.size)
     results = [None] * len(views)
@@ -97,7 +97,7 @@ def _add_points(subparsers) -> None:
                     "saliency.ply (mesh saliency as vertex quality and colours), points.json and points.csv "
                     "(ids from 1, in the mesh file's own units and frame), views.png (the best set's four "
                     "views, saliency overlaid, points numbered) and contact_sheet.png (all 72 saliency maps).")
-    p.add_argument("mesh", type=Path, help="mesh file (OBJ, PLY, OFF, STL)")
+    p.add_argument("mesh", type=Path, help="mesh file (OBJ, PLY, OFF, STL) or a toy name (cow, glasses, ...)")
     p.add_argument("--out", required=True, type=Path, help="output folder")
     p.add_argument("--n", type=int, default=15, help="number of points (default 15)")
     p.add_argument("--method", choices=METHODS, default="attention", help="how to choose them (default attention)")
@@ -120,14 +120,15 @@ def _cmd_points(args) -> int:
     from . import overlay
     from .atomic import write_png, write_text
     from .curvature import mesh_saliency
-    from .io import load_mesh, save_ply
+    from .io import save_ply
     from .mesh import Similarity
     from .points import attention_points, best_view_set, interest_points, saliency_maps
+    from .toys import load_object
     from .transform import scale_to
 
     if args.size < 16:
         raise ValueError(f"--size must be at least 16 pixels, got {args.size}")
-    mesh = scale_to(load_mesh(args.mesh), args.size_mm)
+    mesh = scale_to(load_object(args.mesh), args.size_mm)
     vertex_saliency = mesh_saliency(mesh)
     views, maps = saliency_maps(mesh, size=args.size, vertex_saliency=vertex_saliency, quiet=args.quiet)
     if args.method == "attention":

@@ -36,7 +36,7 @@ import numpy as np
 from . import sdf
 from .mesh import Mesh, face_areas
 
-__all__ = ["NAMES", "make"]
+__all__ = ["NAMES", "make", "load_object"]
 
 NAMES = ("cow", "glasses", "cup", "hand", "plane", "dromedary")
 
@@ -459,3 +459,30 @@ def _dromedary() -> _Design:
 
 _DESIGNS = {"cow": _cow, "glasses": _glasses, "cup": _cup, "hand": _hand, "plane": _plane,
             "dromedary": _dromedary}
+
+
+def load_object(spec, seed: int = 0) -> Mesh:
+    """A mesh file, or a toy when ``spec`` names one and no such file exists.
+
+    The command line accepts either wherever it takes a mesh, so the
+    embedded toys need no export step.
+
+    Parameters
+    ----------
+    spec : str or os.PathLike
+        A mesh file path (OBJ, PLY, OFF, STL) or one of :data:`NAMES`.
+    seed : int
+        The toy's paint seed.
+
+    Examples
+    --------
+    >>> load_object("cup").name
+    'cup'
+    """
+    from pathlib import Path
+
+    from .io import load_mesh
+
+    if str(spec) in NAMES and not Path(spec).exists():
+        return make(str(spec), seed=seed)
+    return load_mesh(spec)

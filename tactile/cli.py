@@ -16,7 +16,7 @@ def register(subparsers) -> None:
                     "(the points.json written by 'visuotactile points': positions and normals in the mesh "
                     "file's units) and write the imprint set (.npz) and imprints.png, a labelled grid of "
                     "the imprints, beside it.")
-    p.add_argument("mesh", type=Path, metavar="MESH", help="mesh file (OBJ, PLY, OFF, STL)")
+    p.add_argument("mesh", type=Path, metavar="MESH", help="mesh file (OBJ, PLY, OFF, STL) or a toy name (cow, glasses, ...)")
     p.add_argument("--points", type=Path, required=True, metavar="POINTS",
                    help="points.json from 'visuotactile points'")
     p.add_argument("--out", type=Path, required=True, metavar="SET.npz", help="imprint set to write")
@@ -80,7 +80,8 @@ def read_points(path) -> tuple:
 
 
 def _cmd_imprints(args) -> int:
-    from meshsal import load_mesh, scale_to
+    from meshsal import scale_to
+    from meshsal.toys import load_object
     from meshsal.atomic import write_png
     from tactile.imprint_set import ImprintSet
     from tactile.picture import imprint_grid
@@ -92,7 +93,7 @@ def _cmd_imprints(args) -> int:
     sensor = Sensor(pitch_mm=args.pitch_mm, depth_mm=args.depth_mm, mode=args.mode,
                     supersample=args.supersample, plane=args.plane)
     source_positions, normals, ids = read_points(args.points)
-    mesh = scale_to(load_mesh(args.mesh), args.size_mm)
+    mesh = scale_to(load_object(args.mesh), args.size_mm)
     # A similarity only scales and shifts, so normals keep their direction.
     positions = mesh.transform.apply(source_positions)
     images = imprints(mesh, positions, normals, sensor)

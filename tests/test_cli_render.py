@@ -81,3 +81,14 @@ def test_help_of_every_subcommand(capsys):
             main([command, "--help"])
         assert exit_info.value.code == 0
     assert "--out" in capsys.readouterr().out
+
+
+def test_render_takes_a_toy_name_for_a_mesh(tmp_path):
+    out = tmp_path / "cup"
+    assert main(["render", "cup", "--out", str(out), "--size", "16", "--quiet"]) == 0
+    assert len(list(out.glob("view_*.png"))) == 72
+
+
+def test_a_missing_mesh_that_is_no_toy_fails_naming_it(tmp_path, capsys):
+    assert main(["render", str(tmp_path / "teapot.obj"), "--out", str(tmp_path / "v"), "--quiet"]) == 1
+    assert "teapot.obj" in capsys.readouterr().err
