@@ -2,9 +2,11 @@
 
 Pipeline, per object and interest-point method: mesh (scaled to ``size_mm``)
 -> ``meshsal.interest_points`` (n points) -> tactile imprints -> the five
-classifiers.  Points and imprints are deterministic, so they are cached on
-disk under a key of the mesh's content and every setting
-(:mod:`classify.cache`); a second run only trains and tests.
+classifiers.  Every stage is deterministic (seeded), so points and imprints
+are cached on disk under a key of the mesh's content, every setting and the
+code, and each protocol's recognition rates under a key of its imprints,
+settings and code (:mod:`classify.cache`): a second run with the same
+settings reads them back instead of recomputing.
 
 Protocols
 ---------
@@ -53,6 +55,7 @@ ordered cow, glasses, cup, hand, plane, dromedary, so these are the paper's
 from __future__ import annotations
 
 import dataclasses
+import json
 import time
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
@@ -337,6 +340,25 @@ def _full_proba(proba, classes, n_classes):
     return out
 
 
+def _cached_rates(cache_dir, key, run):
+    """``run()``'s (rates, confusion, kept) through the array cache: dict keys become entry names."""
+
+    def arrays():
+        rates, confusion, kept = run()
+        out = {"kept": np.asarray(kept, np.float64)}
+        out.update({"rate" + json.dumps(list(k)): np.asarray(v) for k, v in rates.items()})
+        out.update({"conf" + json.dumps(list(k)): np.asarray(v) for k, v in confusion.items()})
+        return out
+
+    stored = cache_mod.cached(cache_dir, key, arrays)
+
+    def decode(prefix):
+        return {tuple(json.loads(name[len(prefix):])): value for name, value in stored.items()
+                if name.startswith(prefix)}
+
+    return decode("rate"), decode("conf"), float(stored["kept"])
+
+
 def _run_paper(X, y, n_classes, cfg, classifiers, pool, quiet, desc):
     """Per-repeat rates and confusion counts for each (classifier, selection)."""
     splits = paper_splits(y, cfg["folds"], cfg["repeats"], cfg["seed"])
@@ -499,6 +521,15 @@ def run_experiment(objects=None, size_mm=150.0, methods=("attention",), protocol
 
     cells, confusions, kept_info = [], [], {}
     t0 = time.perf_counter()
+    recognition_code = cache_mod.code_fingerprint("classify", "tactile")
+    recognition_cfg = [cfg[k] for k in ("folds", "repeats", "seed", "threshold", "touch_sequences", "params")]
+
+    def recognized(kind, arrays, run):
+        """Seeded, hence deterministic: cached under the imprints, settings and code like the imprints."""
+        key = cache_mod.cache_key(kind, cache_mod.hash_arrays(*arrays), recognition_cfg, list(classifiers),
+                                  n_points, recognition_code)
+        return _cached_rates(cache_dir, key, run)
+
     # One BLAS thread per worker: small matrices, and nested threading thrashes a shared machine.
     with threadpool_limits(1), ThreadPoolExecutor(max(1, int(n_jobs))) as pool:
         for m in methods:
@@ -506,8 +537,8 @@ def run_experiment(objects=None, size_mm=150.0, methods=("attention",), protocol
                 if "paper" in protocols:
                     X = np.concatenate([data[m, i]["paper"] for i in range(n)])
                     y = np.concatenate([np.full(len(data[m, i]["paper"]), i) for i in range(n)])
-                    rates, conf, kept = _run_paper(X, y, n, cfg, classifiers, pool, quiet,
-                                                   f"paper {m} {n} objects")
+                    rates, conf, kept = recognized("paper", (X, y), lambda: _run_paper(
+                        X, y, n, cfg, classifiers, pool, quiet, f"paper {m} {n} objects"))
                     kept_info[f"{m}/paper/{n}"] = kept
                     for (c, s), r in rates.items():
                         cells.append(Cell(m, "paper", c, n, s, 1, *summarize(r), len(r)))
@@ -517,8 +548,9 @@ def run_experiment(objects=None, size_mm=150.0, methods=("attention",), protocol
                     train_y = np.concatenate([np.full(len(data[m, i]["train"]), i) for i in range(n)])
                     test_X = np.concatenate([data[m, i]["test"] for i in range(n)], axis=1)
                     test_y = np.concatenate([np.full(data[m, i]["test"].shape[1], i) for i in range(n)])
-                    rates, conf, kept = _run_retouch(train_X, train_y, test_X, test_y, n_points, n, cfg,
-                                                     classifiers, pool, quiet, f"retouch {m} {n} objects")
+                    rates, conf, kept = recognized("retouch", (train_X, train_y, test_X, test_y), lambda: _run_retouch(
+                        train_X, train_y, test_X, test_y, n_points, n, cfg, classifiers, pool, quiet,
+                        f"retouch {m} {n} objects"))
                     kept_info[f"{m}/retouch/{n}"] = kept
                     for (c, s, k), r in rates.items():
                         cells.append(Cell(m, "retouch", c, n, s, k, *summarize(r), len(r)))

@@ -172,9 +172,10 @@ def test_tiny_experiment_through_the_cli_writes_every_file(tmp_path, capsys):
     assert all(0.0 <= float(r["mean"]) <= 100.0 for r in rows)
     settings = json.loads((out / "results.json").read_text())["settings"]
     assert settings["objects"] == ["cow", "cup"] and settings["n_points"] == 5
-    # the second run reads points and imprints from the cache and gives the same numbers
+    # the second run reads points, imprints and rates from the cache and gives the same numbers
     entries = sorted(p.name for p in cache.iterdir())
-    assert len(entries) == 4                                          # 2 objects x 2 methods
+    assert sum(e.startswith("object-") for e in entries) == 4         # 2 objects x 2 methods
+    assert sum(e.startswith(("paper-", "retouch-")) for e in entries) == 4   # 2 methods x 2 protocols
     assert main(argv(tmp_path / "out2")) == 0
     assert sorted(p.name for p in cache.iterdir()) == entries
     assert (tmp_path / "out2" / "results.csv").read_text() == (out / "results.csv").read_text()
