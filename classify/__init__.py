@@ -7,7 +7,7 @@ loaded on first use, so that the ``visuotactile`` command (``classify.cli``)
 starts without importing scikit-learn.
 """
 
-import importlib
+from meshsal.lazy import attach
 
 NAMES = ("knn", "naive_bayes", "decision_tree", "evolutionary_svm", "deep")
 
@@ -31,18 +31,4 @@ _EXPORTS = {
 }
 _SUBMODULES = {"classifiers", "evolutionary_svm", "experiment", "report", "cache", "cli"}
 
-__all__ = ["NAMES"] + sorted(_EXPORTS) + sorted(_SUBMODULES)
-
-
-def __getattr__(name):
-    if name in _EXPORTS:
-        value = getattr(importlib.import_module(f"{__name__}.{_EXPORTS[name]}"), name)
-        globals()[name] = value
-        return value
-    if name in _SUBMODULES:
-        return importlib.import_module(f"{__name__}.{name}")
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-
-
-def __dir__():
-    return __all__
+__getattr__, __dir__, __all__ = attach(__name__, _EXPORTS, _SUBMODULES, eager=("NAMES",))

@@ -5,7 +5,7 @@ points fused on the mesh.  Public names are loaded on first use, so that
 ``import meshsal`` stays cheap for the command line.
 """
 
-import importlib
+from .lazy import attach
 
 _EXPORTS = {
     "Mesh": "mesh",
@@ -34,18 +34,4 @@ _EXPORTS = {
 _SUBMODULES = {"render", "toys", "sdf", "attention", "curvature", "points", "sampling", "overlay", "embree",
                "io", "transform", "progress", "atomic"}
 
-__all__ = sorted(_EXPORTS) + sorted(_SUBMODULES)
-
-
-def __getattr__(name):
-    if name in _EXPORTS:
-        value = getattr(importlib.import_module(f"{__name__}.{_EXPORTS[name]}"), name)
-        globals()[name] = value
-        return value
-    if name in _SUBMODULES:
-        return importlib.import_module(f"{__name__}.{name}")
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-
-
-def __dir__():
-    return __all__
+__getattr__, __dir__, __all__ = attach(__name__, _EXPORTS, _SUBMODULES)

@@ -32,8 +32,6 @@ mesh too small to hold ``n`` points that far apart yields fewer.
 
 from __future__ import annotations
 
-import os
-from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
 import numpy as np
@@ -222,22 +220,14 @@ def saliency_maps(mesh: Mesh, size: int = 128, vertex_saliency=None, quiet: bool
     views : list of 72 View, in rig order (view ``4 * s + k`` is camera ``k`` of set ``s``)
     maps : (72, size, size) float32 in [0, 1]
     """
-    from .attention import saliency
-    from .curvature import mesh_saliency
-    from .progress import progress
+    from .attention import saliency_views
     from .render import render_views, view_rig
 
-    if vertex_saliency is None:
-        vertex_saliency = mesh_saliency(mesh)
     cameras = [c for s in view_rig() for c in s]
     views = render_views(mesh, cameras, size=size, threads=threads)
-
-    def one(view):
-        return saliency(view, mesh, weights=weights, vertex_saliency=vertex_saliency).map
-
-    workers = threads or os.cpu_count() or 1
-    with ThreadPoolExecutor(max_workers=workers) as pool:
-        maps = list(progress(pool.map(one, views), total=len(views), desc="saliency", quiet=quiet))
+    results = saliency_views(views, mesh, weights=weights, vertex_saliency=vertex_saliency, threads=threads,
+                             quiet=quiet)
+    maps = [r.map for r in results]
     return views, np.stack(maps).astype(np.float32)
 
 

@@ -11,7 +11,7 @@ loaded on first use, so that ``import tactile`` stays cheap for the command
 line.
 """
 
-import importlib
+from meshsal.lazy import attach
 
 _EXPORTS = {
     "Sensor": "sensor",
@@ -27,16 +27,4 @@ _EXPORTS = {
     "ImprintSet": "imprint_set",
 }
 
-__all__ = sorted(_EXPORTS)
-
-
-def __getattr__(name):
-    if name in _EXPORTS:
-        value = getattr(importlib.import_module(f"{__name__}.{_EXPORTS[name]}"), name)
-        globals()[name] = value
-        return value
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-
-
-def __dir__():
-    return __all__
+__getattr__, __dir__, __all__ = attach(__name__, _EXPORTS)

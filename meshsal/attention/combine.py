@@ -283,6 +283,7 @@ def saliency_views(
     weights: Mapping[str, float] | None = None,
     vertex_saliency=None,
     threads: int | None = None,
+    quiet: bool = True,
 ) -> list[SaliencyResult]:
     """:func:`saliency` of many views of one mesh, in a thread pool.
 
@@ -296,6 +297,8 @@ def saliency_views(
     weights, vertex_saliency : as in :func:`saliency`
     threads : int, optional
         Worker threads (default: the CPU count).
+    quiet : bool
+        No progress bar on stderr.
 
     Returns
     -------
@@ -311,8 +314,10 @@ def saliency_views(
     def one(view):
         return saliency(view, mesh, weights, vertex_saliency)
 
+    from meshsal.progress import progress
+
     workers = threads or os.cpu_count() or 1
     if workers == 1 or len(views) <= 1:
-        return [one(v) for v in views]
+        return [one(v) for v in progress(views, desc="saliency", quiet=quiet)]
     with ThreadPoolExecutor(max_workers=workers) as pool:
-        return list(pool.map(one, views))
+        return list(progress(pool.map(one, views), total=len(views), desc="saliency", quiet=quiet))
