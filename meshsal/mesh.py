@@ -165,9 +165,9 @@ def vertex_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
     F = np.asarray(faces)
     # The unnormalized cross product is the area-weighted face normal.
     n = np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]])
-    acc = np.zeros_like(V)
-    for k in range(3):
-        np.add.at(acc, F[:, k], n)
+    # bincount sums several times faster than np.add.at.
+    corners = F.reshape(-1)
+    acc = np.stack([np.bincount(corners, np.repeat(n[:, d], 3), minlength=len(V)) for d in range(3)], axis=1)
     length = np.linalg.norm(acc, axis=1, keepdims=True)
     return np.divide(acc, length, out=np.zeros_like(acc), where=length > 0)
 

@@ -3,9 +3,10 @@
 import numpy as np
 import pytest
 
+from meshsal.embree import embree_scene
 from meshsal.mesh import Mesh
 from meshsal.render import Camera, project, render, render_views, surface_points, view_rig
-from shapes import icosphere
+from shapes import icosphere, plane
 
 FRONT = Camera(direction=[0, 0, -1], up=[0, 1, 0])
 
@@ -112,6 +113,71 @@ def test_textured_cow_shows_its_texture(shared_mesh):
     # The texture's dark patches and eyes appear where the texture puts them, not a flat colour.
     assert np.corrcoef(texel, shown / flat)[0, 1] > 0.9
     assert (texel < 100).mean() > 0.05 and shown.std() > 0.1
+
+
+def _every_pixel(mesh, view):
+    """face_id and depth of a ray through every pixel centre, traced with no culling (the reference)."""
+    size, cam = view.size, view.camera
+    x = (np.arange(size) + 0.5) / size * 2.0 - 1.0
+    X, Y = np.meshgrid(x, -x)
+    if cam.projection == "orthographic":
+        half = view.radius * (1.0 + cam.margin)
+        origins = view.eye + half * (X[..., None] * cam.right + Y[..., None] * cam.up)
+        directions = np.broadcast_to(cam.direction, origins.shape)
+    else:
+        t = np.tan(np.deg2rad(cam.fov_deg) / 2.0)
+        directions = cam.direction + t * (X[..., None] * cam.right + Y[..., None] * cam.up)
+        directions = directions / np.linalg.norm(directions, axis=-1, keepdims=True)
+        origins = np.broadcast_to(view.eye, directions.shape)
+    hit = embree_scene(mesh).run(np.ascontiguousarray(origins.reshape(-1, 3), np.float32),
+                                 np.ascontiguousarray(directions.reshape(-1, 3), np.float32), output=1)
+    depth = np.where(hit["primID"] >= 0, hit["tfar"] * (directions.reshape(-1, 3) @ cam.direction), np.inf)
+    return hit["primID"].reshape(size, size), depth.reshape(size, size)
+
+
+def _dumbbell():
+    """Two spheres and the gap between them: a silhouette far from convex."""
+    a, b = icosphere(radius=1.0, subdivisions=3, center=(-2.0, 0, 0)), icosphere(radius=0.6, subdivisions=3,
+                                                                                 center=(2.0, 0.5, 0))
+    return Mesh(vertices=np.vstack([a.vertices, b.vertices]), faces=np.vstack([a.faces, b.faces + a.n_vertices]))
+
+
+@pytest.mark.parametrize("projection", ["orthographic", "perspective"])
+def test_culled_rays_never_lose_a_hit(projection):
+    # The renderer casts rays only inside the image of the convex hull; a ray through every pixel must agree.
+    mesh = _dumbbell()
+    cameras = [Camera(direction=c.direction, up=c.up, projection=projection) for s in view_rig()[::3] for c in s]
+    for view in render_views(mesh, cameras, size=48):
+        face_id, depth = _every_pixel(mesh, view)
+        assert (face_id >= 0).sum() > 100
+        # Float32 rounding of a ray's origin may flip the face hit on a shared edge, never hit or miss.
+        np.testing.assert_array_equal(view.mask, face_id >= 0)
+        assert (view.face_id != face_id).mean() < 0.01
+        np.testing.assert_allclose(view.depth[view.mask], depth[view.mask], atol=1e-3)
+
+
+def test_flat_mesh_has_no_3d_hull_and_still_renders_from_every_side():
+    flat = plane(size=2.0, n=4)
+    for camera in (FRONT, Camera(direction=[1.0, 0.0, -1e-3], up=[0, 1, 0]), Camera(direction=[0.6, 0.3, -0.7],
+                                                                                     up=[0, 1, 0])):
+        view = render(flat, camera, size=40)
+        face_id, _ = _every_pixel(flat, view)
+        np.testing.assert_array_equal(view.mask, face_id >= 0)
+
+
+def test_a_prebuilt_scene_renders_the_same_views(sphere):
+    cameras = view_rig()[4]
+    fresh = render_views(sphere, cameras, size=32)
+    reused = render_views(sphere, cameras, size=32, scene=embree_scene(sphere))
+    for a, b in zip(fresh, reused):
+        np.testing.assert_array_equal(a.face_id, b.face_id)
+        np.testing.assert_array_equal(a.rgb, b.rgb)
+
+
+def test_vertex_ids_are_the_corners_of_the_face_each_pixel_sees(sphere):
+    view = render(sphere, FRONT, size=32)
+    np.testing.assert_array_equal(view.vertex_ids[view.mask], sphere.faces[view.face_id[view.mask]])
+    assert np.all(view.vertex_ids[~view.mask] == -1) and view.vertex_ids.shape == (32, 32, 3)
 
 
 def test_bad_inputs_raise():
