@@ -307,19 +307,22 @@ def _pixel_size(camera: Camera, radius: float, size: int) -> float:
 
 
 def _sample_texture(texture: np.ndarray, uv: np.ndarray) -> np.ndarray:
-    """Bilinear lookup of (k,2) uv (repeating, origin bottom-left) in an (H,W,3) uint8 texture."""
+    """Bilinear lookup of (k, 2) uv (repeating, origin bottom-left) in an (H, W, 3) uint8 texture.
+
+    Returns (k, 3) float32 in [0, 1].
+    """
     H, W = texture.shape[:2]
-    u = np.mod(uv[:, 0], 1.0) * W - 0.5
-    v = (1.0 - np.mod(uv[:, 1], 1.0)) * H - 0.5
-    x0 = np.floor(u).astype(np.int64)
-    y0 = np.floor(v).astype(np.int64)
-    fx = (u - x0)[:, None].astype(np.float32)
-    fy = (v - y0)[:, None].astype(np.float32)
-    x0, x1 = np.mod(x0, W), np.mod(x0 + 1, W)
-    y0, y1 = np.clip(y0, 0, H - 1), np.clip(y0 + 1, 0, H - 1)
-    top = texture[y0, x0] * (1 - fx) + texture[y0, x1] * fx
-    bottom = texture[y1, x0] * (1 - fx) + texture[y1, x1] * fx
-    return (top * (1 - fy) + bottom * fy) / 255.0
+    k = len(uv)
+    if k == 0:
+        return np.zeros((0, texture.shape[2]), np.float32)
+    # cv2.remap takes maps of fewer than 32767 rows: lay the k lookups out in rows of 1024.
+    rows = -(-k // 1024)
+    maps = np.zeros((2, rows * 1024), np.float32)
+    maps[0, :k] = np.mod(uv[:, 0], 1.0) * W - 0.5
+    maps[1, :k] = (1.0 - np.mod(uv[:, 1], 1.0)) * H - 0.5
+    out = cv2.remap(texture, maps[0].reshape(rows, 1024), maps[1].reshape(rows, 1024), cv2.INTER_LINEAR,
+                    borderMode=cv2.BORDER_WRAP)
+    return out.reshape(-1, texture.shape[2])[:k].astype(np.float32) / np.float32(255.0)
 
 
 @dataclass(frozen=True, eq=False)
