@@ -119,9 +119,15 @@ class Session:
             raise OSError(f"{self.path}: cannot open the session ({exc})") from None
         try:
             self._init()
+        except sqlite3.OperationalError as exc:  # locked, read-only, I/O: a session we cannot use now
+            self._con.close()
+            raise OSError(f"{self.path}: cannot open the session ({exc})") from None
         except sqlite3.DatabaseError as exc:
             self._con.close()
             raise ValueError(f"{self.path}: not a capture session ({exc})") from None
+        except BaseException:
+            self._con.close()
+            raise
 
     def _init(self) -> None:
         con = self._con

@@ -132,7 +132,7 @@ def _tilt(normals: np.ndarray, sd_deg: float, rng: np.random.Generator) -> np.nd
 
 
 def acquire(mesh: Mesh, positions, normals, sensor: Sensor | None = None, perturb: Perturbation | None = None,
-            rng=None, workers: int | None = None, scene=None) -> np.ndarray:
+            rng=0, workers: int | None = None, scene=None) -> np.ndarray:
     """Simulated sensor readings at k points, with placement and reading errors.
 
     Parameters
@@ -148,7 +148,8 @@ def acquire(mesh: Mesh, positions, normals, sensor: Sensor | None = None, pertur
         ``tactile.imprints(mesh, positions, normals, sensor)``.
     rng : numpy.random.Generator or int or None
         Source of every random draw; an integer seeds a new generator, so
-        equal seeds give equal readings.
+        equal seeds give equal readings (the default seed is 0).  None
+        draws fresh entropy from the operating system.
     workers : int, optional
         Ray-casting threads.
     scene : optional

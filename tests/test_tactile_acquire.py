@@ -32,6 +32,8 @@ def test_seeded_acquisitions_are_reproducible_and_seeds_matter(surface):
     np.testing.assert_array_equal(a, b)
     assert not np.array_equal(a, c)
     assert a.dtype == np.float32 and a.min() >= 0.0 and a.max() <= 1.0
+    # Without a seed the default one applies: two calls read alike.
+    np.testing.assert_array_equal(acquire(surface, P, N, Sensor(), perturb), acquire(surface, P, N, Sensor(), perturb))
 
 
 def test_adc_quantizes_to_its_levels_and_dead_taxels_read_zero(surface):
