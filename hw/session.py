@@ -119,14 +119,12 @@ class Session:
             raise OSError(f"{self.path}: cannot open the session ({exc})") from None
         try:
             self._init()
-        except sqlite3.OperationalError as exc:  # locked, read-only, I/O: a session we cannot use now
+        except BaseException as exc:
             self._con.close()
-            raise OSError(f"{self.path}: cannot open the session ({exc})") from None
-        except sqlite3.DatabaseError as exc:
-            self._con.close()
-            raise ValueError(f"{self.path}: not a capture session ({exc})") from None
-        except BaseException:
-            self._con.close()
+            if isinstance(exc, sqlite3.OperationalError):  # locked, read-only, I/O: unusable now
+                raise OSError(f"{self.path}: cannot open the session ({exc})") from None
+            if isinstance(exc, sqlite3.DatabaseError):
+                raise ValueError(f"{self.path}: not a capture session ({exc})") from None
             raise
 
     def _init(self) -> None:
