@@ -38,7 +38,7 @@ a headlight plus ambient, evaluated at the vertices and interpolated
 from __future__ import annotations
 
 import os
-from concurrent.futures import ThreadPoolExecutor
+from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass
 
 import cv2
@@ -327,11 +327,15 @@ def _sample_texture(texture: np.ndarray, uv: np.ndarray) -> np.ndarray:
 
 @dataclass(frozen=True, eq=False)
 class _Stage:
-    """What every view of one mesh shares: its Embree scene, normals, framing sphere, hull and pixel grid."""
+    """What every view of one mesh shares: its Embree scene, normals, framing sphere, hull and pixel grid.
+
+    ``normals`` is the future (n, 3) float32 vertex normals: the first views
+    trace while a worker computes them.
+    """
 
     mesh: Mesh
     scene: object
-    normals: np.ndarray
+    normals: Future
     center: np.ndarray
     radius: float
     hull: np.ndarray
@@ -341,11 +345,11 @@ class _Stage:
 def _vertex_light(stage: _Stage, camera: Camera, eye: np.ndarray) -> np.ndarray:
     """Lambert light of a headlight plus ambient at every vertex, (n,) float32."""
     if camera.projection == "orthographic":
-        cosine = stage.normals @ -camera.direction.astype(np.float32)
+        cosine = stage.normals.result() @ -camera.direction.astype(np.float32)
     else:
         towards_eye = (eye - stage.mesh.vertices).astype(np.float32)
         towards_eye /= np.maximum(np.linalg.norm(towards_eye, axis=1, keepdims=True), 1e-12)
-        cosine = np.einsum("nd,nd->n", stage.normals, towards_eye)
+        cosine = np.einsum("nd,nd->n", stage.normals.result(), towards_eye)
     # Open meshes show their inside: light both sides rather than render them black.
     light = np.abs(cosine, out=cosine)
     light *= np.float32(1.0 - AMBIENT)
@@ -427,7 +431,11 @@ def _render_one(stage: _Stage, camera: Camera, images: _Images, k: int) -> View:
     w = 1.0 - u - v
     eye = _eye(camera, stage.center, stage.radius)
     rgb = _shade(stage, camera, eye, face, np.take(stage.mesh.faces, face, axis=0), w, u, v)
-    _scatter(images.rgb[k], seen, (rgb,) * 3 if rgb.ndim == 1 else rgb.T)
+    if rgb.ndim == 1:  # gray: scatter one channel, copy it densely to the others
+        images.rgb[k][seen, 0] = rgb
+        images.rgb[k][:, 1] = images.rgb[k][:, 2] = images.rgb[k][:, 0]
+    else:
+        _scatter(images.rgb[k], seen, rgb.T)
     _scatter(images.bary[k], seen, (w, u, v))
     shape = (grid.size, grid.size)
     return View(rgb=images.rgb[k].reshape(shape + (3,)), depth=depth.reshape(shape),
@@ -484,15 +492,15 @@ def render_views(mesh: Mesh, cameras, size: int = 256, threads: int | None = Non
         raise ValueError(f"cannot render {mesh.name or 'mesh'}: it has no faces")
     workers = threads or os.cpu_count() or 1
     with ThreadPoolExecutor(max_workers=workers) as pool:
-        # Qhull and most of NumPy release the GIL: the hull, the normals and
-        # the scene build run side by side.
+        # Qhull and most of NumPy release the GIL: the hull, the pixel grid,
+        # the normals and the scene build run side by side.
         hull = pool.submit(_hull_points, mesh.vertices)
         normals = pool.submit(lambda: vertex_normals(mesh.vertices, mesh.faces).astype(np.float32))
+        grid = pool.submit(_pixel_grid, size)
         scene = embree_scene(mesh) if scene is None else scene
         center, radius = bounding_sphere(mesh.vertices)
-        stage = _Stage(mesh=mesh, scene=scene, normals=normals.result(), center=center,
-                       radius=max(radius, 1e-12), hull=hull.result(),
-                       grid=_pixel_grid(size))
+        stage = _Stage(mesh=mesh, scene=scene, normals=normals, center=center, radius=max(radius, 1e-12),
+                       hull=hull.result(), grid=grid.result())
         images = _Images.allocate(len(cameras), size)
         if workers == 1:
             return [_render_one(stage, c, images, k) for k, c in enumerate(cameras)]
