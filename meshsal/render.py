@@ -480,7 +480,7 @@ def render_views(mesh: Mesh, cameras, size: int = 256, threads: int | None = Non
         Worker threads (default: the CPU count); Embree releases the GIL.
     scene : optional
         ``meshsal.embree.embree_scene(mesh)`` of this very mesh, to reuse one
-        across calls (building it takes about 30 ms per 100k faces).
+        across calls (building it takes about 15 ms per 100k faces).
 
     Returns
     -------
