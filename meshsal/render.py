@@ -154,7 +154,7 @@ class View:
     def vertex_ids(self) -> np.ndarray:
         """(H, W, 3) int32, the three vertices (the face's corners) each pixel sees; -1 on background."""
         out = np.full(self.face_id.shape + (3,), -1, np.int32)
-        seen = self.face_id >= 0
+        seen = self.mask
         out[seen] = self.faces[self.face_id[seen]]
         return out
 
