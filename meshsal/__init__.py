@@ -15,6 +15,7 @@ _EXPORTS = {
     "face_areas": "mesh",
     "vertex_normals": "mesh",
     "bounding_sphere": "mesh",
+    "closed_orientation": "mesh",
     "vertex_adjacency": "mesh",
     "load_mesh": "io",
     "save_ply": "io",
@@ -31,7 +32,7 @@ _EXPORTS = {
     "interest_points": "points",
     "project_pixel_paper": "points",
 }
-_SUBMODULES = {"render", "toys", "sdf", "attention", "curvature", "points", "sampling", "overlay", "embree",
+_SUBMODULES = {"render", "tracer", "toys", "sdf", "attention", "curvature", "points", "sampling", "overlay", "embree",
                "io", "transform", "progress", "atomic"}
 
 __getattr__, __dir__, __all__ = attach(__name__, _EXPORTS, _SUBMODULES)

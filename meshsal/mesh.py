@@ -20,6 +20,7 @@ __all__ = [
     "face_areas",
     "vertex_normals",
     "bounding_sphere",
+    "closed_orientation",
     "vertex_adjacency",
 ]
 
@@ -161,15 +162,52 @@ def face_areas(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
 
 def vertex_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
     """Area-weighted unit vertex normals, (n, 3) float64; zero at isolated vertices."""
+    import igl
+
+    V = np.ascontiguousarray(vertices, dtype=np.float64)
+    F = np.ascontiguousarray(faces, dtype=np.int64)
+    # libigl sums in C++, three times faster than NumPy's bincount; it leaves NaN where no face adds.
+    N = igl.per_vertex_normals(V, F, igl.PER_VERTEX_NORMALS_WEIGHTING_TYPE_AREA)
+    return np.nan_to_num(N, copy=False, nan=0.0)
+
+
+def closed_orientation(vertices: np.ndarray, faces: np.ndarray) -> int:
+    """Whether the faces bound a solid, and which way they face.
+
+    Returns
+    -------
+    int
+        +1 if every edge joins exactly two faces that run along it in
+        opposite directions (closed, edge-manifold, consistently oriented)
+        and the enclosed volume is positive (normals point out); -1 for such
+        a surface with its normals pointing in; 0 for any other surface.
+
+    Examples
+    --------
+    >>> tetra = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]], float)
+    >>> closed_orientation(tetra, [[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]])
+    1
+    >>> closed_orientation(tetra, [[0, 2, 1], [0, 1, 3], [0, 3, 2]])  # one face missing
+    0
+    """
     V = np.asarray(vertices, dtype=np.float64)
-    F = np.asarray(faces)
-    # The unnormalized cross product is the area-weighted face normal.
-    n = np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]])
-    # bincount sums several times faster than np.add.at.
-    corners = F.reshape(-1)
-    acc = np.stack([np.bincount(corners, np.repeat(n[:, d], 3), minlength=len(V)) for d in range(3)], axis=1)
-    length = np.linalg.norm(acc, axis=1, keepdims=True)
-    return np.divide(acc, length, out=np.zeros_like(acc), where=length > 0)
+    F = np.asarray(faces, dtype=np.int64).reshape(-1, 3)
+    if len(F) < 4:
+        return 0
+    start, end = F.reshape(-1), F[:, [1, 2, 0]].reshape(-1)
+    if np.any(start == end):
+        return 0
+    # One sort pairs each edge's two uses: its key, and which way the use runs along it.
+    n = int(F.max()) + 1
+    key = np.sort((np.minimum(start, end) * n + np.maximum(start, end)) * 2 + (start < end))
+    forward, backward = key[0::2], key[1::2]
+    if not (np.array_equal(forward >> 1, backward >> 1) and np.all(forward & 1 == 0) and np.all(backward & 1 == 1)
+            and np.all((forward[1:] >> 1) > (backward[:-1] >> 1))):
+        return 0
+    # Six times the enclosed volume: the sum of det(a, b, c) over the faces.
+    (xa, xb, xc), (ya, yb, yc), (za, zb, zc) = (np.take(V[:, d], F.T) for d in range(3))
+    volume = np.sum(xa * (yb * zc - yc * zb) + ya * (zb * xc - zc * xb) + za * (xb * yc - xc * yb))
+    return int(np.sign(volume))
 
 
 def bounding_sphere(vertices: np.ndarray) -> tuple[np.ndarray, float]:

@@ -2,8 +2,10 @@
 
 import numpy as np
 
-from meshsal.mesh import vertex_normals
-from shapes import icosphere
+import pytest
+
+from meshsal.mesh import closed_orientation, vertex_normals
+from shapes import icosphere, plane
 
 
 def test_sphere_vertex_normals_point_radially_outwards():
@@ -24,3 +26,45 @@ def test_normals_are_area_weighted_and_zero_at_isolated_vertices():
     np.testing.assert_allclose(N[0], expected, atol=1e-12)
     np.testing.assert_allclose(N[1], [0, 0, 1], atol=1e-12)
     np.testing.assert_array_equal(N[5], 0.0)
+
+
+def test_a_degenerate_face_adds_nothing_to_its_corners():
+    V = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [2, 0, 0]], float)
+    N = vertex_normals(V, np.array([[0, 1, 2], [0, 1, 3]]))  # the second face is a segment
+    np.testing.assert_allclose(N[:3], [[0, 0, 1]] * 3, atol=1e-12)
+    np.testing.assert_array_equal(N[3], 0.0)
+
+
+def _two_spheres():
+    a, b = icosphere(subdivisions=2), icosphere(subdivisions=1, center=(5.0, 0, 0))
+    return np.vstack([a.vertices, b.vertices]), np.vstack([a.faces, b.faces + a.n_vertices])
+
+
+def test_closed_orientation_tells_outward_from_inward_normals():
+    sphere = icosphere(radius=2.0, subdivisions=3, center=(4.0, -1.0, 2.0))
+    assert closed_orientation(sphere.vertices, sphere.faces) == 1
+    assert closed_orientation(sphere.vertices, sphere.faces[:, ::-1]) == -1
+    assert closed_orientation(*_two_spheres()) == 1
+
+
+@pytest.mark.parametrize("damage", ["a face missing", "a face flipped", "a face doubled", "a fin on an edge",
+                                    "a repeated corner", "a plane"])
+def test_closed_orientation_is_zero_for_anything_but_a_consistently_oriented_closed_surface(damage):
+    sphere = icosphere(subdivisions=2)
+    V, F = sphere.vertices, sphere.faces.copy()
+    if damage == "a face missing":
+        F = F[1:]
+    elif damage == "a face flipped":
+        F[7] = F[7, ::-1]
+    elif damage == "a face doubled":
+        F = np.vstack([F, F[:1]])
+    elif damage == "a fin on an edge":  # a third and fourth face on edge (F[0, 0], F[0, 1])
+        V = np.vstack([V, [[0.0, 0.0, 0.0]]])
+        a, b = F[0, :2]
+        F = np.vstack([F, [[a, b, len(V) - 1], [b, a, len(V) - 1]]])
+    elif damage == "a repeated corner":
+        F[3, 2] = F[3, 0]
+    else:
+        flat = plane(size=2.0, n=3)
+        V, F = flat.vertices, flat.faces
+    assert closed_orientation(V, F) == 0
