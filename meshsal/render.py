@@ -27,12 +27,15 @@ distance where the bounding sphere plus the margin just fills the view.
 
 Casting and shading
 -------------------
-One ray per pixel centre, robust Embree traversal (no ray slips between
-two triangles sharing an edge).  Rays are cast only inside the image of the
-mesh's convex hull, which holds its silhouette under both projections, and
-in Z-order, which keeps neighbouring rays together.  Shading is Lambert from
-a headlight plus ambient, evaluated at the vertices and interpolated
-(Gouraud), times the texture, the interpolated vertex colours or light gray.
+One ray per pixel centre, answered as Embree's robust traversal answers it
+(no ray slips between two triangles sharing an edge) by a
+:class:`~meshsal.tracer.Tracer`: on closed meshes Embree's faster traversal
+traces every ray and the few that slip are traced again robustly.  Rays are
+cast only inside the image of the mesh's convex hull, which holds its
+silhouette under both projections, and in Z-order, which keeps neighbouring
+rays together.  Shading is Lambert from a headlight plus ambient, evaluated
+at the vertices and interpolated (Gouraud), times the texture, the
+interpolated vertex colours or light gray.
 """
 
 from __future__ import annotations
@@ -44,8 +47,8 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from .embree import embree_scene
 from .mesh import Mesh, bounding_sphere, vertex_normals
+from .tracer import Tracer, tracer
 
 __all__ = ["Camera", "View", "view_rig", "render", "render_views", "surface_points", "project"]
 
@@ -267,10 +270,11 @@ def _candidates(camera: Camera, center: np.ndarray, radius: float, grid: _PixelG
     """
     rc = _image_coords(camera, center, radius, grid.size, hull)
     # OpenCV puts pixel centres at integers; 4 fractional bits keep the vertices' sub-pixel positions.
-    xy = np.round((rc[:, ::-1] - 0.5) * 16.0).astype(np.int32)
+    xy = np.round(rc[:, ::-1] * 16.0 - 8.0).astype(np.int32)
     mask = np.zeros((grid.size, grid.size), np.uint8)
     cv2.fillConvexPoly(mask, cv2.convexHull(xy), 1, lineType=cv2.LINE_8, shift=4)
-    return np.flatnonzero(cv2.dilate(mask, np.ones((3, 3), np.uint8)).reshape(-1)[grid.pixels])
+    inside = cv2.dilate(mask, np.ones((3, 3), np.uint8)).reshape(-1).view(bool)
+    return np.flatnonzero(np.take(inside, grid.pixels))
 
 
 def _rays(camera: Camera, center: np.ndarray, radius: float, xy1: np.ndarray):
@@ -327,14 +331,14 @@ def _sample_texture(texture: np.ndarray, uv: np.ndarray) -> np.ndarray:
 
 @dataclass(frozen=True, eq=False)
 class _Stage:
-    """What every view of one mesh shares: its Embree scene, normals, framing sphere, hull and pixel grid.
+    """What every view of one mesh shares: its tracer, normals, framing sphere, hull and pixel grid.
 
     ``normals`` is the future (n, 3) float32 vertex normals: the first views
     trace while a worker computes them.
     """
 
     mesh: Mesh
-    scene: object
+    tracer: Tracer
     normals: Future
     center: np.ndarray
     radius: float
@@ -416,9 +420,9 @@ def _render_one(stage: _Stage, camera: Camera, images: _Images, k: int) -> View:
     grid = stage.grid
     cast = _candidates(camera, stage.center, stage.radius, grid, stage.hull)
     pixels = grid.pixels[cast]
-    origins, directions, depth_factor = _rays(camera, stage.center, stage.radius, grid.xy1[cast])
+    origins, directions, depth_factor = _rays(camera, stage.center, stage.radius, np.take(grid.xy1, cast, axis=0))
     # Misses keep tfar = inf, which is the background's depth.
-    hit = stage.scene.run(origins, directions, dists=np.inf, output=1)
+    hit = stage.tracer.first_hits(origins, directions)
     depth, face_id = images.depth[k], images.face_id[k]
     depth.fill(np.inf)
     depth[pixels] = hit["tfar"] if depth_factor is None else hit["tfar"] * depth_factor
@@ -479,8 +483,19 @@ def render_views(mesh: Mesh, cameras, size: int = 256, threads: int | None = Non
     threads : int, optional
         Worker threads (default: the CPU count); Embree releases the GIL.
     scene : optional
-        ``meshsal.embree.embree_scene(mesh)`` of this very mesh, to reuse one
-        across calls (building it takes about 15 ms per 100k faces).
+        What to cast the rays against, reused across calls:
+        ``meshsal.tracer.tracer(mesh)`` of this very mesh, which also keeps
+        what it checked of the mesh; or an Embree scene of it,
+        ``meshsal.embree.embree_scene(mesh, robust=False)`` (building one
+        takes about 15 ms per 100k faces).  A robust scene
+        (``embree_scene(mesh)``) answers every ray itself: slower, and the
+        answer to have on a closed mesh that passes through itself (see
+        :mod:`meshsal.tracer`).
+
+    Raises
+    ------
+    ValueError
+        If the mesh has no faces, or ``scene`` is a tracer of another mesh.
 
     Returns
     -------
@@ -492,14 +507,20 @@ def render_views(mesh: Mesh, cameras, size: int = 256, threads: int | None = Non
         raise ValueError(f"cannot render {mesh.name or 'mesh'}: it has no faces")
     workers = threads or os.cpu_count() or 1
     with ThreadPoolExecutor(max_workers=workers) as pool:
-        # Qhull and most of NumPy release the GIL: the hull, the pixel grid,
-        # the normals and the scene build run side by side.
+        # Qhull and most of NumPy release the GIL: the hull, the pixel grid, the
+        # normals, the mesh's orientation and the scene build run side by side.
         hull = pool.submit(_hull_points, mesh.vertices)
         normals = pool.submit(lambda: vertex_normals(mesh.vertices, mesh.faces).astype(np.float32))
         grid = pool.submit(_pixel_grid, size)
-        scene = embree_scene(mesh) if scene is None else scene
+        if isinstance(scene, Tracer):
+            if scene.mesh is not mesh:
+                raise ValueError(f"scene is a tracer of mesh {scene.mesh.name!r}, not of the mesh to render "
+                                 f"{mesh.name!r}: build it with meshsal.tracer.tracer(mesh)")
+            trace = scene
+        else:
+            trace = tracer(mesh, scene, executor=pool)
         center, radius = bounding_sphere(mesh.vertices)
-        stage = _Stage(mesh=mesh, scene=scene, normals=normals, center=center, radius=max(radius, 1e-12),
+        stage = _Stage(mesh=mesh, tracer=trace, normals=normals, center=center, radius=max(radius, 1e-12),
                        hull=hull.result(), grid=grid.result())
         images = _Images.allocate(len(cameras), size)
         if workers == 1:

@@ -6,6 +6,7 @@ import pytest
 from meshsal.embree import embree_scene
 from meshsal.mesh import Mesh
 from meshsal.render import Camera, project, render, render_views, surface_points, view_rig
+from meshsal.tracer import tracer
 from shapes import icosphere, plane
 
 FRONT = Camera(direction=[0, 0, -1], up=[0, 1, 0])
@@ -168,16 +169,28 @@ def test_flat_mesh_has_no_3d_hull_and_still_renders_from_every_side():
 def test_a_prebuilt_scene_renders_the_same_views(sphere):
     cameras = view_rig()[4]
     fresh = render_views(sphere, cameras, size=32)
-    reused = render_views(sphere, cameras, size=32, scene=embree_scene(sphere))
-    for a, b in zip(fresh, reused):
-        np.testing.assert_array_equal(a.face_id, b.face_id)
-        np.testing.assert_array_equal(a.rgb, b.rgb)
+    reused = render_views(sphere, cameras, size=32, scene=embree_scene(sphere, robust=False))
+    traced = render_views(sphere, cameras, size=32, scene=tracer(sphere))
+    robust = render_views(sphere, cameras, size=32, scene=embree_scene(sphere))
+    for a, b, t, c in zip(fresh, reused, traced, robust):
+        for other in (b, t):
+            np.testing.assert_array_equal(a.face_id, other.face_id)
+            np.testing.assert_array_equal(a.rgb, other.rgb)
+        # A robust scene computes barycentrics another way: the same faces, rounding apart.
+        np.testing.assert_array_equal(a.face_id, c.face_id)
+        np.testing.assert_allclose(a.bary, c.bary, atol=1e-4)
+        np.testing.assert_allclose(a.depth[a.mask], c.depth[a.mask], rtol=1e-6)
 
 
 def test_vertex_ids_are_the_corners_of_the_face_each_pixel_sees(sphere):
     view = render(sphere, FRONT, size=32)
     np.testing.assert_array_equal(view.vertex_ids[view.mask], sphere.faces[view.face_id[view.mask]])
     assert np.all(view.vertex_ids[~view.mask] == -1) and view.vertex_ids.shape == (32, 32, 3)
+
+
+def test_a_tracer_of_another_mesh_is_refused(sphere):
+    with pytest.raises(ValueError, match="tracer of mesh"):
+        render_views(sphere, view_rig()[0], size=16, scene=tracer(icosphere(subdivisions=1)))
 
 
 def test_bad_inputs_raise():
