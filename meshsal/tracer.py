@@ -12,6 +12,10 @@ scene of the faces their lines can meet, or in the whole mesh's robust
 scene, built once, when many slipped at a time.  Surfaces that are not
 closed and consistently oriented are traced robustly from the start.
 
+Rays must start outside the solid, as a camera's do: a ray from inside
+meets the surface first from inside, and one that slipped out could next
+meet another part from outside unnoticed.
+
 What it returns equals the robust scene's answers, but for ties: a ray
 through an edge or a vertex may report another of the faces there (at the
 same distance), barycentrics round differently, and a ray that only grazes
@@ -85,7 +89,7 @@ class Tracer:
 
         Parameters
         ----------
-        origins : (k, 3) float32
+        origins : (k, 3) float32, outside the solid the mesh bounds (see the module docstring)
         directions : (k, 3) float32 unit vectors, or one (1, 3) row shared by all rays
 
         Returns
