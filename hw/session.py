@@ -66,7 +66,10 @@ class PressRecord:
     ``imprint`` is float32 ADC counts above the baseline, ``raw`` the uint16
     peak frame; ``position`` (planning frame, mm, as in simulated imprint
     sets) and ``approach`` come from the probe plan and are None when the
-    press was not planned.
+    press was not planned.  ``frames_received``, ``crc_errors`` and ``gaps``
+    are the parser's counts when the press was stored; ``crc_errors`` counts
+    every frame lost to corruption: failed CRCs (binary) and unreadable
+    lines (text).
     """
 
     id: int
@@ -196,8 +199,9 @@ class Session:
                   position=None, approach=None) -> int:
         """Commit one press in its own transaction; returns its row id.
 
-        ``counters`` holds the parser's ``frames``, ``crc_errors``, ``gaps``
-        and ``bytes_skipped`` at the time of the press.
+        ``counters`` holds the parser's ``frames``, ``crc_errors`` (failed
+        CRCs and unreadable text lines), ``gaps`` and ``bytes_skipped`` at the
+        time of the press.
         """
         rows, cols = press.raw.shape
         if self.sensor != (rows, cols):
