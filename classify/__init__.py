@@ -2,7 +2,8 @@
 
 The five classifiers of the paper (``NAMES``, ``make``) and the experiment
 behind its Tables 1 and 2 (``run_experiment``, ``run_real``): interest
-points -> imprints -> recognition under two protocols.  Public names are
+points -> imprints -> recognition under the paper's protocol and on fresh
+object instances, with bootstrap intervals and paired comparisons.  Public names are
 loaded on first use, so that the ``visuotactile`` command (``classify.cli``)
 starts without importing scikit-learn.
 """
@@ -20,15 +21,18 @@ _EXPORTS = {
     "EvolutionarySVM": "classifiers",
     "DeepNet": "classifiers",
     "METHODS": "experiment",
-    "PROTOCOLS": "experiment",
-    "Cell": "experiment",
-    "ConfusionMatrix": "experiment",
-    "ExperimentResult": "experiment",
+    "PROTOCOLS": "protocols",
+    "Settings": "dataset",
+    "Cell": "results",
+    "Comparison": "results",
+    "ConfusionMatrix": "results",
+    "ExperimentResult": "results",
     "run_experiment": "experiment",
     "run_real": "experiment",
-    "format_tables": "experiment",
-    "write_outputs": "experiment",
+    "format_tables": "results",
+    "write_outputs": "results",
 }
-_SUBMODULES = {"classifiers", "evolutionary_svm", "experiment", "report", "cache", "cli"}
+_SUBMODULES = {"classifiers", "evolutionary_svm", "experiment", "protocols", "dataset", "fusion", "stats", "results",
+               "report", "cache", "cli"}
 
 __getattr__, __dir__, __all__ = attach(__name__, _EXPORTS, _SUBMODULES, eager=("NAMES",))

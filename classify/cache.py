@@ -2,9 +2,10 @@
 
 Interest points and imprints depend only on the mesh, the settings and the
 code that computes them, so each result is stored under a key hashing all
-three: the mesh's arrays (vertices, faces, colors, texture), the settings (as
-canonical JSON) and the source files of the ``meshsal`` and ``tactile``
-packages.  Editing the mesh, a setting or that code gives a new key; stale
+of it: the mesh's arrays (vertices, faces, colors, texture), the settings (as
+canonical JSON), the source files of the packages that compute it and the
+versions of the libraries they call (:func:`library_versions`).  Editing the
+mesh, a setting or that code, or upgrading a library, gives a new key; stale
 entries are never read.  Entries are ``.npz`` files written atomically, so an
 interrupted run leaves no half-written entry; a damaged entry is recomputed.
 
@@ -25,7 +26,11 @@ import numpy as np
 
 from meshsal.atomic import atomic_path
 
-__all__ = ["default_dir", "hash_arrays", "code_fingerprint", "cache_key", "cached"]
+__all__ = ["default_dir", "hash_arrays", "code_fingerprint", "file_fingerprint", "library_versions", "cache_key",
+           "cached"]
+
+#: The distributions whose numbers reach a cached result.
+LIBRARIES = ("numpy", "scipy", "scikit-learn", "opencv-contrib-python-headless", "embreex", "libigl", "pymeshlab")
 
 
 def default_dir() -> Path:
@@ -66,6 +71,33 @@ def code_fingerprint(*packages: str) -> str:
             h.update(str(path.relative_to(root)).encode())
             h.update(path.read_bytes())
     return h.hexdigest()
+
+
+def file_fingerprint(*paths) -> str:
+    """SHA-256 over the named files' bytes."""
+    h = hashlib.sha256()
+    for path in paths:
+        h.update(Path(path).read_bytes())
+    return h.hexdigest()
+
+
+def library_versions() -> dict:
+    """``{distribution: version}`` of :data:`LIBRARIES` ("absent" when not installed).
+
+    Examples
+    --------
+    >>> sorted(library_versions()) == sorted(LIBRARIES)
+    True
+    """
+    from importlib import metadata
+
+    versions = {}
+    for name in LIBRARIES:
+        try:
+            versions[name] = metadata.version(name)
+        except metadata.PackageNotFoundError:
+            versions[name] = "absent"
+    return versions
 
 
 def cache_key(kind: str, *parts) -> str:

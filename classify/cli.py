@@ -13,39 +13,58 @@ import sys
 
 def register(subparsers) -> None:
     """Add the recognition subcommands (``experiment``)."""
+    from classify.experiment import DEFAULT_REPLICATES, FULL_REPLICATES, METHODS, PROTOCOLS
+
     p = subparsers.add_parser(
         "experiment",
         help="recognition experiment: interest points -> imprints -> five classifiers (Table 1)",
-        description=("Run the whole pipeline on the six toy objects (or --objects MESH ...): interest points, "
-                     "simulated 16x16 imprints, and recognition by kNN, naive Bayes, decision tree, "
-                     "evolutionary SVM and a deep network under the 'paper' protocol (stratified 5-fold CV "
-                     "repeated 10x, similarity selection on training folds only) and the 'retouch' protocol "
-                     "(train on clean imprints, test on perturbed re-acquisitions, k-touch fusion). Prints the "
-                     "paper's Table 1 layout and writes results.json, results.csv, confusion_<classifier>.png "
-                     "and touches.png under --out. With --real, reports recognition on a saved ImprintSet "
-                     "(the paper's Table 2 layout) instead."),
+        description=("Run the whole pipeline on the six toy objects (or --objects): interest points, simulated "
+                     "16x16 imprints, and recognition by kNN, naive Bayes, decision tree, evolutionary SVM and a "
+                     "deep network under the 'paper' protocol (one clean imprint per point, 5-fold CV grouped by "
+                     "point, repeated, similarity selection on training folds only: the paper's Table 1 like with "
+                     "like) and the 'instance' protocol (train on several fresh instances of each object: turned, "
+                     "resized, repainted, each touched in its own sessions; test on another instance after "
+                     "k = 1..n touches, calibrated posteriors multiplied). Rates come with 95 %% bootstrap "
+                     "intervals over replicates and objects; with several --methods, paired differences against "
+                     "--baseline. Prints Markdown tables and writes results.json, results.csv, "
+                     "confusion_<classifier>.png and touches.png under --out. With --real, reports recognition "
+                     "on a saved ImprintSet (the paper's Table 2 layout) instead."),
     )
-    p.add_argument("--objects", nargs="+", metavar="MESH",
-                   help="mesh files (OBJ/PLY/OFF/STL) or toy names; default: the six toys")
-    p.add_argument("--size-mm", type=float, default=150.0, help="scale every object to this diagonal (mm)")
+    p.add_argument("--objects", nargs="+", metavar="OBJECTS",
+                   help="object sets (toys, ycb), object names or mesh files (OBJ/PLY/OFF/STL), separated by "
+                        "spaces or commas, e.g. 'toys,ycb'; default: toys")
+    p.add_argument("--size-mm", type=float, default=150.0,
+                   help="nominal size: every object is scaled to this principal-frame box diagonal (mm)")
     p.add_argument("--methods", type=_csv_list, default=("attention",),
-                   help="comma-separated interest-point methods: attention,random,uniform,mesh_saliency,curvature")
-    p.add_argument("--protocols", type=_csv_list, default=("paper", "retouch"),
-                   help="comma-separated protocols: paper,retouch")
+                   help=f"comma-separated interest-point methods: {','.join(METHODS)}")
+    p.add_argument("--baseline", default=None,
+                   help="the method the others are compared with (default: uniform if measured, else the first)")
+    p.add_argument("--protocols", type=_csv_list, default=PROTOCOLS,
+                   help=f"comma-separated protocols: {','.join(PROTOCOLS)}")
     p.add_argument("--classifiers", type=_csv_list, default=None,
                    help="comma-separated subset of knn,naive_bayes,decision_tree,evolutionary_svm,deep")
-    p.add_argument("--n-points", type=int, default=15, help="interest points per object")
-    p.add_argument("--folds", type=int, default=5, help="cross-validation folds")
-    p.add_argument("--repeats", type=int, default=10, help="repeats (seeds) of each protocol")
+    p.add_argument("--n-points", type=int, default=15, help="interest points per object instance")
+    p.add_argument("--replicates", type=int, default=None,
+                   help=f"instance-protocol replicates, each with fresh instances (default {DEFAULT_REPLICATES}, "
+                        f"a quick run; --full gives {FULL_REPLICATES})")
+    p.add_argument("--full", action="store_true", help=f"a full run: {FULL_REPLICATES} replicates")
+    p.add_argument("--train-instances", type=int, default=3, help="training instances per object and replicate")
+    p.add_argument("--train-sessions", type=int, default=2, help="acquisition sessions per training instance")
+    p.add_argument("--folds", type=int, default=5, help="paper protocol: cross-validation folds")
+    p.add_argument("--repeats", type=int, default=10, help="paper protocol: repeats with reshuffled folds")
     p.add_argument("--view-size", type=int, default=None, help="rendered view size for the interest points")
     p.add_argument("--mode", choices=("contour", "pressure"), default=None,
                    help="imprint mode of the simulated sensor (default: tactile.Sensor's)")
     p.add_argument("--out", default="results", help="output directory (default ./results)")
     p.add_argument("--cache-dir", default=None,
-                   help="cache of points and imprints (default $XDG_CACHE_HOME/visuotactile or "
+                   help="cache of points, imprints and rates (default $XDG_CACHE_HOME/visuotactile or "
                         "./.cache/visuotactile); 'none' disables it")
     p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--jobs", type=int, default=2, help="threads fitting classifiers")
+    p.add_argument("--features", choices=("raw", "polar"), default="raw",
+                   help="what the classifiers see: raw taxels (the paper's) or roll-invariant polar Fourier "
+                        "descriptors")
+    p.add_argument("--jobs", type=int, default=2,
+                   help="worker processes (default 2; results do not depend on it)")
     p.add_argument("--quiet", action="store_true", help="no progress bars")
     p.add_argument("--real", metavar="SET.npz",
                    help="a saved tactile.ImprintSet (e.g. from 'visuotactile export'): report recognition on it")
@@ -61,28 +80,34 @@ def _csv_list(text: str) -> tuple:
 
 def _experiment(args) -> int:
     from classify import NAMES
-    from classify.experiment import format_tables, run_experiment, run_real
+    from classify.dataset import Settings
+    from classify.experiment import DEFAULT_REPLICATES, FULL_REPLICATES, format_tables, run_experiment, run_real
 
     classifiers = args.classifiers or NAMES
     if args.real:
         result = run_real(args.real, folds=args.folds, repeats=args.repeats, seed=args.seed,
-                          classifiers=classifiers, out_dir=args.out, quiet=args.quiet, n_jobs=args.jobs)
+                          classifiers=classifiers, features=args.features, out_dir=args.out, quiet=args.quiet,
+                          n_jobs=args.jobs)
         print(format_tables(result, title="Table 2 layout (real imprints)"))
         return 0
+    if args.full and args.replicates is not None:
+        raise ValueError("give --full or --replicates, not both")
+    replicates = FULL_REPLICATES if args.full else (args.replicates or DEFAULT_REPLICATES)
     cache_dir = "default" if args.cache_dir is None else (None if args.cache_dir.lower() == "none"
                                                           else args.cache_dir)
-    sensor = None
-    if args.mode is not None:
-        import tactile
+    import tactile
 
-        sensor = tactile.Sensor(mode=args.mode)
-    result = run_experiment(objects=args.objects, size_mm=args.size_mm, methods=args.methods, protocols=args.protocols,
-                            n_points=args.n_points, folds=args.folds, repeats=args.repeats, seed=args.seed,
-                            view_size=args.view_size, out_dir=args.out, cache_dir=cache_dir, quiet=args.quiet,
-                            classifiers=classifiers, sensor=sensor, n_jobs=args.jobs)
+    sensor = tactile.Sensor() if args.mode is None else tactile.Sensor(mode=args.mode)
+    settings = Settings(n_points=args.n_points, size_mm=args.size_mm, view_size=args.view_size, sensor=sensor,
+                        train_instances=args.train_instances, train_sessions=args.train_sessions, seed=args.seed)
+    result = run_experiment(objects=args.objects, methods=args.methods, protocols=args.protocols,
+                            classifiers=classifiers, settings=settings, replicates=replicates, folds=args.folds,
+                            repeats=args.repeats, features=args.features, baseline=args.baseline, n_jobs=args.jobs,
+                            cache_dir=cache_dir,
+                            out_dir=args.out, quiet=args.quiet)
     print(format_tables(result))
     if not args.quiet:
-        print(f"results written to {args.out}/", file=sys.stderr)
+        print(f"results written to {args.out}/ ({result.timings['total']:.0f} s)", file=sys.stderr)
     return 0
 
 
@@ -105,6 +130,9 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     """Run one subcommand; returns the exit status (0 success, 1 bad input or failure)."""
+    from meshsal.reproducible import pin_blas_kernel
+
+    pin_blas_kernel()
     args = build_parser().parse_args(argv)
     try:
         return int(args.func(args) or 0)

@@ -2,7 +2,7 @@
 
 Tables follow the paper's Table 1 (and Table 2 for real data): one row per
 classifier, one column per object set and similarity selection, each cell
-``mean ± std`` of the recognition rate in percent.  Figures are drawn with
+the mean recognition rate in percent with its 95 % interval.  Figures are drawn with
 OpenCV (no plotting library): a confusion-matrix sheet per classifier and
 recognition rate against the number of touches.  Every file is written
 atomically.
@@ -19,26 +19,39 @@ import numpy as np
 
 from meshsal.atomic import write_png, write_text
 
-__all__ = ["CSV_COLUMNS", "format_rate", "table_markdown", "touches_markdown", "write_csv",
+__all__ = ["CSV_COLUMNS", "format_rate", "format_diff", "table_markdown", "touches_markdown", "comparison_markdown",
+           "write_csv",
            "write_json", "confusion_image", "touches_image", "write_confusion_png", "write_touches_png"]
 
 CSV_COLUMNS = ("method", "protocol", "classifier", "n_objects", "selection", "touches",
-               "mean", "std", "ci_low", "ci_high")
+               "mean", "std", "ci_low", "ci_high", "replicates", "touch_sets",
+               "baseline", "diff", "diff_ci_low", "diff_ci_high", "p_value")
 
 _FONT = cv2.FONT_HERSHEY_SIMPLEX
 _PALETTE = [(31, 119, 180), (255, 127, 14), (44, 160, 44), (214, 39, 40), (148, 103, 189),
             (140, 86, 75), (227, 119, 194), (127, 127, 127)]
 
 
-def format_rate(mean: float, std: float) -> str:
-    """``"87.9 ± 2.1"`` (percent).
+def format_rate(mean: float, low: float, high: float) -> str:
+    """``"87.9 [85.2, 90.1]"``: a rate (percent) and its interval.
 
     Examples
     --------
-    >>> format_rate(87.894, 2.06)
-    '87.9 ± 2.1'
+    >>> format_rate(87.894, 85.21, 90.06)
+    '87.9 [85.2, 90.1]'
     """
-    return f"{mean:.1f} ± {std:.1f}"
+    return f"{mean:.1f} [{low:.1f}, {high:.1f}]"
+
+
+def format_diff(diff: float, low: float, high: float, p: float) -> str:
+    """``"+4.2 [1.0, 7.5] p=0.012"``: a paired difference (points), its interval and p-value.
+
+    Examples
+    --------
+    >>> format_diff(-3.04, -6.0, -0.5, 0.0312)
+    '-3.0 [-6.0, -0.5] p=0.031'
+    """
+    return f"{diff:+.1f} [{low:.1f}, {high:.1f}] p={p:.2g}" if p < 0.01 else f"{diff:+.1f} [{low:.1f}, {high:.1f}] p={p:.3f}"
 
 
 def _index(cells):
@@ -68,14 +81,14 @@ def table_markdown(cells, method: str, protocol: str, classifiers, object_sets, 
         for n in object_sets:
             for selection in (False, True):
                 c = index.get((method, protocol, name, n, selection, touches))
-                row.append(format_rate(c.mean, c.std) if c else "-")
+                row.append(format_rate(c.mean, c.ci_low, c.ci_high) if c else "-")
         lines.append("| " + " | ".join(row) + " |")
     return "\n".join(lines)
 
 
 def touches_markdown(cells, method: str, protocol: str, classifiers, n_objects: int, selection: bool,
                      touches=(1, 2, 3, 5, 10, 15)) -> str:
-    """Recognition after k touches: rows classifiers, columns k (mean ± std, percent)."""
+    """Recognition after k touches: rows classifiers, columns k (mean [95 % interval], percent)."""
     index = _index(cells)
     ks = [k for k in touches if any((method, protocol, c, n_objects, selection, k) in index for c in classifiers)]
     lines = ["| classifier | " + " | ".join(f"{k} touch{'es' if k > 1 else ''}" for k in ks) + " |",
@@ -84,19 +97,59 @@ def touches_markdown(cells, method: str, protocol: str, classifiers, n_objects: 
         row = [name]
         for k in ks:
             c = index.get((method, protocol, name, n_objects, selection, k))
-            row.append(format_rate(c.mean, c.std) if c else "-")
+            row.append(format_rate(c.mean, c.ci_low, c.ci_high) if c else "-")
         lines.append("| " + " | ".join(row) + " |")
     return "\n".join(lines)
 
 
-def write_csv(path, cells) -> None:
-    """One row per cell, columns ``CSV_COLUMNS``; rates in percent, selection true/false."""
+def comparison_markdown(cells, comparisons, protocol: str, classifier: str, n_objects: int, selection: bool,
+                        touches=(1, 5, 15)) -> str:
+    """Point methods side by side: rate and paired difference against the baseline at a few k.
+
+    Rows are methods (the baseline first), columns the rate and the
+    difference at each k; empty when nothing was compared.
+    """
+    index = _index(cells)
+    diffs = {(d.method, d.touches): d for d in comparisons if (d.protocol, d.classifier, d.n_objects, d.selection)
+             == (protocol, classifier, n_objects, selection)}
+    if not diffs:
+        return ""
+    baseline = next(iter(diffs.values())).baseline
+    methods = [baseline] + list(dict.fromkeys(m for m, _ in diffs))
+    ks = [k for k in touches if (methods[0], protocol, classifier, n_objects, selection, k) in index]
+    header = ["points"]
+    for k in ks:
+        header += [f"{k} touch{'es' if k > 1 else ''}", f"diff at {k}"]
+    lines = ["| " + " | ".join(header) + " |", "|---|" + "|".join([":---:"] * (len(header) - 1)) + "|"]
+    for m in methods:
+        row = [m]
+        for k in ks:
+            c = index.get((m, protocol, classifier, n_objects, selection, k))
+            d = diffs.get((m, k))
+            row.append(format_rate(c.mean, c.ci_low, c.ci_high) if c else "-")
+            row.append(format_diff(d.diff, d.ci_low, d.ci_high, d.p_value) if d else ("baseline" if m == baseline
+                                                                                      else "-"))
+        lines.append("| " + " | ".join(row) + " |")
+    return "\n".join(lines)
+
+
+def write_csv(path, cells, comparisons=()) -> None:
+    """One row per cell, columns ``CSV_COLUMNS``; rates in percent, selection true/false.
+
+    The comparison columns hold the cell's paired difference against the
+    baseline method, where there is one (empty otherwise).
+    """
+    diffs = {(d.method, d.protocol, d.classifier, d.n_objects, d.selection, d.touches): d for d in comparisons}
     buffer = io.StringIO()
     writer = csv.writer(buffer, lineterminator="\n")
     writer.writerow(CSV_COLUMNS)
     for c in cells:
+        d = diffs.get((c.method, c.protocol, c.classifier, c.n_objects, c.selection, c.touches))
+        extra = ([d.baseline, f"{d.diff:.4f}", f"{d.ci_low:.4f}", f"{d.ci_high:.4f}", f"{d.p_value:.6f}"]
+                 if d else ["", "", "", "", ""])
         writer.writerow([c.method, c.protocol, c.classifier, c.n_objects, "true" if c.selection else "false",
-                         c.touches, f"{c.mean:.4f}", f"{c.std:.4f}", f"{c.ci_low:.4f}", f"{c.ci_high:.4f}"])
+                         c.touches, f"{c.mean:.4f}", f"{c.std:.4f}", f"{c.ci_low:.4f}", f"{c.ci_high:.4f}",
+                         c.replicates, c.touch_sets, *extra])
     write_text(path, buffer.getvalue())
 
 
@@ -170,7 +223,7 @@ def touches_image(curves, title: str, size=(760, 460)) -> np.ndarray:
 
     Parameters
     ----------
-    curves : dict label -> (touches (k,), mean (k,), std (k,))
+    curves : dict label -> (touches (k,), mean (k,), low (k,), high (k,)), the band between low and high
     title : str
     size : (width, height)
 
@@ -182,8 +235,8 @@ def touches_image(curves, title: str, size=(760, 460)) -> np.ndarray:
     img = np.full((height, width, 3), 255, np.uint8)
     left, right, top, bottom = 64, 170, 40, 56
     pw, ph = width - left - right, height - top - bottom
-    k_max = max([int(np.max(k)) for k, _, _ in curves.values()] + [2])
-    lows = [float(np.min(m - s)) for _, m, s in curves.values()]
+    k_max = max([int(np.max(k)) for k, _, _, _ in curves.values()] + [2])
+    lows = [float(np.min(lo)) for _, _, lo, _ in curves.values()]
     y_min = max(0.0, np.floor(min(lows + [50.0]) / 10) * 10)
 
     def xy(k, rate):
@@ -204,11 +257,11 @@ def touches_image(curves, title: str, size=(760, 460)) -> np.ndarray:
     cv2.rectangle(img, (left, top), (left + pw, top + ph), (0, 0, 0), 1)
     _put(img, "touches", (left + pw // 2, height - 14), 0.45, anchor="center")
     _put(img, "%", (12, top + ph // 2), 0.45)
-    for n, (label, (ks, mean, std)) in enumerate(curves.items()):
+    for n, (label, (ks, mean, low, high)) in enumerate(curves.items()):
         color = _PALETTE[n % len(_PALETTE)]
         pts = np.array([xy(k, r) for k, r in zip(ks, mean)], np.int32)
-        band = np.array([xy(k, min(100.0, r + s)) for k, r, s in zip(ks, mean, std)]
-                        + [xy(k, max(y_min, r - s)) for k, r, s in zip(ks[::-1], mean[::-1], std[::-1])], np.int32)
+        band = np.array([xy(k, min(100.0, h)) for k, h in zip(ks, high)]
+                        + [xy(k, max(y_min, lo)) for k, lo in zip(ks[::-1], low[::-1])], np.int32)
         overlay = img.copy()
         cv2.fillPoly(overlay, [band], color)
         img = cv2.addWeighted(overlay, 0.15, img, 0.85, 0)

@@ -182,14 +182,12 @@ def make_plan(mesh, n: int = 15, method: str = "attention", size_mm: float = 150
     # The pad settles on the plane tactile fits over its footprint, with tactile's angle-0 image axes.
     poses = tactile.sensor_poses(scaled, pts.positions, pts.normals, sensor)
     positions = scaled.transform.to_source(poses.centers)
-    # A similarity has no rotation, so directions are the same in both frames.
-    approach = -poses.normals
-    rotations = sensor_rotations(poses)
+    approach = -scaled.transform.direction_to_source(poses.normals)
+    rotations = scaled.transform.rotation.T @ sensor_rotations(poses)
     points = tuple(ProbePoint(i, positions[i], approach[i], quaternion_from_matrix(rotations[i]))
                    for i in range(len(positions)))
     # File -> planning frame: undo the mesh's own transform, then apply the scaled one.
-    frame = Similarity(1.0 / mesh.transform.scale, -mesh.transform.offset / mesh.transform.scale).then(
-        scaled.transform)
+    frame = mesh.transform.inverse().then(scaled.transform)
     width_mm, height_mm = sensor.cols * sensor.pitch_mm, sensor.rows * sensor.pitch_mm
     info = {"rows": sensor.rows, "cols": sensor.cols, "pitch_mm": sensor.pitch_mm, "width_mm": width_mm,
             "height_mm": height_mm, "depth_mm": sensor.depth_mm, "width": width_mm / frame.scale,
@@ -207,7 +205,8 @@ def _plan_dict(plan: Plan) -> dict:
         "method": plan.method,
         "units": "positions in the mesh file's frame and units; sensor width and height in mm and in file units",
         "planning_frame": {"scale": plan.frame.scale, "offset": plan.frame.offset.tolist(),
-                           "meaning": "position_mm = scale * position + offset: the mesh scaled to size_mm "
+                           "rotation": plan.frame.rotation.tolist(),
+                           "meaning": "position_mm = scale * rotation @ position + offset: the mesh scaled to size_mm "
                                       "and centred, where imprints are simulated; scale = mm per file unit"},
         "sensor": {**plan.sensor,
                    "axes": "x = increasing column, y = increasing row (row 0 at the top), z = approach "
@@ -266,7 +265,8 @@ def load_plan(path) -> Plan:
             raise ValueError("repeated point ids")
         plan = Plan(points=tuple(points), sensor=dict(data["sensor"]), mesh=str(data.get("mesh", "")),
                     size_mm=float(data["size_mm"]), method=str(data.get("method", "")),
-                    frame=Similarity(float(data["planning_frame"]["scale"]), data["planning_frame"]["offset"]))
+                    frame=Similarity(float(data["planning_frame"]["scale"]), data["planning_frame"]["offset"],
+                                     data["planning_frame"].get("rotation", np.eye(3))))
     except (KeyError, TypeError, ValueError) as exc:
         raise ValueError(f"{path}: damaged probe plan ({type(exc).__name__}: {exc})") from None
     if not plan.points:

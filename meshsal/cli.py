@@ -146,8 +146,9 @@ def _cmd_points(args) -> int:
     save_ply(args.out / "saliency.ply", source_mesh, quality=vertex_saliency)
 
     positions = to_source(pts.positions)
+    normals = mesh.transform.direction_to_source(pts.normals)
     records = [{"id": k + 1, "vertex": int(pts.vertex_ids[k]), "position": positions[k].tolist(),
-                "normal": pts.normals[k].tolist(), "score": float(pts.scores[k]), "votes": int(pts.votes[k]),
+                "normal": normals[k].tolist(), "score": float(pts.scores[k]), "votes": int(pts.votes[k]),
                 "views": list(pts.views[k])} for k in range(len(pts))]
     settings = {"n": args.n, "method": args.method, "size_mm": args.size_mm, "view_size": args.size,
                 "threshold": args.threshold, "seed": args.seed,

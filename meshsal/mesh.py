@@ -31,40 +31,68 @@ class MeshError(ValueError):
 
 @dataclass(frozen=True)
 class Similarity:
-    """A uniform scale then a translation: ``current = scale * source + offset``.
+    """A rotation, a uniform scale, then a translation: ``current = scale * R source + offset``.
 
     It maps a mesh's current frame back to the frame and units of the file it
     was loaded from, so any result (points, normals, lengths) can be reported
-    in the user's own coordinates.
+    in the user's own coordinates.  ``rotation`` is the identity unless the
+    mesh was turned (as the instances of :mod:`meshsal.instances` are).
+
+    Parameters
+    ----------
+    scale : float
+    offset : (3,) float64
+    rotation : (3, 3) float64, a proper rotation (default identity)
 
     Examples
     --------
     >>> s = Similarity(scale=2.0, offset=np.array([1.0, 0.0, 0.0]))
     >>> s.to_source(np.array([[3.0, 0.0, 0.0]]))
     array([[1., 0., 0.]])
+    >>> turn = Similarity(rotation=[[0, -1, 0], [1, 0, 0], [0, 0, 1]])   # 90 degrees about z
+    >>> turn.apply([[1.0, 0.0, 0.0]]), turn.direction_to_source([[0.0, 1.0, 0.0]])
+    (array([[0., 1., 0.]]), array([[1., 0., 0.]]))
     """
 
     scale: float = 1.0
     offset: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    rotation: np.ndarray = field(default_factory=lambda: np.eye(3))
 
     def __post_init__(self):
         offset = np.asarray(self.offset, dtype=np.float64).reshape(3)
+        R = np.asarray(self.rotation, dtype=np.float64)
         if not (np.isfinite(self.scale) and self.scale > 0):
             raise ValueError(f"similarity scale must be finite and positive, got {self.scale}")
+        if R.shape != (3, 3) or not np.allclose(R @ R.T, np.eye(3), atol=1e-9) or np.linalg.det(R) <= 0:
+            raise ValueError(f"similarity rotation must be a proper 3x3 rotation matrix, got {R.tolist()}")
         object.__setattr__(self, "scale", float(self.scale))
         object.__setattr__(self, "offset", offset)
+        object.__setattr__(self, "rotation", R)
 
     def then(self, other: Similarity) -> Similarity:
         """The transform that applies ``self`` first, then ``other``."""
-        return Similarity(other.scale * self.scale, other.scale * self.offset + other.offset)
+        return Similarity(other.scale * self.scale, other.scale * (other.rotation @ self.offset) + other.offset,
+                          other.rotation @ self.rotation)
 
-    def apply(self, points: np.ndarray) -> np.ndarray:
+    def inverse(self) -> Similarity:
+        """The transform back: ``inverse().apply(apply(p)) == p``."""
+        return Similarity(1.0 / self.scale, -(self.rotation.T @ self.offset) / self.scale, self.rotation.T)
+
+    def apply(self, points) -> np.ndarray:
         """Map (k,3) points from the source frame into the current frame."""
-        return self.scale * np.asarray(points, dtype=np.float64) + self.offset
+        return self.scale * (np.asarray(points, dtype=np.float64) @ self.rotation.T) + self.offset
 
-    def to_source(self, points: np.ndarray) -> np.ndarray:
+    def to_source(self, points) -> np.ndarray:
         """Map (k,3) points from the current frame back to the source frame."""
-        return (np.asarray(points, dtype=np.float64) - self.offset) / self.scale
+        return ((np.asarray(points, dtype=np.float64) - self.offset) / self.scale) @ self.rotation
+
+    def apply_direction(self, directions) -> np.ndarray:
+        """Turn (k,3) directions (normals) from the source frame into the current frame."""
+        return np.asarray(directions, dtype=np.float64) @ self.rotation.T
+
+    def direction_to_source(self, directions) -> np.ndarray:
+        """Turn (k,3) directions (normals) from the current frame back into the source frame."""
+        return np.asarray(directions, dtype=np.float64) @ self.rotation
 
     def length_to_source(self, length):
         """Map a length (or array of lengths) back to source units."""

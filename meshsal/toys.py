@@ -36,7 +36,7 @@ import numpy as np
 from . import sdf
 from .mesh import Mesh, face_areas
 
-__all__ = ["NAMES", "make", "load_object"]
+__all__ = ["NAMES", "make", "repaint", "load_object"]
 
 NAMES = ("cow", "glasses", "cup", "hand", "plane", "dromedary")
 
@@ -102,6 +102,36 @@ def make(name: str, seed: int = 0) -> Mesh:
     labels = _labels(design.parts, V)
     colors = design.paint(V, labels, np.random.default_rng(seed))
     return Mesh(vertices=V, faces=F, vertex_colors=colors, name=name)
+
+
+def repaint(mesh: Mesh, seed: int) -> Mesh:
+    """The same toy painted with another paint seed, without meshing it again.
+
+    Parameters
+    ----------
+    mesh : Mesh
+        Made by :func:`make` (``mesh.name`` names the toy), possibly scaled,
+        turned or moved since: the paint is computed on
+        ``mesh.transform.to_source(mesh.vertices)``, the toy's millimetres.
+    seed : int
+
+    Returns
+    -------
+    Mesh
+        Same vertices, faces and transform; the colours of ``make(name, seed)``.
+
+    Examples
+    --------
+    >>> cup = make("cup")
+    >>> bool((repaint(cup, 3).vertex_colors == make("cup", seed=3).vertex_colors).all())
+    True
+    """
+    if mesh.name not in _DESIGNS:
+        raise ValueError(f"mesh {mesh.name!r} is not a toy; valid toys are: {', '.join(NAMES)}")
+    design = _DESIGNS[mesh.name]()
+    V = mesh.transform.to_source(mesh.vertices)
+    colors = design.paint(V, _labels(design.parts, V), np.random.default_rng(seed))
+    return mesh.replace(vertex_colors=colors)
 
 
 def _field(parts, P: np.ndarray, boxes=None, margin: float = 0.0) -> np.ndarray:
@@ -462,27 +492,31 @@ _DESIGNS = {"cow": _cow, "glasses": _glasses, "cup": _cup, "hand": _hand, "plane
 
 
 def load_object(spec, seed: int = 0) -> Mesh:
-    """A mesh file, or a toy when ``spec`` names one and no such file exists.
+    """A mesh file, or an embedded object (a toy or a YCB scan) when ``spec`` names one and no such file exists.
 
-    The command line accepts either wherever it takes a mesh, so the
-    embedded toys need no export step.
+    The command line accepts any of these wherever it takes a mesh, so the
+    embedded objects need no export step.
 
     Parameters
     ----------
     spec : str or os.PathLike
-        A mesh file path (OBJ, PLY, OFF, STL) or one of :data:`NAMES`.
+        A mesh file path (OBJ, PLY, OFF, STL), one of :data:`NAMES` or one
+        of ``meshsal.ycb.NAMES``.
     seed : int
         The toy's paint seed.
 
     Examples
     --------
-    >>> load_object("cup").name
-    'cup'
+    >>> load_object("cup").name, load_object("banana").name
+    ('cup', 'banana')
     """
     from pathlib import Path
 
+    from . import ycb
     from .io import load_mesh
 
     if str(spec) in NAMES and not Path(spec).exists():
         return make(str(spec), seed=seed)
+    if str(spec) in ycb.NAMES and not Path(spec).exists():
+        return ycb.load(str(spec))
     return load_mesh(spec)

@@ -13,11 +13,21 @@ import numpy as np
 
 from meshsal.mesh import Mesh, MeshError, Similarity, bounding_sphere
 
-__all__ = ["scale_to", "normalize"]
+__all__ = ["scale_to", "normalize", "principal_diagonal", "scale_to_principal"]
 
 
 def _label(mesh: Mesh) -> str:
     return f"mesh {mesh.name!r}" if mesh.name else "mesh"
+
+
+def _check_diagonal(diagonal_mm) -> float:
+    try:
+        diagonal_mm = float(diagonal_mm)
+    except (TypeError, ValueError):
+        raise ValueError(f"diagonal_mm must be a positive number, got {diagonal_mm!r}") from None
+    if not (math.isfinite(diagonal_mm) and diagonal_mm > 0):
+        raise ValueError(f"diagonal_mm must be positive and finite, got {diagonal_mm}")
+    return diagonal_mm
 
 
 def _apply(mesh: Mesh, step: Similarity) -> Mesh:
@@ -56,12 +66,7 @@ def scale_to(mesh: Mesh, diagonal_mm: float = 150.0) -> Mesh:
     >>> s.transform.to_source(s.vertices)[1]
     array([3., 0., 0.])
     """
-    try:
-        diagonal_mm = float(diagonal_mm)
-    except (TypeError, ValueError):
-        raise ValueError(f"diagonal_mm must be a positive number, got {diagonal_mm!r}") from None
-    if not (math.isfinite(diagonal_mm) and diagonal_mm > 0):
-        raise ValueError(f"diagonal_mm must be positive and finite, got {diagonal_mm}")
+    diagonal_mm = _check_diagonal(diagonal_mm)
     if mesh.n_vertices == 0:
         raise MeshError(f"{_label(mesh)}: cannot scale a mesh without vertices")
     lo, hi = mesh.vertices.min(axis=0), mesh.vertices.max(axis=0)
@@ -109,3 +114,72 @@ def normalize(mesh: Mesh) -> Mesh:
     if not (math.isfinite(radius) and radius > 0):
         raise MeshError(f"{_label(mesh)}: cannot normalize a mesh of zero extent (all vertices coincide)")
     return _apply(mesh, Similarity(1.0 / radius, -center / radius))
+
+
+def principal_diagonal(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, float]:
+    """Area-weighted centroid and the bounding-box diagonal in the surface's principal frame.
+
+    Both follow the mesh when it is turned, unlike the axis-aligned box of
+    :func:`scale_to`, so two copies of one object turned differently in
+    their files get the same size (up to the sign and order of the
+    principal axes, which the diagonal ignores).
+
+    Parameters
+    ----------
+    vertices : (n, 3) float64
+    faces : (m, 3) int32
+
+    Returns
+    -------
+    centroid : (3,) float64
+    diagonal : float
+
+    Examples
+    --------
+    >>> V = np.array([[0, 0, 0], [4, 0, 0], [4, 3, 0], [0, 3, 0]], float)
+    >>> c, d = principal_diagonal(V, np.array([[0, 1, 2], [0, 2, 3]]))
+    >>> np.round(c, 6).tolist(), round(d, 6)
+    ([2.0, 1.5, 0.0], 5.0)
+    """
+    V = np.asarray(vertices, dtype=np.float64)
+    F = np.asarray(faces)
+    corners = V[F]
+    area = 0.5 * np.linalg.norm(np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]), axis=1)
+    total = float(area.sum())
+    if not (math.isfinite(total) and total > 0):
+        raise MeshError("cannot find the principal frame of a surface of zero area")
+    centroid = (area[:, None] * corners.mean(axis=1)).sum(axis=0) / total
+    # Second moment of each triangle about the centroid (exact for a uniform density on it).
+    D = corners - centroid
+    S = D.sum(axis=1)
+    second = np.einsum("f,fi,fj->ij", area, S, S) + np.einsum("f,fci,fcj->ij", area, D, D)
+    _, axes = np.linalg.eigh(second / (12.0 * total))
+    local = (V[np.unique(F)] - centroid) @ axes
+    return centroid, float(np.linalg.norm(local.max(axis=0) - local.min(axis=0)))
+
+
+def scale_to_principal(mesh: Mesh, diagonal_mm: float = 150.0) -> Mesh:
+    """Scale uniformly so the principal-frame box diagonal is ``diagonal_mm``; centroid to the origin.
+
+    The rotation-invariant counterpart of :func:`scale_to`: a mesh and a
+    turned copy of it come out the same size (:func:`principal_diagonal`).
+    No rotation is applied; ``transform`` still maps back to the source.
+
+    Examples
+    --------
+    >>> m = Mesh(vertices=[[0, 0, 0], [4, 0, 0], [4, 3, 0], [0, 3, 0]], faces=[[0, 1, 2], [0, 2, 3]])
+    >>> s = scale_to_principal(m, 10.0)
+    >>> np.round(s.vertices.max(axis=0) - s.vertices.min(axis=0), 6).tolist()
+    [8.0, 6.0, 0.0]
+    """
+    diagonal_mm = _check_diagonal(diagonal_mm)
+    if mesh.n_faces == 0:
+        raise MeshError(f"{_label(mesh)}: cannot scale a mesh without faces")
+    try:
+        centroid, diagonal = principal_diagonal(mesh.vertices, mesh.faces)
+    except MeshError as exc:
+        raise MeshError(f"{_label(mesh)}: {exc}") from None
+    if not (math.isfinite(diagonal) and diagonal > 0):
+        raise MeshError(f"{_label(mesh)}: cannot scale a mesh of zero extent (all vertices coincide)")
+    scale = diagonal_mm / diagonal
+    return _apply(mesh, Similarity(scale, -scale * centroid))

@@ -94,8 +94,8 @@ def _cmd_imprints(args) -> int:
                     supersample=args.supersample, plane=args.plane)
     source_positions, normals, ids = read_points(args.points)
     mesh = scale_to(load_object(args.mesh), args.size_mm)
-    # A similarity only scales and shifts, so normals keep their direction.
     positions = mesh.transform.apply(source_positions)
+    normals = mesh.transform.apply_direction(normals)
     images = imprints(mesh, positions, normals, sensor)
     result = ImprintSet(imprints=images, labels=[0] * len(images), object_names=(mesh.name or args.mesh.stem,),
                         point_ids=ids, positions=positions, normals=normals, sensor=sensor,

@@ -5,6 +5,10 @@ from pathlib import Path
 
 import pytest
 
+from meshsal.reproducible import pin_blas_kernel
+
+pin_blas_kernel()   # before anything imports NumPy: the same BLAS kernels, hence numbers, on every x86-64 CPU
+
 _DEFAULT_SHARED = Path(__file__).resolve().parents[1].parent / "shared" / "meshes"
 
 

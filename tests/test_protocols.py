@@ -1,0 +1,161 @@
+"""The evaluation protocols: grouped folds, no leakage, instance-disjoint calibration, seeded fusion."""
+
+import numpy as np
+import pytest
+
+import classify
+import tactile
+from classify import protocols
+from classify.protocols import InstanceData
+
+
+def _tagged_pool(n_objects=3, per_object=20, seed=0):
+    """Imprints whose first taxel holds their own index, so any row can be traced back."""
+    rng = np.random.default_rng(seed)
+    y = np.repeat(np.arange(n_objects), per_object)
+    X = rng.uniform(0, 1, (len(y), 16, 16)).astype(np.float32)
+    X[np.arange(len(y)), 4, 4] += 3 * y                 # a class signal
+    X[:, 0, 0] = np.arange(len(y))
+    return X, y
+
+
+def test_paper_splits_partition_each_repeat_keep_groups_whole_and_reshuffle():
+    y = np.repeat([0, 1, 2], [10, 12, 15])
+    groups = np.concatenate([np.arange(10) // 2, 100 + np.arange(12) // 2, 200 + np.arange(15) // 3])
+    splits = protocols.paper_splits(y, groups, folds=5, repeats=3, seed=7)
+    assert len(splits) == 15
+    for r in range(3):
+        mine = [s for s in splits if s.repeat == r]
+        tests = np.concatenate([s.test for s in mine])
+        assert sorted(tests.tolist()) == list(range(len(y)))          # each imprint tested once per repeat
+        for s in mine:
+            assert not set(groups[s.train].tolist()) & set(groups[s.test].tolist())   # no point on both sides
+            assert np.all(np.bincount(y[s.test], minlength=3) >= 1)   # stratified over objects
+    first = [s.test.tolist() for s in splits if s.repeat == 0]
+    second = [s.test.tolist() for s in splits if s.repeat == 1]
+    assert first != second
+    again = protocols.paper_splits(y, groups, folds=5, repeats=3, seed=7)
+    assert all(np.array_equal(a.test, b.test) for a, b in zip(splits, again))
+
+
+def test_paper_splits_refuse_too_few_points_per_object():
+    with pytest.raises(ValueError, match="at least 5 points per object"):
+        protocols.paper_splits(np.repeat([0, 1], [3, 10]), folds=5)
+
+
+def test_paper_job_never_trains_or_selects_on_a_test_imprint(monkeypatch):
+    X, y = _tagged_pool()
+    groups = np.arange(len(y))
+    selected, fits = [], []
+
+    def spy_select(Xs, ys, threshold=0.85):
+        selected.append(Xs[:, 0, 0].astype(int))
+        return Xs[:, 0, 0].astype(int) % 3 != 0                     # drop some training imprints
+
+    real_fit = protocols._fit
+
+    def spy_fit(name, params, X_train, y_train, g):
+        fits.append(X_train[:, 0].astype(int))
+        return real_fit(name, params, X_train, y_train, g)
+
+    monkeypatch.setattr(tactile, "select_by_similarity", spy_select, raising=False)
+    monkeypatch.setattr(protocols, "_fit", spy_fit)
+    splits = protocols.paper_splits(y, groups, 5, 1, 3)
+    out = protocols.paper_job(X, y, groups, splits, "naive_bayes", True, {}, 0.85, 3)
+    assert len(selected) == len(fits) == 5
+    for rows, trained, split in zip(selected, fits, splits):
+        assert sorted(rows.tolist()) == sorted(split.train.tolist())  # selection saw the training fold only
+        assert not set(trained.tolist()) & set(split.test.tolist())
+        assert np.all(trained % 3 != 0)                              # the fit used the selected fold
+    assert out.confusion.sum() == len(y) and out.rates.shape == (3,)
+    assert out.kept == pytest.approx(2 / 3, abs=0.05)
+
+
+def _instance_data(n_objects=3, train_instances=3, sessions=2, k=5, seed=0):
+    """Training imprints tagged with a unique id in taxel (0, 0) (1e-6 per id, too faint to matter);
+    test imprints tagged >= 10000."""
+    rng = np.random.default_rng(seed)
+    X, y, inst, point = [], [], [], []
+    for o in range(n_objects):
+        for j in range(1, train_instances + 1):
+            for s in range(sessions):
+                img = rng.uniform(0, 0.2, (k, 16, 16))
+                img[:, 3 * o:3 * o + 3, 5:9] = 0.9
+                X.append(img)
+                y += [o] * k
+                inst += [j] * k
+                point += list(range(k))
+    X = np.concatenate(X).astype(np.float32)
+    X[:, 0, 0] = np.arange(len(X)) * 1e-6
+    test = []
+    for o in range(n_objects):
+        img = rng.uniform(0, 0.2, (k, 16, 16)).astype(np.float32)
+        img[:, 3 * o:3 * o + 3, 5:9] = 0.9
+        img[:, 0, 0] = (10000 + 100 * o + np.arange(k)) * 1e-6
+        test.append(img)
+    return InstanceData(X, np.array(y), np.array(inst), np.array(point), tuple(test),
+                        tuple(f"obj{o}" for o in range(n_objects)))
+
+
+def _tag(X):
+    X = np.asarray(X)
+    return np.round(X.reshape(len(X), -1)[:, 0] * 1e6).astype(int)
+
+
+def test_instance_job_calibrates_on_held_out_instances_and_never_trains_on_the_test(monkeypatch):
+    data = _instance_data()
+    fits, scored = [], []
+    real_fit, real_proba = protocols._fit, protocols._proba
+
+    def spy_fit(name, params, X_train, y_train, g):
+        fits.append(_tag(X_train))
+        return real_fit(name, params, X_train, y_train, g)
+
+    def spy_proba(model, X, n):
+        scored.append(_tag(X))
+        return real_proba(model, X, n)
+
+    monkeypatch.setattr(protocols, "_fit", spy_fit)
+    monkeypatch.setattr(protocols, "_proba", spy_proba)
+    out = protocols.instance_job(data, "knn", False, {}, 0.85, 5, 50, 0, 0)
+    assert len(fits) == 4                                           # 3 held-out instances, then all of them
+    for trained, held in zip(fits[:3], scored[:3]):
+        trained_instances = set(data.train_instance[trained].tolist())
+        held_instances = set(data.train_instance[held].tolist())
+        assert len(held_instances) == 1 and not trained_instances & held_instances
+    assert all(np.all(f < 10000) for f in fits)                    # no test imprint ever trains
+    assert sorted(np.concatenate(scored[3:]).tolist()) == sorted(
+        np.concatenate([_tag(t) for t in data.test]).tolist())
+    assert out.rates.shape == (5, 3) and np.all(out.rates[0] == 100.0)
+    assert out.sets.tolist() == [5, 10, 10, 5, 1]                   # C(5, k): fewer than 50 exist
+
+
+def test_instance_job_is_paired_and_deterministic():
+    data = _instance_data(seed=3)
+    a = protocols.instance_job(data, "naive_bayes", True, {}, 0.85, 5, 7, 11, 2)
+    b = protocols.instance_job(data, "naive_bayes", True, {}, 0.85, 5, 7, 11, 2)
+    assert np.array_equal(a.rates, b.rates) and np.array_equal(a.confusion, b.confusion)
+
+
+def test_fused_rate_after_all_touches_is_not_below_a_single_touch_for_every_classifier():
+    rng = np.random.default_rng(5)
+    X, y, inst, point = [], [], [], []
+    k = 6
+    for o in range(3):
+        for j in (1, 2, 3):
+            img = rng.uniform(0, 1, (k, 16, 16))
+            img[:, 4 * o:4 * o + 4, 4:8] += 0.6                       # a weak signal among noise
+            X.append(img / 1.6)
+            y += [o] * k
+            inst += [j] * k
+            point += list(range(k))
+    test = []
+    for o in range(3):
+        img = rng.uniform(0, 1, (k, 16, 16))
+        img[:, 4 * o:4 * o + 4, 4:8] += 0.6
+        test.append((img / 1.6).astype(np.float32))
+    data = InstanceData(np.concatenate(X).astype(np.float32), np.array(y), np.array(inst), np.array(point),
+                        tuple(test), ("a", "b", "c"))
+    for name in classify.NAMES:
+        out = protocols.instance_job(data, name, False, {}, 0.85, k, 20, 0, 0)
+        assert out.rates[-1].mean() >= out.rates[0].mean(), name

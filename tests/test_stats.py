@@ -1,0 +1,109 @@
+"""Bootstrap intervals, paired differences, calibration and touch fusion, kNN's ties."""
+
+import numpy as np
+import pytest
+
+import classify
+from classify import fusion, stats
+
+
+def test_bootstrap_interval_covers_the_true_mean_about_95_percent_of_the_time():
+    rng = np.random.default_rng(0)
+    hits = 0
+    trials = 200
+    for t in range(trials):
+        R = 70.0 + 5.0 * rng.standard_normal((20, 1))               # replicates only: a plain mean
+        s = stats.summarize(R, seed=t)
+        hits += s.ci_low <= 70.0 <= s.ci_high
+    assert 0.88 <= hits / trials <= 0.99
+
+
+def test_interval_widens_with_object_spread_and_is_a_point_when_nothing_varies():
+    flat = stats.summarize(np.full((6, 4), 80.0))
+    assert (flat.mean, flat.ci_low, flat.ci_high, flat.std) == (80.0, 80.0, 80.0, 0.0)
+    spread = stats.summarize(np.tile([60.0, 70.0, 90.0, 100.0], (6, 1)))
+    assert spread.std == 0.0 and spread.ci_low < 75.0 < 80.0 < spread.ci_high
+
+
+def test_paired_difference_finds_a_planted_gap_that_unpaired_noise_would_hide():
+    rng = np.random.default_rng(1)
+    base = rng.uniform(40, 100, (20, 6))                             # replicate/object difficulty varies a lot
+    better = base + 3.0 + rng.normal(0, 1.0, base.shape)
+    d = stats.paired_difference(better, base)
+    assert 2.0 < d.ci_low < 3.0 < d.ci_high < 4.0 and d.p_value < 1e-3
+    same = stats.paired_difference(base, base)
+    assert (same.mean, same.ci_low, same.ci_high, same.p_value) == (0.0, 0.0, 0.0, 1.0)
+    with pytest.raises(ValueError, match="equal shapes"):
+        stats.paired_difference(base, base[:3])
+
+
+def test_calibration_never_changes_a_single_decision_but_softens_certainty():
+    rng = np.random.default_rng(2)
+    P = rng.dirichlet(np.ones(4) * 0.1, 50)
+    cal = fusion.Calibration(eps=0.1, temperature=3.0)
+    Q = fusion.calibrate(P, cal)
+    assert np.array_equal(np.argmax(P, axis=1), np.argmax(Q, axis=1))
+    assert np.allclose(Q.sum(axis=1), 1.0) and Q.max() < P.max()
+
+
+def test_calibration_fitted_on_one_hot_wrong_answers_stops_a_single_zero_from_vetoing():
+    y = np.repeat([0, 1], 20)
+    P = np.eye(2)[y]
+    P[:4] = [0.0, 1.0]                                              # 4 of 20 "certain" answers are wrong
+    cal = fusion.fit_calibration(P, y)
+    fused = fusion.fuse(fusion.calibrate([[1.0, 0.0], [1.0, 0.0], [0.0, 1.0]], cal), [[0, 1, 2]],
+                        np.random.default_rng(0))
+    assert fused.tolist() == [0]                                    # two firm votes beat one
+
+
+def test_touch_sets_are_distinct_exhaustive_when_few_and_seeded():
+    rng = np.random.default_rng(0)
+    assert len(fusion.touch_sets(15, 14, 50, rng)) == 15            # C(15, 14) = 15 < 50: all of them
+    a = fusion.touch_sets(15, 4, 50, np.random.default_rng(3))
+    b = fusion.touch_sets(15, 4, 50, np.random.default_rng(3))
+    assert np.array_equal(a, b) and len({tuple(r) for r in a.tolist()}) == 50
+    assert all(len(set(r)) == 4 for r in a.tolist())
+    with pytest.raises(ValueError, match="within 1..15"):
+        fusion.touch_sets(15, 16, 5, rng)
+
+
+def test_fused_ties_go_either_way_with_the_seed_never_to_index_zero():
+    P = np.full((3, 3), 1 / 3)
+    picks = fusion.fuse(P, np.zeros((300, 1), int), np.random.default_rng(0))
+    assert set(picks.tolist()) == {0, 1, 2} and 60 < np.sum(picks == 0) < 140
+    again = fusion.fuse(P, np.zeros((300, 1), int), np.random.default_rng(0))
+    assert np.array_equal(picks, again)
+
+
+def test_knn_k_ties_are_drawn_with_the_seed_not_taken_by_order():
+    X = np.r_[np.zeros((8, 2)), np.ones((8, 2))]
+    y = np.repeat([0, 1], 8)
+    chosen = {classify.make("knn", random_state=s).fit(X, y).k_ for s in range(12)}
+    assert len(chosen) > 1                                          # every k scores 100 %: the draw decides
+
+
+def test_knn_tuning_with_groups_does_not_reward_memorizing_a_point():
+    # Each point touched 4 times with tiny noise; points of the two objects interleave along a line.
+    rng = np.random.default_rng(4)
+    centers = np.arange(40, dtype=float)
+    labels = (rng.random(40) < 0.5).astype(int)
+    labels[::7] = 1 - labels[::7]
+    X = np.repeat(centers, 4)[:, None] + 0.01 * rng.standard_normal((160, 1))
+    y = np.repeat(labels, 4)
+    groups = np.repeat(np.arange(40), 4)
+    leaky = classify.make("knn", ks=(1, 9)).fit(X, y)
+    grouped = classify.make("knn", ks=(1, 9)).fit(X, y, groups=groups)
+    assert leaky.cv_scores_[1] > 0.95                               # re-touches of the same point: memorized
+    assert grouped.cv_scores_[1] < 0.9                               # held-out points: no such luck
+
+
+def test_knn_is_invariant_to_the_order_of_its_training_set():
+    rng = np.random.default_rng(6)
+    X = np.round(rng.uniform(0, 1, (60, 16)) * 255) / 255            # ADC codes: exact distances
+    X[10] = X[40]                                                   # exact ties between classes
+    y = np.repeat([0, 1, 2], 20)
+    queries = np.r_[X[:5], X[40:41], rng.uniform(0, 1, (10, 16))]
+    perm = rng.permutation(60)
+    a = classify.make("knn", ks=(1, 3)).fit(X, y).predict_proba(queries)
+    b = classify.make("knn", ks=(1, 3)).fit(X[perm], y[perm]).predict_proba(queries)
+    assert np.array_equal(a, b)
