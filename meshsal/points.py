@@ -397,7 +397,8 @@ def attention_points(mesh: Mesh, views, maps: np.ndarray, vertex_saliency: np.nd
 
 def interest_points(mesh: Mesh, n: int = 15, method: str = "attention", seed=0,
                     min_spacing: float | None = None, size: int = 128, threshold: float = 0.5,
-                    quiet: bool = True, weights=None, vertex_saliency=None) -> InterestPoints:
+                    quiet: bool = True, weights=None, vertex_saliency=None,
+                    threads: int | None = None) -> InterestPoints:
     """Choose ``n`` interest points on a mesh (module docstring for the pipeline).
 
     Parameters
@@ -426,6 +427,9 @@ def interest_points(mesh: Mesh, n: int = 15, method: str = "attention", seed=0,
         Channel weights of the attention model.
     vertex_saliency : (n_vertices,) float64, optional
         Precomputed mesh saliency.
+    threads : int, optional
+        Rendering and attention threads ("attention"; default: the CPU
+        count).  The points do not depend on it.
 
     Returns
     -------
@@ -446,7 +450,7 @@ def interest_points(mesh: Mesh, n: int = 15, method: str = "attention", seed=0,
     vertex_saliency = _check_field(mesh, vertex_saliency)
     if method == "attention":
         views, maps = saliency_maps(mesh, size=size, vertex_saliency=vertex_saliency, quiet=quiet,
-                                    weights=weights)
+                                    weights=weights, threads=threads)
         return attention_points(mesh, views, maps, vertex_saliency, n=n, min_spacing=spacing,
                                 threshold=threshold)
 

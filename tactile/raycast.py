@@ -245,8 +245,8 @@ def imprints(mesh: Mesh, positions, normals, sensor: Sensor | None = None, angle
     >>> plane = Mesh(vertices=[[-50, 0, -50], [50, 0, -50], [50, 0, 50], [-50, 0, 50]],
     ...              faces=[[0, 2, 1], [0, 3, 2]])
     >>> img = imprints(plane, [[0, 0, 0]], [[0, 1, 0]], Sensor(mode="pressure"))
-    >>> img.shape, float(img.min()), float(img.max())
-    ((1, 16, 16), 1.0, 1.0)
+    >>> img.shape, bool(np.allclose(img, 1.0, atol=1e-6))   # a flat plane presses every taxel fully
+    ((1, 16, 16), True)
     >>> scene = embree_scene(plane)  # once per mesh, then for every call
     >>> bool((imprints(plane, [[0, 0, 0]], [[0, 1, 0]], Sensor(mode="pressure"), scene=scene) == img).all())
     True

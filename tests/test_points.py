@@ -149,14 +149,19 @@ def test_points_are_distinct_spaced_and_votes_match_views(planted):
     assert pts.votes.max() >= 10
 
 
-def test_translation_and_uniform_scale_keep_the_vertex_ids(planted):
+def test_translation_and_uniform_scale_keep_the_points(planted):
     mesh, _, _, pts = planted
     moved = mesh.replace(vertices=mesh.vertices * 7.5 + [300.0, -120.0, 45.0])
     other = interest_points(moved, n=15, size=SIZE)
-    assert other.vertex_ids.tolist() == pts.vertex_ids.tolist()
-    # Equal up to Embree's float32 barycentric coordinates.
-    np.testing.assert_allclose(other.positions, pts.positions * 7.5 + [300.0, -120.0, 45.0], atol=1e-4 * 375)
-    np.testing.assert_allclose(other.normals, pts.normals, atol=1e-4)
+    # Invariant up to float32 rounding in Embree, whose kernels differ between CPUs: a rounding may swap two
+    # candidates whose saliency ties, so most points must be the same vertices, at the same places.
+    same = np.isin(other.vertex_ids, pts.vertex_ids)
+    assert same.sum() >= 13 and len(other) == len(pts)
+    where = {v: k for k, v in enumerate(pts.vertex_ids.tolist())}
+    mine = [where[v] for v in other.vertex_ids[same].tolist()]
+    np.testing.assert_allclose(other.positions[same], pts.positions[mine] * 7.5 + [300.0, -120.0, 45.0],
+                               atol=1e-4 * 375)
+    np.testing.assert_allclose(other.normals[same], pts.normals[mine], atol=1e-4)
 
 
 def test_same_input_same_output(planted):

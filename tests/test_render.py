@@ -176,10 +176,16 @@ def test_a_prebuilt_scene_renders_the_same_views(sphere):
         for other in (b, t):
             np.testing.assert_array_equal(a.face_id, other.face_id)
             np.testing.assert_array_equal(a.rgb, other.rgb)
-        # A robust scene computes barycentrics another way: the same faces, rounding apart.
-        np.testing.assert_array_equal(a.face_id, c.face_id)
-        np.testing.assert_allclose(a.bary, c.bary, atol=1e-4)
+        # A robust scene computes barycentrics another way: the same surface points, rounding apart.  A pixel
+        # ray through a shared edge may report either face there (a tie, CPU-dependent), never a farther one.
+        np.testing.assert_array_equal(a.mask, c.mask)
         np.testing.assert_allclose(a.depth[a.mask], c.depth[a.mask], rtol=1e-6)
+        other = a.mask & (a.face_id != c.face_id)
+        assert other.mean() < 0.01
+        for fa, fc in zip(a.face_id[other], c.face_id[other]):
+            assert set(sphere.faces[fa].tolist()) & set(sphere.faces[fc].tolist())   # neighbours at the tie
+        same = a.mask & ~other
+        np.testing.assert_allclose(a.bary[same], c.bary[same], atol=1e-4)
 
 
 def test_vertex_ids_are_the_corners_of_the_face_each_pixel_sees(sphere):

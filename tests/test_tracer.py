@@ -2,8 +2,13 @@
 
 The stimulus is a ray along an axis through a vertex of a closed sphere: the
 fast traversal lets about one such ray in a hundred slip between the faces
-that meet there.  The sphere is turned off its mirror planes, so that no ray
-also meets a vertex on its way out.
+that meet there, on the CPUs seen so far.  How many slip depends on the CPU
+(Embree picks its traversal kernels by instruction set), so what the tests
+require holds on any CPU: every answer equals the robust scene's.  The
+re-trace itself is exercised everywhere by a stand-in fast scene that lets
+chosen rays slip: it answers them with the face where they leave the sphere,
+as a slipped ray would report.  The sphere is turned off its mirror planes,
+so that no ray also meets a vertex on its way out.
 """
 
 import numpy as np
@@ -56,10 +61,26 @@ def _run(scene, origins, directions):
     return scene.run(origins, directions, dists=np.inf, output=1)
 
 
-def _slipped(mesh: Mesh, origins, directions, robust: dict) -> np.ndarray:
-    """Which rays the fast scene alone answers wrongly."""
-    fast = _run(embree_scene(mesh, robust=False), origins, directions)
-    return (fast["primID"] < 0) | (fast["tfar"] > robust["tfar"] + 1e-3)
+class _Slipping:
+    """A fast scene that lets the rays in ``slip`` through: it reports their exit from the sphere."""
+
+    def __init__(self, mesh: Mesh, slip: np.ndarray):
+        self.robust, self.slip = embree_scene(mesh), slip
+
+    def run(self, origins, directions, dists=np.inf, output=1):
+        hit = _run(self.robust, origins, directions)
+        far = _run(self.robust, origins + 400.0 * directions, -directions)     # from beyond: the exit face
+        chosen = self.slip[:len(origins)]
+        for key in hit:
+            hit[key] = hit[key].copy()
+            hit[key][chosen] = far[key][chosen]
+        hit["tfar"][chosen] = 400.0 - far["tfar"][chosen]
+        return hit
+
+
+def _slipping_tracer(mesh: Mesh, slip: np.ndarray) -> Tracer:
+    real = tracer(mesh)
+    return Tracer(mesh=mesh, fast=_Slipping(mesh, slip), facing=real.facing, robust=real.robust, reach=real.reach)
 
 
 def _assert_robust_answers(mesh: Mesh, ours: dict, robust: dict):
@@ -69,27 +90,43 @@ def _assert_robust_answers(mesh: Mesh, ours: dict, robust: dict):
 
 
 @pytest.mark.parametrize("inward", [False, True], ids=["outward", "inward"])
-def test_the_few_rays_that_slip_are_traced_again_near_their_lines(inward):
+def test_rays_through_vertices_get_the_robust_answers_whatever_slips_on_this_cpu(inward):
     mesh = _sphere(3, inward)
     origins, directions = _rays_through_vertices(mesh)
     robust = _run(embree_scene(mesh), origins, directions)
     assert np.all(robust["primID"] >= 0)
-    slipped = _slipped(mesh, origins, directions, robust)
     trace = tracer(mesh)
     assert trace.facing() == (-1 if inward else 1)
-    # One call per axis direction, each with a few slipped rays: small local scenes answer them.
     calls = np.flatnonzero(np.any(np.diff(directions, axis=0), axis=1)) + 1
-    assert slipped.sum() >= 3 and max(s.sum() for s in np.split(slipped, calls)) <= _LOCAL_RAYS
     hits = [trace.first_hits(o, d[:1]) for o, d in zip(np.split(origins, calls), np.split(directions, calls))]
     _assert_robust_answers(mesh, {key: np.concatenate([h[key] for h in hits]) for key in hits[0]}, robust)
+
+
+@pytest.mark.parametrize("inward", [False, True], ids=["outward", "inward"])
+def test_a_few_slipped_rays_are_traced_again_near_their_lines(inward):
+    mesh = _sphere(3, inward)
+    origins, directions = _rays_through_vertices(mesh)
+    robust = _run(embree_scene(mesh), origins, directions)
+    calls = np.flatnonzero(np.any(np.diff(directions, axis=0), axis=1)) + 1
+    for o, d in zip(np.split(origins, calls), np.split(directions, calls)):
+        slip = np.zeros(len(o), bool)
+        slip[::max(1, len(o) // 5)] = True                          # a few per call: small local scenes
+        assert 3 <= slip.sum() <= _LOCAL_RAYS
+        trace = _slipping_tracer(mesh, slip)
+        assert np.all(trace.fast.run(o, d[:1])["tfar"][slip] > _run(embree_scene(mesh), o, d)["tfar"][slip] + 0.5)
+        _assert_robust_answers(mesh, trace.first_hits(o, d[:1]), _run(embree_scene(mesh), o, d))
+    assert np.all(robust["primID"] >= 0)
 
 
 def test_many_rays_that_slip_at_once_are_traced_again_in_the_whole_robust_scene():
     mesh = _sphere(4)
     origins, directions = _rays_through_vertices(mesh)  # one call, each ray with its own direction
     robust = _run(embree_scene(mesh), origins, directions)
-    assert _slipped(mesh, origins, directions, robust).sum() > _LOCAL_RAYS
     _assert_robust_answers(mesh, tracer(mesh).first_hits(origins, directions), robust)
+    slip = np.zeros(len(origins), bool)
+    slip[::7] = True
+    assert slip.sum() > _LOCAL_RAYS
+    _assert_robust_answers(mesh, _slipping_tracer(mesh, slip).first_hits(origins, directions), robust)
 
 
 def _refuse():
@@ -145,20 +182,16 @@ def test_a_mesh_without_faces_is_refused():
         tracer(Mesh(vertices=np.zeros((3, 3)), faces=np.zeros((0, 3), np.int32), name="empty"))
 
 
-def test_renders_of_a_scanned_bust_match_a_robust_scene_though_rays_slip(shared_mesh):
+def test_renders_of_a_scanned_bust_match_a_robust_scene(shared_mesh):
     from meshsal import load_mesh
     from meshsal.render import render_views, view_rig
 
     bust = load_mesh(shared_mesh("nefertiti.obj"))
     cameras = [c for s in view_rig() for c in s]
-    fast_scene = embree_scene(bust, robust=False)
-    unchecked = Tracer(mesh=bust, fast=None, facing=lambda: 0, robust=lambda: fast_scene, reach=_refuse)
-    fast_alone = render_views(bust, cameras, scene=unchecked)
     robust = render_views(bust, cameras, scene=embree_scene(bust))
     ours = render_views(bust, cameras)
-    # Some pixel rays slip through the fast scene on to a face deeper inside...
-    assert sum(np.sum(a.depth[a.mask] > r.depth[a.mask] + 1.0) for a, r in zip(fast_alone, robust)) >= 1
-    # ... and none of that reaches the views: rounding apart, which is largest on faces seen edge-on.
+    # Whatever slips through the fast scene on this CPU (5 pixel rays on the machines seen so far) never
+    # reaches the views: rounding apart, which is largest on faces seen edge-on.
     for a, r in zip(ours, robust):
         np.testing.assert_array_equal(a.mask, r.mask)
         np.testing.assert_allclose(a.depth[a.mask], r.depth[r.mask], atol=0.01 * a.pixel_size)

@@ -148,7 +148,8 @@ def gabor_energy(level: np.ndarray, theta_deg: float) -> np.ndarray:
     even, odd = _GABORS[theta_deg] if theta_deg in _GABORS else _gabor_pair(theta_deg)
     e = cv2.filter2D(level, cv2.CV_32F, even, borderType=cv2.BORDER_REFLECT)
     o = cv2.filter2D(level, cv2.CV_32F, odd, borderType=cv2.BORDER_REFLECT)
-    return cv2.magnitude(e, o)
+    # Not cv2.magnitude: its result depends on the output buffer's alignment (seen: 5e-7 run to run).
+    return np.sqrt(e * e + o * o)
 
 
 def orientation(img: np.ndarray) -> np.ndarray:
