@@ -10,9 +10,9 @@ starts without importing scikit-learn.
 
 from meshsal.lazy import attach
 
-NAMES = ("knn", "naive_bayes", "decision_tree", "evolutionary_svm", "deep")
-
 _EXPORTS = {
+    "NAMES": "classifiers",
+    "CLASSIFIERS": "classifiers",
     "make": "classifiers",
     "as_matrix": "classifiers",
     "KNN": "classifiers",
@@ -21,6 +21,8 @@ _EXPORTS = {
     "EvolutionarySVM": "classifiers",
     "DeepNet": "classifiers",
     "METHODS": "experiment",
+    "run_batch": "batch",
+    "load_store": "batch",
     "PROTOCOLS": "protocols",
     "Settings": "dataset",
     "Cell": "results",
@@ -33,6 +35,6 @@ _EXPORTS = {
     "write_outputs": "results",
 }
 _SUBMODULES = {"classifiers", "evolutionary_svm", "experiment", "protocols", "dataset", "fusion", "stats", "results",
-               "report", "cache", "cli"}
+               "report", "cache", "cli", "batch", "cluster"}
 
-__getattr__, __dir__, __all__ = attach(__name__, _EXPORTS, _SUBMODULES, eager=("NAMES",))
+__getattr__, __dir__, __all__ = attach(__name__, _EXPORTS, _SUBMODULES)

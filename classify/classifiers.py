@@ -32,10 +32,11 @@ from sklearn.neural_network import MLPClassifier
 from sklearn.tree import DecisionTreeClassifier
 from sklearn.utils.validation import check_is_fitted
 
-from classify import NAMES
 from classify.evolutionary_svm import EvolutionarySVM, as_matrix
+from meshsal.registry import Registry
 
-__all__ = ["NAMES", "make", "as_matrix", "KNN", "NaiveBayes", "DecisionTree", "EvolutionarySVM", "DeepNet"]
+__all__ = ["CLASSIFIERS", "NAMES", "make", "as_matrix", "KNN", "NaiveBayes", "DecisionTree", "EvolutionarySVM",
+           "DeepNet"]
 
 
 class _Flatten:
@@ -329,14 +330,15 @@ def _posterior(neighbour_codes, class_dist, scale):
     return (votes + _SOFT * soft) / (k + _SOFT)
 
 
-_FACTORIES = {
-    "knn": (KNN, {}),
-    "naive_bayes": (NaiveBayes, {}),
-    "decision_tree": (DecisionTree, {"random_state": 0}),
-    "evolutionary_svm": (EvolutionarySVM, {}),
-    "deep": (DeepNet, {"hidden_layer_sizes": (128, 64), "early_stopping": True, "batch_size": 32,
-                         "max_iter": 500, "random_state": 0}),
-}
+#: The five recognizers of the paper: class and default parameters.
+CLASSIFIERS = Registry("classifier")
+CLASSIFIERS.register("knn", (KNN, {}), "k-nearest neighbours, k tuned on grouped inner folds")
+CLASSIFIERS.register("naive_bayes", (NaiveBayes, {}), "Gaussian naive Bayes")
+CLASSIFIERS.register("decision_tree", (DecisionTree, {"random_state": 0}), "CART")
+CLASSIFIERS.register("evolutionary_svm", (EvolutionarySVM, {}), "Mierswa's evolutionary SVM")
+CLASSIFIERS.register("deep", (DeepNet, {"hidden_layer_sizes": (128, 64), "early_stopping": True, "batch_size": 32,
+                                        "max_iter": 500, "random_state": 0}), "two-layer network")
+NAMES = CLASSIFIERS.names()
 
 
 def make(name: str, **params):
@@ -355,11 +357,9 @@ def make(name: str, **params):
     >>> make("svm")
     Traceback (most recent call last):
     ...
-    ValueError: unknown classifier 'svm'; choose one of knn, naive_bayes, decision_tree, evolutionary_svm, deep
+    ValueError: unknown classifier 'svm'; choose from knn, naive_bayes, decision_tree, evolutionary_svm, deep
     """
-    if name not in _FACTORIES:
-        raise ValueError(f"unknown classifier {name!r}; choose one of {', '.join(NAMES)}")
-    cls, defaults = _FACTORIES[name]
+    cls, defaults = CLASSIFIERS.get(name)
     estimator = cls(**defaults)
     valid = estimator.get_params()
     unknown = sorted(set(params) - set(valid))

@@ -12,8 +12,11 @@ import sys
 
 
 def register(subparsers) -> None:
-    """Add the recognition subcommands (``experiment``)."""
-    from classify.experiment import DEFAULT_REPLICATES, FULL_REPLICATES, METHODS, PROTOCOLS
+    """Add the recognition subcommands (``experiment``, ``batch``)."""
+    from classify.classifiers import CLASSIFIERS
+    from classify.experiment import DEFAULT_REPLICATES, FULL_REPLICATES
+    from classify.protocols import PROTOCOL_REGISTRY, PROTOCOLS
+    from meshsal.points import POINT_METHODS
 
     p = subparsers.add_parser(
         "experiment",
@@ -36,13 +39,13 @@ def register(subparsers) -> None:
     p.add_argument("--size-mm", type=float, default=150.0,
                    help="nominal size: every object is scaled to this principal-frame box diagonal (mm)")
     p.add_argument("--methods", type=_csv_list, default=("attention",),
-                   help=f"comma-separated interest-point methods: {','.join(METHODS)}")
+                   help=f"comma-separated interest-point methods: {POINT_METHODS.help_text()}")
     p.add_argument("--baseline", default=None,
                    help="the method the others are compared with (default: uniform if measured, else the first)")
     p.add_argument("--protocols", type=_csv_list, default=PROTOCOLS,
-                   help=f"comma-separated protocols: {','.join(PROTOCOLS)}")
+                   help=f"comma-separated protocols: {PROTOCOL_REGISTRY.help_text()}")
     p.add_argument("--classifiers", type=_csv_list, default=None,
-                   help="comma-separated subset of knn,naive_bayes,decision_tree,evolutionary_svm,deep")
+                   help=f"comma-separated classifiers (default all): {CLASSIFIERS.help_text()}")
     p.add_argument("--n-points", type=int, default=15, help="interest points per object instance")
     p.add_argument("--replicates", type=int, default=None,
                    help=f"instance-protocol replicates, each with fresh instances (default {DEFAULT_REPLICATES}, "
@@ -64,11 +67,65 @@ def register(subparsers) -> None:
                    help="what the classifiers see: raw taxels (the paper's) or roll-invariant polar Fourier "
                         "descriptors")
     p.add_argument("--jobs", type=int, default=2,
-                   help="worker processes (default 2; results do not depend on it)")
+                   help="local worker processes without --workers or --scheduler (default 2; results do not "
+                        "depend on it)")
     p.add_argument("--quiet", action="store_true", help="no progress bars")
     p.add_argument("--real", metavar="SET.npz",
                    help="a saved tactile.ImprintSet (e.g. from 'visuotactile export'): report recognition on it")
+    _add_cluster_options(p, default_workers=None)
     p.set_defaults(func=_experiment)
+
+    b = subparsers.add_parser(
+        "batch",
+        help="points and imprints for every mesh of a folder, on a Dask cluster, into a resumable store",
+        description=("Compute interest points (per --methods) and their simulated imprints for every mesh file "
+                     "(.obj .ply .off .stl) under DIR, one task per mesh on a Dask cluster: a LocalCluster of "
+                     "--workers processes (default: one per core), or an existing cluster at --scheduler. Each "
+                     "mesh's entry is written atomically to STORE/meshes/<name>.npz; a rerun skips the meshes "
+                     "already there; a broken mesh goes to STORE/failures.jsonl and does not stop the batch. "
+                     "Load the store with classify.batch.load_store(STORE)."),
+    )
+    b.add_argument("directory", metavar="DIR", help="folder of meshes (searched recursively)")
+    b.add_argument("--out", required=True, metavar="STORE", help="the store folder (created or resumed)")
+    b.add_argument("--methods", type=_csv_list, default=("attention", "uniform"),
+                   help=f"comma-separated interest-point methods (default attention,uniform): "
+                        f"{POINT_METHODS.help_text()}")
+    b.add_argument("--n-points", type=int, default=15, help="points (and imprints) per mesh and method")
+    b.add_argument("--size-mm", type=float, default=150.0, help="nominal size: principal-frame box diagonal (mm)")
+    b.add_argument("--view-size", type=int, default=128, help="rendered view size for the attention points")
+    b.add_argument("--seed", type=int, default=0)
+    b.add_argument("--quiet", action="store_true", help="no progress bar")
+    _add_cluster_options(b, default_workers=0)
+    b.set_defaults(func=_batch)
+
+
+def _add_cluster_options(p, default_workers):
+    where = p.add_mutually_exclusive_group()
+    where.add_argument("--workers", type=int, default=None, metavar="N",
+                       help="run on a new Dask LocalCluster of N single-threaded worker processes"
+                            + (" (default: one per core; 1 runs in this process)" if default_workers == 0 else ""))
+    where.add_argument("--scheduler", metavar="ADDRESS",
+                       help="run on an existing Dask cluster, e.g. tcp://127.0.0.1:8786 (see 'dask scheduler')")
+
+
+def _batch(args) -> int:
+    import os
+
+    from classify.batch import BatchSettings, run_batch
+    from classify.cluster import Inline, open_executor
+
+    settings = BatchSettings(methods=args.methods, n_points=args.n_points, size_mm=args.size_mm,
+                             view_size=args.view_size, seed=args.seed)
+    workers = args.workers if args.workers is not None or args.scheduler else (os.cpu_count() or 1)
+    if workers is not None and workers <= 1 and not args.scheduler:
+        summary = run_batch(args.directory, args.out, settings, Inline(), args.quiet)
+    else:
+        with open_executor(workers=workers, scheduler=args.scheduler) as executor:
+            summary = run_batch(args.directory, args.out, settings, executor, args.quiet)
+    print(summary.markdown())
+    if summary.failed:
+        print(f"{summary.failed} mesh(es) failed: see {args.out}/failures.jsonl", file=sys.stderr)
+    return 0
 
 
 def _csv_list(text: str) -> tuple:
@@ -79,7 +136,7 @@ def _csv_list(text: str) -> tuple:
 
 
 def _experiment(args) -> int:
-    from classify import NAMES
+    from classify.classifiers import NAMES
     from classify.dataset import Settings
     from classify.experiment import DEFAULT_REPLICATES, FULL_REPLICATES, format_tables, run_experiment, run_real
 
@@ -100,11 +157,14 @@ def _experiment(args) -> int:
     sensor = tactile.Sensor() if args.mode is None else tactile.Sensor(mode=args.mode)
     settings = Settings(n_points=args.n_points, size_mm=args.size_mm, view_size=args.view_size, sensor=sensor,
                         train_instances=args.train_instances, train_sessions=args.train_sessions, seed=args.seed)
-    result = run_experiment(objects=args.objects, methods=args.methods, protocols=args.protocols,
-                            classifiers=classifiers, settings=settings, replicates=replicates, folds=args.folds,
-                            repeats=args.repeats, features=args.features, baseline=args.baseline, n_jobs=args.jobs,
-                            cache_dir=cache_dir,
-                            out_dir=args.out, quiet=args.quiet)
+    from classify.cluster import open_executor
+
+    with open_executor(workers=args.workers, scheduler=args.scheduler, n_jobs=args.jobs) as executor:
+        result = run_experiment(objects=args.objects, methods=args.methods, protocols=args.protocols,
+                                classifiers=classifiers, settings=settings, replicates=replicates,
+                                folds=args.folds, repeats=args.repeats, features=args.features,
+                                baseline=args.baseline, executor=executor, cache_dir=cache_dir,
+                                out_dir=args.out, quiet=args.quiet)
     print(format_tables(result))
     if not args.quiet:
         print(f"results written to {args.out}/ ({result.timings['total']:.0f} s)", file=sys.stderr)

@@ -137,10 +137,10 @@ def instance_spec(settings: Settings, name: str, replicate: int, index: int):
                          settings.brightness_spread)
 
 
-def _points(mesh, method, settings: Settings, seed: int):
+def _points(mesh, method, settings: Settings, seed: int, threads):
     import meshsal
 
-    kwargs = {"n": settings.n_points, "method": method, "seed": seed, "quiet": True}
+    kwargs = {"n": settings.n_points, "method": method, "seed": seed, "quiet": True, "threads": threads}
     if settings.view_size is not None:
         kwargs["size"] = settings.view_size
     return meshsal.interest_points(mesh, **kwargs)
@@ -152,8 +152,11 @@ def _key(kind, nominal, name, method, settings, *parts):
                                cache_mod.library_versions())
 
 
-def paper_sample(nominal, name: str, method: str, settings: Settings, cache_dir=None) -> dict:
+def paper_sample(nominal, name: str, method: str, settings: Settings, cache_dir=None, threads=None) -> dict:
     """The paper's data for one object: n points on the nominal mesh, one clean imprint each.
+
+    ``threads`` (rendering and attention threads, default the CPU count)
+    changes nothing in the result.
 
     Returns
     -------
@@ -164,7 +167,7 @@ def paper_sample(nominal, name: str, method: str, settings: Settings, cache_dir=
     import tactile
 
     def compute():
-        pts = _points(nominal, method, settings, int(_rng(settings, name, 0, 0, 2).integers(2**31 - 1)))
+        pts = _points(nominal, method, settings, int(_rng(settings, name, 0, 0, 2).integers(2**31 - 1)), threads)
         images = tactile.imprints(nominal, pts.positions, pts.normals, settings.sensor)
         return {"positions": np.asarray(pts.positions, np.float64), "normals": np.asarray(pts.normals, np.float64),
                 "imprints": np.asarray(images, np.float32)}
@@ -173,11 +176,12 @@ def paper_sample(nominal, name: str, method: str, settings: Settings, cache_dir=
 
 
 def instance_sample(nominal, name: str, method: str, settings: Settings, replicate: int, index: int,
-                    cache_dir=None) -> dict:
+                    cache_dir=None, threads=None) -> dict:
     """Instance ``index`` of replicate ``replicate``: its points and the imprints of its sessions.
 
     Instance 0 is the test instance (one session), the others train
-    (``settings.train_sessions`` sessions each).
+    (``settings.train_sessions`` sessions each).  ``threads`` as in
+    :func:`paper_sample`.
 
     Returns
     -------
@@ -192,7 +196,8 @@ def instance_sample(nominal, name: str, method: str, settings: Settings, replica
 
     def compute():
         mesh = make_instance(nominal, instance_spec(settings, name, replicate, index))
-        pts = _points(mesh, method, settings, int(_rng(settings, name, replicate, index, 2).integers(2**31 - 1)))
+        pts = _points(mesh, method, settings, int(_rng(settings, name, replicate, index, 2).integers(2**31 - 1)),
+                      threads)
         scene = meshsal.embree.embree_scene(mesh)
         stack = [tactile.acquire(mesh, pts.positions, pts.normals, settings.sensor, settings.perturbation,
                                  _rng(settings, name, replicate, index, 1, s), scene=scene)

@@ -18,9 +18,7 @@ these are the paper's 4- and 6-object sets).
 from __future__ import annotations
 
 import dataclasses
-import multiprocessing
 import time
-from concurrent.futures import ProcessPoolExecutor
 from contextlib import nullcontext
 
 import numpy as np
@@ -28,17 +26,18 @@ from threadpoolctl import threadpool_limits
 
 from classify import cache as cache_mod
 from classify import dataset, stats
-from classify.classifiers import NAMES, make
-from classify.protocols import (PROTOCOLS, InstanceData, InstanceOutcome, PaperOutcome, instance_job, paper_job,
-                                paper_splits)
+from classify.cluster import Inline, worker_pool
+from classify.classifiers import CLASSIFIERS, NAMES, make
+from classify.protocols import (PROTOCOL_REGISTRY, PROTOCOLS, InstanceData, InstanceOutcome, PaperOutcome,
+                                instance_job, paper_job, paper_splits)
 from classify.results import Cell, Comparison, ConfusionMatrix, ExperimentResult, format_tables, write_outputs
+from meshsal.points import METHODS, POINT_METHODS
 from meshsal.progress import progress
 from tactile.features import FEATURES
 
-__all__ = ["PROTOCOLS", "METHODS", "DEFAULT_REPLICATES", "FULL_REPLICATES", "load_objects", "worker_pool",
-           "run_experiment", "run_real", "format_tables", "write_outputs"]
+__all__ = ["PROTOCOLS", "METHODS", "DEFAULT_REPLICATES", "FULL_REPLICATES", "load_objects", "run_experiment",
+           "run_real", "format_tables", "write_outputs"]
 
-METHODS = ("attention", "random", "uniform", "mesh_saliency", "curvature")
 #: Replicates of the instance protocol in a quick run (the default) and in a full run.
 DEFAULT_REPLICATES = 5
 FULL_REPLICATES = 20
@@ -70,37 +69,16 @@ def load_objects(objects, settings: dataset.Settings):
     return names, tuple(dataset.nominal_mesh(m, settings) for m in meshes)
 
 
-class _Inline:
-    """The executor interface, run in the calling thread (one job at a time)."""
-
-    def map(self, fn, *iterables):
-        return map(fn, *iterables)
-
-
-def _limit_threads():
-    """Worker initializer: one BLAS/OpenMP thread per worker process, for its whole life."""
-    threadpool_limits(1)
-
-
-def worker_pool(n_jobs: int):
-    """``n_jobs`` worker processes with capped BLAS/OpenMP threads (in-process when ``n_jobs`` is 1).
-
-    Workers are spawned, not forked: the parent may hold Embree and BLAS threads.
-    """
-    if int(n_jobs) <= 1:
-        return nullcontext(_Inline())
-    return ProcessPoolExecutor(int(n_jobs), mp_context=multiprocessing.get_context("spawn"),
-                               initializer=_limit_threads)
-
-
 def _paper_sample_task(task):
-    nominal, name, method, settings, cache_dir = task
-    return dataset.paper_sample(nominal, name, method, settings, cache_dir)
+    nominal, name, method, settings, cache_dir, threads = task
+    with threadpool_limits(1):
+        return dataset.paper_sample(nominal, name, method, settings, cache_dir, threads)
 
 
 def _instance_sample_task(task):
-    nominal, name, method, settings, r, j, cache_dir = task
-    return dataset.instance_sample(nominal, name, method, settings, r, j, cache_dir)
+    nominal, name, method, settings, r, j, cache_dir, threads = task
+    with threadpool_limits(1):
+        return dataset.instance_sample(nominal, name, method, settings, r, j, cache_dir, threads)
 
 
 def _paper_task(task):
@@ -169,11 +147,11 @@ def run_experiment(objects=None, methods=("attention",), protocols=PROTOCOLS, cl
         The method others are compared with (default ``uniform`` when
         measured, else the first method); no comparison with one method.
     n_jobs : int
-        Worker processes (:func:`worker_pool`); results do not depend on it.
-    executor : concurrent.futures.Executor, optional
+        Worker processes (``classify.cluster.worker_pool``); results do not depend on it.
+    executor : optional
         Runs the per-object stage and the recognition jobs instead of a
-        pool of ``n_jobs`` (e.g. a Dask client's ``get_executor()``); it
-        must cap BLAS/OpenMP threads in its workers itself.
+        pool of ``n_jobs``: anything with an ordered ``map``, e.g. from
+        ``classify.cluster.open_executor`` (a Dask cluster).
     cache_dir : path, None (no cache) or ``"default"`` (:func:`classify.cache.default_dir`)
     out_dir : path or None
         Where ``results.json``, ``results.csv``, ``confusion_<classifier>.png``
@@ -191,12 +169,8 @@ def run_experiment(objects=None, methods=("attention",), protocols=PROTOCOLS, cl
     """
     started = time.perf_counter()
     settings = dataset.Settings() if settings is None else settings
-    methods, protocols, classifiers = tuple(methods), tuple(protocols), tuple(classifiers)
-    for label, given, valid in (("interest-point method", methods, METHODS), ("protocol", protocols, PROTOCOLS),
-                                ("classifier", classifiers, NAMES)):
-        bad = [x for x in given if x not in valid]
-        if bad or not given or len(set(given)) != len(given):
-            raise ValueError(f"unknown or repeated {label}(s) {bad or list(given)}; choose from {', '.join(valid)}")
+    methods, protocols = POINT_METHODS.check(methods), PROTOCOL_REGISTRY.check(protocols)
+    classifiers = CLASSIFIERS.check(classifiers)
     if folds < 2 or repeats < 1 or replicates < 1 or touch_sets_per_object < 1:
         raise ValueError("folds must be >= 2 and repeats, replicates, touch_sets_per_object >= 1")
     if baseline is None:
@@ -215,55 +189,61 @@ def run_experiment(objects=None, methods=("attention",), protocols=PROTOCOLS, cl
     sets = {}
 
     with threadpool_limits(1), (nullcontext(executor) if executor is not None else worker_pool(n_jobs)) as pool:
+        # Workers render with one thread each; alone, the stage renders with every core.
+        threads = None if isinstance(pool, Inline) else 1
         if "paper" in protocols:
             t0 = time.perf_counter()
             pairs = [(m, i) for m in methods for i in range(n_all)]
-            done = progress(pool.map(_paper_sample_task, [(nominal[i], names[i], m, settings, cache_dir)
-                                                         for m, i in pairs]),
+            done = progress(pool.map(_paper_sample_task, [(nominal[i], names[i], m, settings, cache_dir,
+                                                          threads) for m, i in pairs]),
                             total=len(pairs), desc="paper: points+imprints", quiet=quiet)
             samples = dict(zip(pairs, done))
             timings["paper_points_and_imprints"] = time.perf_counter() - t0
             t0 = time.perf_counter()
             for m in methods:
                 for n in object_sets:
-                    X = np.concatenate([samples[m, i]["imprints"] for i in range(n)])
-                    y = np.concatenate([np.full(len(samples[m, i]["imprints"]), i) for i in range(n)])
-                    points = np.concatenate([np.arange(len(samples[m, i]["imprints"])) for i in range(n)])
+                    order = _by_name(names[:n])
+                    X = np.concatenate([samples[m, i]["imprints"] for i in order])
+                    y = np.concatenate([np.full(len(samples[m, i]["imprints"]), c) for c, i in enumerate(order)])
+                    points = np.concatenate([np.arange(len(samples[m, i]["imprints"])) for i in order])
                     _paper_protocol(m, X, y, y * 100000 + points, names[:n], classifiers, params, threshold, folds,
-                                    repeats, settings.seed, features, pool, cache_dir, quiet, (rates, confusions, kept))
+                                    repeats, settings.seed, features, pool, cache_dir, quiet, (rates, confusions, kept),
+                                    order)
             timings["paper_recognition"] = time.perf_counter() - t0
 
         if "instance" in protocols:
             t0 = time.perf_counter()
             index = range(settings.train_instances + 1)
             keys = [(r, m, i, j) for r in range(replicates) for m in methods for i in range(n_all) for j in index]
-            done = progress(pool.map(_instance_sample_task, [(nominal[i], names[i], m, settings, r, j, cache_dir)
-                                                            for r, m, i, j in keys]),
+            done = progress(pool.map(_instance_sample_task, [(nominal[i], names[i], m, settings, r, j,
+                                                             cache_dir, threads) for r, m, i, j in keys]),
                             total=len(keys), desc="instances: points+imprints", quiet=quiet)
             samples = dict(zip(keys, done))
             timings["instance_points_and_imprints"] = time.perf_counter() - t0
             t0 = time.perf_counter()
             for m in methods:
                 for n in object_sets:
-                    data = [_instance_data(samples, r, m, n, names, settings) for r in range(replicates)]
+                    order = _by_name(names[:n])
+                    back = np.argsort(order)
+                    data = [_instance_data(samples, r, m, order, names, settings) for r in range(replicates)]
                     jobs = [(r, c, s) for r in range(replicates) for c in classifiers for s in (False, True)]
                     tasks = [(data[r], c, s, params, threshold, settings.n_points, touch_sets_per_object,
                               settings.seed, r, features) for r, c, s in jobs]
                     arrays = [a for d in data for a in (d.train_X, d.train_y, d.train_instance, d.train_point,
                                                         *d.test)]
                     key = _recognition_key("instance", arrays, [settings.key(), threshold, params, jobs,
-                                                                touch_sets_per_object, list(names[:n]), features])
+                                                                touch_sets_per_object, sorted(names[:n]), features])
                     outcomes = _run_jobs(cache_dir, key, InstanceOutcome, _instance_task, tasks, pool,
                                          f"instances: {m}, {n} objects", quiet)
                     for c in classifiers:
                         for s in (False, True):
                             mine = [o for (_, cj, sj), o in zip(jobs, outcomes) if (cj, sj) == (c, s)]
-                            stack = np.stack([o.rates for o in mine])           # (replicates, k, objects)
+                            stack = np.stack([o.rates for o in mine])[:, :, back]   # (replicates, k, objects)
                             for k in range(1, settings.n_points + 1):
                                 rates[m, "instance", c, n, s, k] = stack[:, k - 1, :]
                                 sets[m, "instance", c, n, s, k] = int(min(o.sets[k - 1] for o in mine))
                             confusions.append(ConfusionMatrix(m, "instance", c, n, s, names[:n],
-                                                              sum(o.confusion for o in mine)))
+                                                              sum(o.confusion for o in mine)[np.ix_(back, back)]))
                             if s:
                                 kept[f"{m}/instance/{n}"] = float(np.mean([o.kept for o in mine]))
             timings["instance_recognition"] = time.perf_counter() - t0
@@ -299,11 +279,21 @@ def run_experiment(objects=None, methods=("attention",), protocols=PROTOCOLS, cl
     return result
 
 
+def _by_name(names) -> np.ndarray:
+    """Object positions sorted by name: recognition sees every object set in one order, whatever was given."""
+    return np.array(sorted(range(len(names)), key=lambda i: names[i]), dtype=np.int64)
+
+
 def _paper_protocol(method, X, y, groups, names, classifiers, params, threshold, folds, repeats, seed, features,
-                    pool, cache_dir, quiet, into):
-    """The paper protocol on one pool of imprints; its rates, confusions and kept fractions go ``into``."""
+                    pool, cache_dir, quiet, into, order=None):
+    """The paper protocol on one pool of imprints; its rates, confusions and kept fractions go ``into``.
+
+    Label c of the pool is object ``order[c]`` of ``names`` (identity by default); what goes ``into``
+    follows the order of ``names``.
+    """
     rates, confusions, kept = into
     n = len(names)
+    back = np.argsort(np.arange(n) if order is None else order)
     splits = paper_splits(y, groups, folds, repeats, seed)
     jobs = [(c, s, r) for c in classifiers for s in (False, True) for r in range(repeats)]
     tasks = [(X, y, groups, [x for x in splits if x.repeat == r], c, s, params, threshold, n, features)
@@ -314,25 +304,27 @@ def _paper_protocol(method, X, y, groups, names, classifiers, params, threshold,
     for c in classifiers:
         for s in (False, True):
             mine = [o for (cj, sj, _), o in zip(jobs, outcomes) if (cj, sj) == (c, s)]
-            rates[method, "paper", c, n, s, 1] = np.stack([o.rates for o in mine])
-            confusions.append(ConfusionMatrix(method, "paper", c, n, s, tuple(names), sum(o.confusion for o in mine)))
+            rates[method, "paper", c, n, s, 1] = np.stack([o.rates for o in mine])[:, back]
+            confusions.append(ConfusionMatrix(method, "paper", c, n, s, tuple(names),
+                                              sum(o.confusion for o in mine)[np.ix_(back, back)]))
             if s:
                 kept[f"{method}/paper/{n}"] = float(np.mean([o.kept for o in mine]))
 
 
-def _instance_data(samples, r, m, n, names, settings) -> InstanceData:
+def _instance_data(samples, r, m, order, names, settings) -> InstanceData:
+    """Replicate r's imprints of the objects ``order`` (label c is object ``order[c]``)."""
     X, y, inst, point = [], [], [], []
-    for i in range(n):
+    for c, i in enumerate(order):
         for j in range(1, settings.train_instances + 1):
             imprints = samples[r, m, i, j]["imprints"]                          # (sessions, k, rows, cols)
             sessions, k = imprints.shape[:2]
             X.append(imprints.reshape(-1, *imprints.shape[2:]))
-            y.append(np.full(sessions * k, i))
+            y.append(np.full(sessions * k, c))
             inst.append(np.full(sessions * k, j))
             point.append(np.tile(np.arange(k), sessions))
-    test = tuple(samples[r, m, i, 0]["imprints"][0] for i in range(n))
+    test = tuple(samples[r, m, i, 0]["imprints"][0] for i in order)
     return InstanceData(np.concatenate(X), np.concatenate(y).astype(np.int64), np.concatenate(inst).astype(np.int64),
-                        np.concatenate(point).astype(np.int64), test, tuple(names[:n]))
+                        np.concatenate(point).astype(np.int64), test, tuple(names[i] for i in order))
 
 
 def run_real(imprint_set, folds=5, repeats=10, seed=0, classifiers=NAMES, threshold=0.85, params=None,

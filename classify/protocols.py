@@ -37,12 +37,17 @@ from threadpoolctl import threadpool_limits
 from classify.classifiers import make
 from classify.dataset import name_seed
 from classify.fusion import calibrate, fit_calibration, fuse, touch_sets
+from meshsal.registry import Registry
 from tactile.features import describe
 
-__all__ = ["PROTOCOLS", "Split", "paper_splits", "select_training", "PaperOutcome", "paper_job",
+__all__ = ["PROTOCOLS", "PROTOCOL_REGISTRY", "Split", "paper_splits", "select_training", "PaperOutcome", "paper_job",
            "InstanceData", "InstanceOutcome", "instance_job"]
 
-PROTOCOLS = ("paper", "instance")
+#: The evaluation protocols (this module's docstring describes them).
+PROTOCOL_REGISTRY = Registry("protocol")
+PROTOCOL_REGISTRY.register("paper", None, "the paper's CV, folds grouped by point")
+PROTOCOL_REGISTRY.register("instance", None, "train and test on distinct fresh instances, k-touch fusion")
+PROTOCOLS = PROTOCOL_REGISTRY.names()
 
 
 @dataclass(frozen=True)

@@ -51,7 +51,7 @@ def format_diff(diff: float, low: float, high: float, p: float) -> str:
     >>> format_diff(-3.04, -6.0, -0.5, 0.0312)
     '-3.0 [-6.0, -0.5] p=0.031'
     """
-    return f"{diff:+.1f} [{low:.1f}, {high:.1f}] p={p:.2g}" if p < 0.01 else f"{diff:+.1f} [{low:.1f}, {high:.1f}] p={p:.3f}"
+    return f"{diff:+.1f} [{low:.1f}, {high:.1f}] p={p:.3f}" if p >= 0.001 else f"{diff:+.1f} [{low:.1f}, {high:.1f}] p<0.001"
 
 
 def _index(cells):

@@ -7,6 +7,8 @@ import sys
 
 def register(subparsers) -> None:
     """Add this package's subcommands to the ``visuotactile`` parser."""
+    from meshsal.points import POINT_METHODS
+
     from . import capture
 
     p = subparsers.add_parser(
@@ -39,9 +41,8 @@ def register(subparsers) -> None:
     p.add_argument("--out", required=True, help="plan to write (.json; the .csv goes beside it)")
     p.add_argument("--size-mm", type=float, default=150.0, help="object diagonal for planning (default 150)")
     p.add_argument("--n", type=int, default=15, help="number of points (default 15)")
-    p.add_argument("--method", default="attention",
-                   choices=("attention", "random", "uniform", "mesh_saliency", "curvature"),
-                   help="interest point method (default attention)")
+    p.add_argument("--method", default="attention", choices=POINT_METHODS.names(),
+                   help=f"interest point method (default attention): {POINT_METHODS.help_text()}")
     p.add_argument("--seed", type=int, default=0, help="seed of the random methods (default 0)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=_cmd_plan)

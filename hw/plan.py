@@ -22,6 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
+from meshsal.jsonfile import read_json
 from meshsal.mesh import Similarity
 
 __all__ = ["FORMAT", "ProbePoint", "Plan", "sensor_rotations", "quaternion_from_matrix", "matrix_from_quaternion",
@@ -240,12 +241,7 @@ def save_plan(plan: Plan, path) -> tuple[Path, Path]:
 def load_plan(path) -> Plan:
     """Read a plan written by :func:`save_plan`, with clear errors naming the file."""
     path = Path(path)
-    try:
-        data = json.loads(path.read_text())
-    except FileNotFoundError:
-        raise FileNotFoundError(f"{path}: no such probe plan") from None
-    except (UnicodeDecodeError, json.JSONDecodeError) as exc:
-        raise ValueError(f"{path}: not a probe plan (invalid JSON: {exc})") from None
+    data = read_json(path, "probe plan")
     if not isinstance(data, dict) or data.get("format") != FORMAT:
         raise ValueError(f"{path}: not a probe plan (no format {FORMAT!r})")
     if data.get("version") != VERSION:

@@ -262,13 +262,15 @@ def press_targets(mesh, plan=None, n: int = 15, method: str = "random", seed: in
 
 
 def _parser() -> argparse.ArgumentParser:
+    from meshsal.points import POINT_METHODS
+    from tactile.sensor import SENSOR_MODES
+
     p = argparse.ArgumentParser(prog="python -m hw.simdevice", description=__doc__.split("\n\n")[0])
     p.add_argument("--object", required=True, help="a toy name (meshsal.toys.NAMES) or a mesh file")
     p.add_argument("--size-mm", type=float, default=150.0, help="object diagonal in mm (default 150)")
     p.add_argument("--points", metavar="PLAN_JSON", help="press the points of this probe plan")
     p.add_argument("--n", type=int, default=15, help="interest points without a plan (default 15)")
-    p.add_argument("--method", default="random",
-                   choices=("attention", "random", "uniform", "mesh_saliency", "curvature"),
+    p.add_argument("--method", default="random", choices=POINT_METHODS.names(),
                    help="interest point method without a plan (default random: starts at once)")
     p.add_argument("--presses", type=int, help="number of presses (default: one per point)")
     p.add_argument("--rate", type=float, default=100.0, help="frames per second (default 100)")
@@ -279,7 +281,7 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--full-scale", type=float, default=3000.0, help="counts at imprint value 1 (default 3000)")
     p.add_argument("--rows", type=int, default=16, help="sensor rows (default 16)")
     p.add_argument("--cols", type=int, default=16, help="sensor columns (default 16)")
-    p.add_argument("--mode", choices=("contour", "pressure"), default="contour",
+    p.add_argument("--mode", choices=SENSOR_MODES.names(), default="contour",
                    help="imprint mode of the simulated pad (default contour, the paper's image)")
     p.add_argument("--protocol", choices=PROTOCOLS, default="binary")
     p.add_argument("--garbage", type=float, default=0.0, help="probability of a garbage burst per frame")

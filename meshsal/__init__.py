@@ -32,7 +32,8 @@ _EXPORTS = {
     "interest_points": "points",
     "project_pixel_paper": "points",
 }
-_SUBMODULES = {"render", "tracer", "toys", "ycb", "objects", "instances", "reproducible", "sdf", "attention", "curvature", "points", "sampling", "overlay", "embree",
-               "io", "transform", "progress", "atomic"}
+_SUBMODULES = {"render", "tracer", "toys", "ycb", "objects", "instances", "reproducible", "registry", "sdf",
+               "attention", "curvature", "points", "sampling", "overlay", "embree", "io", "transform", "progress",
+               "atomic"}
 
 __getattr__, __dir__, __all__ = attach(__name__, _EXPORTS, _SUBMODULES)

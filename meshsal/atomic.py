@@ -15,6 +15,9 @@ def atomic_path(path):
     The temporary name keeps ``path``'s suffix, so writers that choose the
     format by extension (``cv2.imwrite``, ``np.savez``) still work.  On an
     exception the temporary file is removed and ``path`` is left untouched.
+    The file is flushed to disk before the rename and the directory after
+    it, so a power loss leaves the old file or the new one, never an empty
+    one under the final name.
 
     Examples
     --------
@@ -34,10 +37,20 @@ def atomic_path(path):
         yield tmp
         # mkstemp creates the file private (0600); results are for sharing.
         os.chmod(tmp, 0o644)
+        _fsync(tmp, os.O_RDONLY)
         os.replace(tmp, path)
+        _fsync(path.parent, os.O_RDONLY | getattr(os, "O_DIRECTORY", 0))
     finally:
         if tmp.exists():
             tmp.unlink()
+
+
+def _fsync(path, flags) -> None:
+    fd = os.open(path, flags)
+    try:
+        os.fsync(fd)
+    finally:
+        os.close(fd)
 
 
 def write_text(path, text: str) -> None:

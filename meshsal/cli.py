@@ -88,7 +88,7 @@ def _cmd_render(args) -> int:
 
 
 def _add_points(subparsers) -> None:
-    from .points import METHODS
+    from .points import POINT_METHODS
 
     p = subparsers.add_parser(
         "points", help="choose interest points on a mesh by visual attention (or a baseline)",
@@ -100,7 +100,8 @@ def _add_points(subparsers) -> None:
     p.add_argument("mesh", type=Path, help="mesh file (OBJ, PLY, OFF, STL) or a toy name (cow, glasses, ...)")
     p.add_argument("--out", required=True, type=Path, help="output folder")
     p.add_argument("--n", type=int, default=15, help="number of points (default 15)")
-    p.add_argument("--method", choices=METHODS, default="attention", help="how to choose them (default attention)")
+    p.add_argument("--method", choices=POINT_METHODS.names(), default="attention",
+                   help=f"how to choose them (default attention): {POINT_METHODS.help_text()}")
     p.add_argument("--size-mm", type=float, default=150.0,
                    help="scale the mesh to this bounding-box diagonal in mm first (default 150)")
     p.add_argument("--min-spacing-mm", type=float, default=None,
@@ -115,8 +116,6 @@ def _add_points(subparsers) -> None:
 
 
 def _cmd_points(args) -> int:
-    import json
-
     from . import overlay
     from .atomic import write_png, write_text
     from .curvature import mesh_saliency
@@ -145,18 +144,14 @@ def _cmd_points(args) -> int:
     source_mesh = mesh.replace(vertices=to_source(mesh.vertices), vertex_colors=colors, transform=Similarity())
     save_ply(args.out / "saliency.ply", source_mesh, quality=vertex_saliency)
 
+    settings = {"n": args.n, "method": args.method, "size_mm": args.size_mm, "view_size": args.size,
+                "threshold": args.threshold, "seed": args.seed}
+    pts.save(args.out / "points.json", frame=mesh.transform, source=str(args.mesh), settings=settings)
     positions = to_source(pts.positions)
     normals = mesh.transform.direction_to_source(pts.normals)
     records = [{"id": k + 1, "vertex": int(pts.vertex_ids[k]), "position": positions[k].tolist(),
-                "normal": normals[k].tolist(), "score": float(pts.scores[k]), "votes": int(pts.votes[k]),
-                "views": list(pts.views[k])} for k in range(len(pts))]
-    settings = {"n": args.n, "method": args.method, "size_mm": args.size_mm, "view_size": args.size,
-                "threshold": args.threshold, "seed": args.seed,
-                "min_spacing": float(mesh.transform.length_to_source(pts.min_spacing)),
-                "best_set": pts.best_set}
-    document = {"mesh": str(args.mesh), "units": "source units of the mesh file", "settings": settings,
-                "points": records}
-    write_text(args.out / "points.json", json.dumps(document, indent=2) + "\n")
+                "normal": normals[k].tolist(), "score": float(pts.scores[k]), "votes": int(pts.votes[k])}
+               for k in range(len(pts))]
     lines = ["id,vertex,x,y,z,nx,ny,nz,score,votes"]
     for r in records:
         lines.append(",".join([str(r["id"]), str(r["vertex"])] + [repr(float(v)) for v in r["position"]]

@@ -38,10 +38,12 @@ import numpy as np
 
 from .embree import embree_scene
 from .mesh import Mesh, face_normals, vertex_normals
+from .registry import Registry
 from .sampling import farthest_points, field_peaks, non_maximum_suppression, random_surface_points
 
 __all__ = [
     "METHODS",
+    "POINT_METHODS",
     "InterestPoints",
     "interest_points",
     "default_min_spacing",
@@ -52,7 +54,8 @@ __all__ = [
     "project_pixel_paper",
 ]
 
-METHODS = ("attention", "random", "uniform", "mesh_saliency", "curvature")
+POINTS_FORMAT = "visuotactile.points"
+POINTS_VERSION = 1
 SPACING_FRACTION = 0.08
 #: Candidates drawn per requested point by the random baseline (dart throwing).
 RANDOM_POOL = 64
@@ -104,6 +107,116 @@ class InterestPoints:
     def __len__(self) -> int:
         return int(self.vertex_ids.size)
 
+    def save(self, path, frame=None, source: str = "", settings: dict | None = None) -> None:
+        """Write the points as a versioned ``points.json``, in the mesh file's own frame, atomically.
+
+        Parameters
+        ----------
+        path : str or os.PathLike
+        frame : meshsal.Similarity, optional
+            The mesh's ``transform``: positions, normals and the spacing are
+            written mapped back to the file's frame and units.
+        source : str
+            The mesh file (or object name) the points belong to.
+        settings : dict, optional
+            How they were chosen, recorded as given.
+
+        Examples
+        --------
+        >>> import pathlib, tempfile
+        >>> from meshsal import toys
+        >>> pts = interest_points(toys.make("cup"), n=3, method="uniform")
+        >>> path = pathlib.Path(tempfile.mkdtemp()) / "points.json"
+        >>> pts.save(path, source="cup")
+        >>> again = InterestPoints.load(path)
+        >>> again.method, bool(np.allclose(again.positions, pts.positions))
+        ('uniform', True)
+        """
+        import json
+
+        from .atomic import write_text
+        from .mesh import Similarity
+
+        frame = Similarity() if frame is None else frame
+        positions = frame.to_source(self.positions)
+        normals = frame.direction_to_source(self.normals)
+        records = [{"id": k + 1, "vertex": int(self.vertex_ids[k]), "position": positions[k].tolist(),
+                    "normal": normals[k].tolist(), "score": float(self.scores[k]), "votes": int(self.votes[k]),
+                    "views": list(self.views[k])} for k in range(len(self))]
+        document = {"format": POINTS_FORMAT, "version": POINTS_VERSION, "mesh": str(source),
+                    "units": "source units and frame of the mesh file", "method": self.method,
+                    "best_set": int(self.best_set), "min_spacing": float(frame.length_to_source(self.min_spacing)),
+                    "settings": settings or {}, "points": records,
+                    "vertex_saliency": np.asarray(self.vertex_saliency, np.float64).tolist()}
+        write_text(path, json.dumps(document, indent=1) + "\n")
+
+    @classmethod
+    def load(cls, path) -> InterestPoints:
+        """Points from a ``points.json``, in the file's frame and units (ValueError naming the file).
+
+        Files of this format's version 1 give every field back.  Older
+        files without a ``format`` key give positions, normals and ids only
+        (``vertex_ids`` -1, no scores, votes or saliency).
+        """
+        return _read_points(path)
+
+
+@dataclass(frozen=True, eq=False)
+class _LoadedPoints(InterestPoints):
+    """Points read from a file, with the ids the file gave them (1..k when written by ``save``)."""
+
+    ids: np.ndarray = None
+
+
+def _read_points(path) -> InterestPoints:
+    from pathlib import Path
+
+    from meshsal.jsonfile import read_json
+
+    path = Path(path)
+    document = read_json(path, "points file")
+    if not isinstance(document, dict) or not isinstance(document.get("points"), list):
+        raise ValueError(f"{path}: expected an object with a 'points' list (as written by 'visuotactile points')")
+    version = document.get("version", 0) if document.get("format", POINTS_FORMAT) == POINTS_FORMAT else None
+    if version is None or not isinstance(version, int) or version > POINTS_VERSION:
+        raise ValueError(f"{path}: not a points file this version reads (format {document.get('format')!r}, "
+                         f"version {document.get('version')!r}; this reads {POINTS_FORMAT} up to {POINTS_VERSION})")
+    items = document["points"]
+    if not items:
+        raise ValueError(f"{path}: the 'points' list is empty")
+    positions, normals, ids, vertices, scores, votes, views = [], [], [], [], [], [], []
+    for k, item in enumerate(items):
+        where = f"{path}: points[{k}]"
+        if not isinstance(item, dict):
+            raise ValueError(f"{where} is not an object")
+        for key, out in (("position", positions), ("normal", normals)):
+            value = item.get(key)
+            try:
+                vector = np.asarray(value, dtype=np.float64)
+            except (TypeError, ValueError):
+                vector = None
+            if vector is None or vector.shape != (3,) or not np.isfinite(vector).all():
+                raise ValueError(f"{where}: '{key}' must be three finite numbers, got {value!r}")
+            out.append(vector)
+        if np.linalg.norm(normals[-1]) < 1e-12:
+            raise ValueError(f"{where}: 'normal' is zero")
+        point_id = item.get("id", k + 1)
+        if isinstance(point_id, bool) or not isinstance(point_id, int):
+            raise ValueError(f"{where}: 'id' must be an integer, got {point_id!r}")
+        ids.append(point_id)
+        vertices.append(int(item.get("vertex", -1)))
+        scores.append(float(item.get("score", 0.0)))
+        votes.append(int(item.get("votes", 0)))
+        views.append(tuple(int(v) for v in item.get("views", ())))
+    N = np.array(normals)
+    return _LoadedPoints(vertex_ids=np.array(vertices, np.int64), positions=np.array(positions),
+                         normals=N / np.linalg.norm(N, axis=1, keepdims=True), scores=np.array(scores),
+                         votes=np.array(votes, np.int64),
+                         vertex_saliency=np.asarray(document.get("vertex_saliency", []), np.float64),
+                         views=tuple(views), method=str(document.get("method", "unknown")),
+                         best_set=int(document.get("best_set", -1)),
+                         min_spacing=float(document.get("min_spacing", 0.0)), ids=np.array(ids, np.int64))
+
 
 def default_min_spacing(mesh: Mesh) -> float:
     """8 % of the bounding-box diagonal (a sensor's half width on a 150 mm object)."""
@@ -112,8 +225,7 @@ def default_min_spacing(mesh: Mesh) -> float:
 
 
 def _check(mesh: Mesh, n, method, min_spacing, threshold) -> tuple[int, float]:
-    if method not in METHODS:
-        raise ValueError(f"unknown method {method!r}; expected one of {METHODS}")
+    POINT_METHODS.get(method)
     if int(n) != n or n < 1:
         raise ValueError(f"n must be a positive integer, got {n!r}")
     if mesh.n_faces == 0:
@@ -395,6 +507,45 @@ def attention_points(mesh: Mesh, views, maps: np.ndarray, vertex_saliency: np.nd
                           method="attention", best_set=best, min_spacing=spacing)
 
 
+def _random_candidates(mesh, vn, n, rng, vertex_saliency):
+    faces, bary = random_surface_points(mesh.vertices, mesh.faces, RANDOM_POOL * n, seed=rng)
+    ids = _nearest_corner(mesh, faces, bary)
+    positions = np.einsum("kc,kcd->kd", bary, mesh.vertices[mesh.faces[faces]])
+    return _Candidates(ids, positions, _normals_at(mesh, vn, faces, bary), vertex_saliency[ids]), vertex_saliency
+
+
+def _uniform_candidates(mesh, vn, n, rng, vertex_saliency):
+    used = np.unique(mesh.faces)
+    order = used[farthest_points(mesh.vertices[used], 4 * n, start=int(rng.integers(used.size)))]
+    return _vertex_candidates(mesh, vn, order, vertex_saliency[order]), vertex_saliency
+
+
+def _peak_candidates(field):
+    def candidates(mesh, vn, n, rng, vertex_saliency):
+        values = field(mesh, vertex_saliency)
+        ids = field_peaks(values, mesh.faces)
+        return _vertex_candidates(mesh, vn, ids, values[ids]), values
+
+    return candidates
+
+
+def _abs_mean_curvature(mesh, vertex_saliency):
+    from .curvature import mean_curvature
+
+    return np.abs(mean_curvature(mesh.vertices, mesh.faces))
+
+
+#: The interest-point methods.  A baseline's value maps (mesh, vertex normals, n, generator, mesh
+#: saliency) to its first candidates and the field that ranks the fill; "attention" is the paper's pipeline.
+POINT_METHODS = Registry("interest-point method")
+POINT_METHODS.register("attention", None, "the paper's visual attention")
+POINT_METHODS.register("random", _random_candidates, "area-weighted random surface points")
+POINT_METHODS.register("uniform", _uniform_candidates, "farthest-point sampling")
+POINT_METHODS.register("mesh_saliency", _peak_candidates(lambda mesh, s: s), "peaks of Lee et al.'s mesh saliency")
+POINT_METHODS.register("curvature", _peak_candidates(_abs_mean_curvature), "peaks of absolute mean curvature")
+METHODS = POINT_METHODS.names()
+
+
 def interest_points(mesh: Mesh, n: int = 15, method: str = "attention", seed=0,
                     min_spacing: float | None = None, size: int = 128, threshold: float = 0.5,
                     quiet: bool = True, weights=None, vertex_saliency=None,
@@ -442,7 +593,7 @@ def interest_points(mesh: Mesh, n: int = 15, method: str = "attention", seed=0,
     >>> pts.positions.shape, pts.normals.shape, len(pts.views)
     ((15, 3), (15, 3), 15)
     """
-    from .curvature import mean_curvature, mesh_saliency
+    from .curvature import mesh_saliency
 
     n, spacing = _check(mesh, n, method, min_spacing, threshold)
     if vertex_saliency is None:
@@ -455,22 +606,7 @@ def interest_points(mesh: Mesh, n: int = 15, method: str = "attention", seed=0,
                                 threshold=threshold)
 
     vn = vertex_normals(mesh.vertices, mesh.faces)
-    rng = np.random.default_rng(seed)
-    field = vertex_saliency
-    used = np.unique(mesh.faces)
-    if method == "random":
-        faces, bary = random_surface_points(mesh.vertices, mesh.faces, RANDOM_POOL * n, seed=rng)
-        ids = _nearest_corner(mesh, faces, bary)
-        positions = np.einsum("kc,kcd->kd", bary, mesh.vertices[mesh.faces[faces]])
-        first = _Candidates(ids, positions, _normals_at(mesh, vn, faces, bary), field[ids])
-    elif method == "uniform":
-        order = used[farthest_points(mesh.vertices[used], 4 * n, start=int(rng.integers(used.size)))]
-        first = _vertex_candidates(mesh, vn, order, field[order])
-    else:
-        if method == "curvature":
-            field = np.abs(mean_curvature(mesh.vertices, mesh.faces))
-        ids = field_peaks(field, mesh.faces)
-        first = _vertex_candidates(mesh, vn, ids, field[ids])
+    first, field = POINT_METHODS.get(method)(mesh, vn, n, np.random.default_rng(seed), vertex_saliency)
     chosen = _select(first, _saliency_fill(mesh, vn, vertex_saliency, lambda i: field[i]), n, spacing)
     return InterestPoints(vertex_ids=chosen.vertex_ids, positions=chosen.positions, normals=chosen.normals,
                           scores=chosen.scores, votes=np.zeros(chosen.vertex_ids.size, np.int64),

@@ -11,12 +11,12 @@ T = TypeVar("T")
 
 
 def progress(items: Iterable[T], total: int | None = None, desc: str = "",
-             quiet: bool = False, stream=None) -> Iterator[T]:
+             quiet: bool = False, stream=None, unit: str = "") -> Iterator[T]:
     """Yield ``items`` while drawing ``desc [#####.....] k/total elapsed`` on stderr.
 
     Nothing is drawn when ``quiet`` is true.  On a terminal the bar redraws in
     place; elsewhere (logs, CI) it prints a line at most every 10 % so logs
-    stay short.
+    stay short.  With a ``unit`` (``"meshes"``) the rate follows: ``2.4 meshes/s``.
 
     Examples
     --------
@@ -46,6 +46,8 @@ def progress(items: Iterable[T], total: int | None = None, desc: str = "",
             text = f"{desc} [{bar}] {k}/{total} {elapsed:5.1f}s"
         else:
             text = f"{desc} {k} {elapsed:5.1f}s"
+        if unit:
+            text += f" {k / elapsed if elapsed > 0 else 0.0:.2f} {unit}/s"
         stream.write(("\r" + text) if tty else text + "\n")
         stream.flush()
 

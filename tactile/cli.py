@@ -7,7 +7,7 @@ from pathlib import Path
 
 def register(subparsers) -> None:
     """Add this package's subcommands to the ``visuotactile`` parser."""
-    from tactile.sensor import MODES, PLANES, Sensor
+    from tactile.sensor import PLANES, SENSOR_MODES, Sensor
 
     default = Sensor()
     p = subparsers.add_parser(
@@ -22,7 +22,7 @@ def register(subparsers) -> None:
     p.add_argument("--out", type=Path, required=True, metavar="SET.npz", help="imprint set to write")
     p.add_argument("--size-mm", type=float, default=150.0,
                    help="bounding-box diagonal the mesh is scaled to, in mm (default 150)")
-    p.add_argument("--mode", choices=MODES, default=default.mode,
+    p.add_argument("--mode", choices=SENSOR_MODES.names(), default=default.mode,
                    help=f"contour (the paper's image) or pressure (default {default.mode})")
     p.add_argument("--plane", choices=PLANES, default=default.plane,
                    help=f"how the pad plane is fitted (default {default.plane})")
@@ -36,47 +36,14 @@ def register(subparsers) -> None:
 
 
 def read_points(path) -> tuple:
-    """Positions (k,3), unit normals (k,3) and ids (k,) from a points.json; ValueError naming the file."""
-    import json
+    """Positions (k,3), unit normals (k,3) and ids (k,) from a points.json, in the file's frame.
 
-    import numpy as np
+    ``meshsal.InterestPoints.load`` reads and checks it (ValueError naming the file).
+    """
+    from meshsal.points import InterestPoints
 
-    path = Path(path)
-    try:
-        document = json.loads(path.read_text())
-    except FileNotFoundError:
-        raise FileNotFoundError(f"{path}: points file not found") from None
-    except UnicodeDecodeError:
-        raise ValueError(f"{path}: points file is not UTF-8 text") from None
-    except json.JSONDecodeError as exc:
-        raise ValueError(f"{path}: malformed JSON at line {exc.lineno} column {exc.colno}: {exc.msg}") from None
-    if not isinstance(document, dict) or not isinstance(document.get("points"), list):
-        raise ValueError(f"{path}: expected an object with a 'points' list (as written by 'visuotactile points')")
-    items = document["points"]
-    if not items:
-        raise ValueError(f"{path}: the 'points' list is empty")
-    positions, normals, ids = [], [], []
-    for k, item in enumerate(items):
-        where = f"{path}: points[{k}]"
-        if not isinstance(item, dict):
-            raise ValueError(f"{where} is not an object")
-        for key, out in (("position", positions), ("normal", normals)):
-            value = item.get(key)
-            try:
-                vector = np.asarray(value, dtype=np.float64)
-            except (TypeError, ValueError):
-                vector = None
-            if vector is None or vector.shape != (3,) or not np.isfinite(vector).all():
-                raise ValueError(f"{where}: '{key}' must be three finite numbers, got {value!r}")
-            out.append(vector)
-        if np.linalg.norm(normals[-1]) < 1e-12:
-            raise ValueError(f"{where}: 'normal' is zero")
-        point_id = item.get("id", k + 1)
-        if isinstance(point_id, bool) or not isinstance(point_id, int):
-            raise ValueError(f"{where}: 'id' must be an integer, got {point_id!r}")
-        ids.append(point_id)
-    N = np.array(normals)
-    return np.array(positions), N / np.linalg.norm(N, axis=1, keepdims=True), np.array(ids, dtype=np.int64)
+    pts = InterestPoints.load(path)
+    return pts.positions, pts.normals, pts.ids
 
 
 def _cmd_imprints(args) -> int:

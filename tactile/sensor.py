@@ -19,9 +19,11 @@ from dataclasses import asdict, dataclass
 import numpy as np
 
 from meshsal.mesh import Mesh
+from meshsal.registry import Registry
 
 __all__ = [
     "MODES",
+    "SENSOR_MODES",
     "PLANES",
     "Sensor",
     "Poses",
@@ -33,7 +35,11 @@ __all__ = [
     "check_points",
 ]
 
-MODES = ("contour", "pressure")
+#: How a pad turns depth into taxel values.
+SENSOR_MODES = Registry("sensor mode")
+SENSOR_MODES.register("contour", None, "the paper's depth-coded image of four plane sections")
+SENSOR_MODES.register("pressure", None, "indentation depth, as a force-resistive array reads it")
+MODES = SENSOR_MODES.names()
 PLANES = ("pca", "paper")
 
 # The in-plane frame follows world +y (meshes are y-up) unless the normal is
@@ -103,8 +109,8 @@ class Sensor:
             if not (np.isfinite(value) and value > 0):
                 raise ValueError(f"Sensor.{name} must be finite and positive, got {value}")
             object.__setattr__(self, name, value)
-        if self.mode not in MODES:
-            raise ValueError(f"Sensor.mode must be one of {MODES}, got {self.mode!r}")
+        if self.mode not in SENSOR_MODES:
+            raise ValueError(f"Sensor.mode must be one of {SENSOR_MODES.names()}, got {self.mode!r}")
         if self.plane not in PLANES:
             raise ValueError(f"Sensor.plane must be one of {PLANES}, got {self.plane!r}")
 

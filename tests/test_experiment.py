@@ -44,6 +44,17 @@ def _objects():
             shapes.cylinder(radius=25.0, length=120.0, around=48, along=8).replace(name="rod")]
 
 
+def test_the_rates_of_an_object_set_do_not_depend_on_the_order_objects_are_given_in():
+    kwargs = dict(methods=("random",), classifiers=("knn", "naive_bayes"), settings=SMALL, replicates=2,
+                  repeats=2, folds=3, cache_dir=None, quiet=True, n_jobs=1)
+    given = experiment.run_experiment(_objects(), **kwargs)
+    flipped = experiment.run_experiment(_objects()[::-1], **kwargs)
+    for protocol, k in (("paper", 1), ("instance", 1), ("instance", 4)):
+        for c in ("knn", "naive_bayes"):
+            key = ("random", protocol, c, 3, True, k)
+            np.testing.assert_array_equal(given.rates[key], flipped.rates[key][:, ::-1])
+
+
 def test_results_csv_is_identical_for_one_and_two_jobs(tmp_path):
     kwargs = dict(methods=("random",), settings=SMALL, replicates=2, repeats=2, folds=3, cache_dir=None, quiet=True)
     one = experiment.run_experiment(_objects(), n_jobs=1, out_dir=tmp_path / "one", **kwargs)
@@ -148,3 +159,17 @@ def test_real_imprint_set_gives_table_2_with_folds_grouped_by_point(tmp_path, ca
     assert len(rows) == 5 * 2 and all(r["method"] == "real" for r in rows)
     knn = [r for r in rows if r["classifier"] == "knn" and r["selection"] == "false"][0]
     assert float(knn["mean"]) == 100.0
+
+
+def test_results_csv_is_identical_in_process_on_a_local_cluster_and_on_a_tcp_cluster(tmp_path, dask_cluster):
+    from classify.cluster import open_executor
+
+    kwargs = dict(methods=("uniform",), classifiers=("knn", "naive_bayes", "decision_tree"), settings=SMALL,
+                  replicates=2, repeats=2, folds=3, cache_dir=None, quiet=True)
+    experiment.run_experiment(_objects(), n_jobs=1, out_dir=tmp_path / "serial", **kwargs)
+    with open_executor(workers=2) as executor:
+        experiment.run_experiment(_objects(), executor=executor, out_dir=tmp_path / "local", **kwargs)
+    with open_executor(scheduler=dask_cluster.address) as executor:
+        experiment.run_experiment(_objects(), executor=executor, out_dir=tmp_path / "tcp", **kwargs)
+    serial = (tmp_path / "serial" / "results.csv").read_text()
+    assert serial == (tmp_path / "local" / "results.csv").read_text() == (tmp_path / "tcp" / "results.csv").read_text()

@@ -67,7 +67,7 @@ def test_plan_file_errors(tmp_path):
     with pytest.raises(FileNotFoundError, match="plan.json"):
         load_plan(path)
     path.write_text("{not json")
-    with pytest.raises(ValueError, match="plan.json: not a probe plan"):
+    with pytest.raises(ValueError, match="plan.json: not a valid probe plan: malformed JSON"):
         load_plan(path)
     path.write_text(json.dumps({"format": "something else"}))
     with pytest.raises(ValueError, match="not a probe plan"):

@@ -9,6 +9,7 @@ import pytest
 from meshsal.mesh import Mesh
 from meshsal.points import (
     METHODS,
+    InterestPoints,
     attention_points,
     best_view_set,
     interest_points,
@@ -222,7 +223,7 @@ def test_saliency_and_curvature_baselines_start_at_the_bump():
 
 def test_bad_arguments_are_rejected():
     mesh, _, _ = planted_sphere()
-    with pytest.raises(ValueError, match="unknown method"):
+    with pytest.raises(ValueError, match="unknown interest-point method"):
         interest_points(mesh, method="magic")
     with pytest.raises(ValueError, match="positive integer"):
         interest_points(mesh, n=0, method="random")
@@ -300,7 +301,12 @@ def test_cli_writes_every_file_in_the_source_frame(tmp_path, capsys):
     positions = np.array([p["position"] for p in pts])
     assert distance_to_surface(positions, source).max() < 1e-6
     assert np.allclose(np.linalg.norm([p["normal"] for p in pts], axis=1), 1.0)
-    np.testing.assert_allclose(doc["settings"]["min_spacing"], 0.08 * np.linalg.norm(np.ptp(source.vertices, 0)))
+    np.testing.assert_allclose(doc["min_spacing"], 0.08 * np.linalg.norm(np.ptp(source.vertices, 0)))
+    assert (doc["format"], doc["version"]) == ("visuotactile.points", 1)
+    again = InterestPoints.load(out / "points.json")             # the versioned format round-trips
+    np.testing.assert_allclose(again.positions, positions)
+    assert again.method == "attention" and len(again.vertex_saliency) == source.n_vertices
+    assert again.ids.tolist() == list(range(1, 7)) and again.votes.tolist() == [p["votes"] for p in pts]
     rows = (out / "points.csv").read_text().strip().splitlines()
     assert rows[0].startswith("id,") and len(rows) == 7
     np.testing.assert_allclose([float(v) for v in rows[1].split(",")[2:5]], positions[0])
@@ -329,3 +335,12 @@ def test_cli_bad_mesh_fails_with_the_loader_message(tmp_path, capsys):
     err = capsys.readouterr().err
     assert "points" in err and "broken.obj" in err
     assert not (tmp_path / "o" / "points.json").exists()
+
+
+def test_a_points_file_of_a_newer_version_or_another_format_is_refused(tmp_path):
+    path = tmp_path / "points.json"
+    for document, message in (({"format": "visuotactile.points", "version": 99, "points": []}, "version 99"),
+                              ({"format": "something.else", "points": []}, "something.else")):
+        path.write_text(json.dumps(document))
+        with pytest.raises(ValueError, match=message):
+            InterestPoints.load(path)

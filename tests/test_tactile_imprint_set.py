@@ -126,7 +126,7 @@ def test_imprints_command_writes_set_and_picture(tmp_path):
 
 @pytest.mark.parametrize("content,message", [
     (None, "points.json: points file not found"),
-    ("{not json", "points.json: malformed JSON at line 1"),
+    ("{not json", "points.json: not a valid points file: malformed JSON at line 1"),
     ('{"points": []}', "points.json: the 'points' list is empty"),
     ('[1, 2]', "points.json: expected an object with a 'points' list"),
     ('{"points": [{"position": [0, 1], "normal": [0, 1, 0]}]}', r"points.json: points\[0\]: 'position'"),

@@ -10,6 +10,8 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
+from meshsal.registry import Registry
+
 from .dkl import dkl
 from .itti import color, intensity, orientation
 from .local import contrast, entropy
@@ -18,6 +20,7 @@ from .symmetry import symmetry
 
 __all__ = [
     "CHANNELS",
+    "CHANNEL_REGISTRY",
     "IMAGE_CHANNELS",
     "SaliencyResult",
     "channel_function",
@@ -30,25 +33,26 @@ __all__ = [
     "saliency_views",
 ]
 
-CHANNELS = ("intensity", "color", "orientation", "dkl", "symmetry", "curvature", "entropy", "contrast")
-IMAGE_CHANNELS = tuple(c for c in CHANNELS if c != "curvature")
-
-_FUNCTIONS = {
-    "intensity": intensity,
-    "color": color,
-    "orientation": orientation,
-    "dkl": dkl,
-    "symmetry": symmetry,
-    "entropy": entropy,
-    "contrast": contrast,
-}
+#: The eight conspicuity channels; an image channel's value maps (H, W, 3) float32 to (H, W) float32.
+#: "curvature" (mesh saliency seen from the view) needs the mesh, so it has no image function.
+CHANNEL_REGISTRY = Registry("attention channel")
+CHANNEL_REGISTRY.register("intensity", intensity, "Itti's intensity")
+CHANNEL_REGISTRY.register("color", color, "Itti's red-green and blue-yellow opponency")
+CHANNEL_REGISTRY.register("orientation", orientation, "Gabor energy at four orientations")
+CHANNEL_REGISTRY.register("dkl", dkl, "DKL colour contrast")
+CHANNEL_REGISTRY.register("symmetry", symmetry, "Loy and Eklundh's mirror symmetry")
+CHANNEL_REGISTRY.register("curvature", None, "mesh saliency (Lee et al.) seen from the view")
+CHANNEL_REGISTRY.register("entropy", entropy, "local entropy")
+CHANNEL_REGISTRY.register("contrast", contrast, "local contrast")
+CHANNELS = CHANNEL_REGISTRY.names()
+IMAGE_CHANNELS = tuple(e.name for e in CHANNEL_REGISTRY if e.value is not None)
 
 
 def channel_function(name: str):
     """The function ``(img (H, W, 3) float32) -> (H, W) float32`` of an image channel."""
-    if name not in _FUNCTIONS:
+    if name not in IMAGE_CHANNELS:
         raise ValueError(f"unknown image channel {name!r}; expected one of {IMAGE_CHANNELS}")
-    return _FUNCTIONS[name]
+    return CHANNEL_REGISTRY.get(name)
 
 
 @dataclass(frozen=True, eq=False)
