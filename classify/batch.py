@@ -173,7 +173,8 @@ def _compute(path: Path, name: str, store: Path, settings: BatchSettings, timing
     for method in settings.methods:
         t = time.perf_counter()
         pts = meshsal.interest_points(mesh, n=settings.n_points, method=method, seed=settings.seed,
-                                      size=settings.view_size, vertex_saliency=saliency, threads=1)
+                                      size=settings.view_size, vertex_saliency=saliency, threads=1,
+                                      pad_width=tactile.Sensor().width_mm)
         timings["points"] += time.perf_counter() - t
         t = time.perf_counter()
         images = tactile.imprints(mesh, pts.positions, pts.normals, tactile.Sensor(), workers=1, scene=scene)
@@ -182,6 +183,7 @@ def _compute(path: Path, name: str, store: Path, settings: BatchSettings, timing
             arrays[f"{method}/{key}"] = np.asarray(getattr(pts, key))
         arrays[f"{method}/imprints"] = np.asarray(images, np.float32)
         methods[method] = {"best_set": int(pts.best_set), "min_spacing": float(pts.min_spacing),
+                           "combination": pts.combination, "untouchable": int(pts.untouchable),
                            "views": [list(v) for v in pts.views]}
     t = time.perf_counter()
     frame = mesh.transform
@@ -291,7 +293,9 @@ def load_entry(store, name: str) -> MeshEntry:
         points[method] = InterestPoints(vertex_ids=a("vertex_ids"), positions=a("positions"), normals=a("normals"),
                                         scores=a("scores"), votes=a("votes"), vertex_saliency=arrays["vertex_saliency"],
                                         views=tuple(tuple(v) for v in info["views"]), method=method,
-                                        best_set=info["best_set"], min_spacing=info["min_spacing"])
+                                        best_set=info["best_set"], min_spacing=info["min_spacing"],
+                                        combination=info.get("combination", ""),
+                                        untouchable=info.get("untouchable", -1))
         k = len(a("positions"))
         imprints[method] = tactile.ImprintSet(imprints=a("imprints"), labels=np.zeros(k, np.int64),
                                               object_names=(name,), point_ids=np.arange(k), positions=a("positions"),

@@ -140,7 +140,9 @@ def instance_spec(settings: Settings, name: str, replicate: int, index: int):
 def _points(mesh, method, settings: Settings, seed: int, threads):
     import meshsal
 
-    kwargs = {"n": settings.n_points, "method": method, "seed": seed, "quiet": True, "threads": threads}
+    # The pad's real width: instances differ in size, the sensor does not.
+    kwargs = {"n": settings.n_points, "method": method, "seed": seed, "quiet": True, "threads": threads,
+              "pad_width": settings.sensor.width_mm}
     if settings.view_size is not None:
         kwargs["size"] = settings.view_size
     return meshsal.interest_points(mesh, **kwargs)

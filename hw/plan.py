@@ -179,7 +179,7 @@ def make_plan(mesh, n: int = 15, method: str = "attention", size_mm: float = 150
 
     sensor = tactile.Sensor() if sensor is None else sensor
     scaled = meshsal.scale_to(mesh, size_mm)
-    pts = meshsal.interest_points(scaled, n=n, method=method, seed=seed, quiet=quiet)
+    pts = meshsal.interest_points(scaled, n=n, method=method, seed=seed, quiet=quiet, pad_width=sensor.width_mm)
     # The pad settles on the plane tactile fits over its footprint, with tactile's angle-0 image axes.
     poses = tactile.sensor_poses(scaled, pts.positions, pts.normals, sensor)
     positions = scaled.transform.to_source(poses.centers)

@@ -88,7 +88,7 @@ def _cmd_render(args) -> int:
 
 
 def _add_points(subparsers) -> None:
-    from .points import POINT_METHODS
+    from .points import COMBINATIONS, POINT_METHODS
 
     p = subparsers.add_parser(
         "points", help="choose interest points on a mesh by visual attention (or a baseline)",
@@ -104,9 +104,15 @@ def _add_points(subparsers) -> None:
                    help=f"how to choose them (default attention): {POINT_METHODS.help_text()}")
     p.add_argument("--size-mm", type=float, default=150.0,
                    help="scale the mesh to this bounding-box diagonal in mm first (default 150)")
+    p.add_argument("--pad-mm", type=float, default=32.0,
+                   help="width of the tactile pad in mm (default 32: 16 x 16 taxels at 2 mm)")
     p.add_argument("--min-spacing-mm", type=float, default=None,
-                   help="no two points closer than this, in mm after scaling: the sensor's half width "
-                        "(default 8%% of the diagonal, 12 mm at 150 mm)")
+                   help="no two points closer than this, in mm after scaling (default half of --pad-mm)")
+    p.add_argument("--combination", choices=COMBINATIONS, default="equal",
+                   help="how the eight attention channels are summed: the paper's equal weights, or each "
+                        "also weighted by Itti's N(.) (default equal)")
+    p.add_argument("--no-touch-check", dest="touch", action="store_false",
+                   help="keep points the pad, pressed along the normal, would not meet first")
     p.add_argument("--size", type=int, default=128, help="rendered view size in pixels (default 128)")
     p.add_argument("--threshold", type=float, default=0.5,
                    help="peaks and salient pixels exceed this fraction of their map's maximum (default 0.5)")
@@ -121,6 +127,7 @@ def _cmd_points(args) -> int:
     from .curvature import mesh_saliency
     from .io import save_ply
     from .mesh import Similarity
+    from .attention import plateau_fraction
     from .points import attention_points, best_view_set, interest_points, saliency_maps
     from .toys import load_object
     from .transform import scale_to
@@ -129,14 +136,15 @@ def _cmd_points(args) -> int:
         raise ValueError(f"--size must be at least 16 pixels, got {args.size}")
     mesh = scale_to(load_object(args.mesh), args.size_mm)
     vertex_saliency = mesh_saliency(mesh)
-    views, maps = saliency_maps(mesh, size=args.size, vertex_saliency=vertex_saliency, quiet=args.quiet)
+    views, maps = saliency_maps(mesh, size=args.size, vertex_saliency=vertex_saliency, quiet=args.quiet,
+                                combination=args.combination)
+    rule = {"min_spacing": args.min_spacing_mm, "threshold": args.threshold, "pad_width": args.pad_mm,
+            "touch": args.touch}
     if args.method == "attention":
-        pts = attention_points(mesh, views, maps, vertex_saliency, n=args.n, min_spacing=args.min_spacing_mm,
-                               threshold=args.threshold)
+        pts = attention_points(mesh, views, maps, vertex_saliency, n=args.n, combination=args.combination, **rule)
     else:
         pts = interest_points(mesh, n=args.n, method=args.method, seed=args.seed,
-                              min_spacing=args.min_spacing_mm, threshold=args.threshold,
-                              vertex_saliency=vertex_saliency)
+                              vertex_saliency=vertex_saliency, **rule)
 
     to_source = mesh.transform.to_source
     top = float(vertex_saliency.max())
@@ -145,7 +153,8 @@ def _cmd_points(args) -> int:
     save_ply(args.out / "saliency.ply", source_mesh, quality=vertex_saliency)
 
     settings = {"n": args.n, "method": args.method, "size_mm": args.size_mm, "view_size": args.size,
-                "threshold": args.threshold, "seed": args.seed}
+                "threshold": args.threshold, "seed": args.seed, "combination": args.combination,
+                "pad_mm": args.pad_mm, "touch_check": args.touch}
     pts.save(args.out / "points.json", frame=mesh.transform, source=str(args.mesh), settings=settings)
     positions = to_source(pts.positions)
     normals = mesh.transform.direction_to_source(pts.normals)
@@ -162,5 +171,9 @@ def _cmd_points(args) -> int:
     write_png(args.out / "views.png", overlay.views_picture(views, maps, range(4 * best, 4 * best + 4),
                                                             pts.positions))
     write_png(args.out / "contact_sheet.png", overlay.contact_sheet(maps, [v.mask for v in views]))
-    print(f"wrote {len(pts)} {args.method} points of {args.mesh} to {args.out}")
+    plateau = np.median([plateau_fraction(m, v.mask) for m, v in zip(maps, views)])
+    lost = f", {pts.untouchable} candidates the pad could not touch first skipped" if pts.untouchable > 0 else ""
+    print(f"wrote {len(pts)} {args.method} points of {args.mesh} to {args.out}{lost}; "
+          f"saliency maps ({args.combination}): median {100 * plateau:.0f} % of the silhouette above half "
+          f"the maximum")
     return 0

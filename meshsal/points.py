@@ -15,14 +15,22 @@ The paper's pipeline (Rouhafzay, Pedneault & Cretu, 2017), done on the mesh:
    when some vertex within ``min_spacing`` of it (along mesh edges) lies
    under a salient pixel of that view (value above ``threshold`` times the
    view's maximum); then non-maximum suppression: no two points closer than
-   ``min_spacing`` (Euclidean), each on a distinct nearest vertex;
+   ``min_spacing`` (Euclidean), each on a distinct nearest vertex, and each
+   touchable: the pad pressed along the point's normal meets the surface
+   there first (:mod:`meshsal.touch`), else the next candidate takes its place;
 5. keep the top ``n``.
 
-``min_spacing`` is the tactile sensor's half width, in mesh units.  Its
-default, 8 % of the bounding-box diagonal, is 12 mm on an object scaled to
-a 150 mm diagonal: half the 24 mm width of a 16 x 16 sensor at 1.5 mm pitch.
-Every other length (views, mesh saliency) is relative to the mesh's size, so
-translating or uniformly scaling a mesh leaves the chosen vertices unchanged.
+Step 1 combines the eight channels with the paper's equal weights
+(``combination="equal"``) or weights each by Itti's N(.) (``"itti"``).
+
+``pad_width`` is the tactile pad's width in mesh units (default 32/150 of
+the bounding-box diagonal: the 32 mm of a 16 x 16 pad at 2 mm pitch on an
+object of 150 mm diagonal), and ``min_spacing`` defaults to half of it, so
+that neighbouring touches do not share most of their contact.  On a small
+object that spacing holds fewer points: the fill below stops when no more
+fit, rather than overlapping touches.  Every length is relative to the
+mesh's size, so translating or uniformly scaling a mesh leaves the chosen
+vertices unchanged.  The baselines obey the same spacing and touch rule.
 
 When fewer than ``n`` points survive the suppression, the rest are filled
 from the peaks of the per-vertex mesh saliency (strongest first), then from
@@ -32,6 +40,7 @@ mesh too small to hold ``n`` points that far apart yields fewer.
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
@@ -40,6 +49,7 @@ from .embree import embree_scene
 from .mesh import Mesh, face_normals, vertex_normals
 from .registry import Registry
 from .sampling import farthest_points, field_peaks, non_maximum_suppression, random_surface_points
+from .touch import default_pad_width
 
 __all__ = [
     "METHODS",
@@ -52,11 +62,14 @@ __all__ = [
     "map_peaks",
     "attention_points",
     "project_pixel_paper",
+    "COMBINATIONS",
 ]
+
+#: How the attention channels are combined: the paper's equal weights, or Itti's N(.) on each.
+COMBINATIONS = ("equal", "itti")
 
 POINTS_FORMAT = "visuotactile.points"
 POINTS_VERSION = 1
-SPACING_FRACTION = 0.08
 #: Candidates drawn per requested point by the random baseline (dart throwing).
 RANDOM_POOL = 64
 
@@ -91,6 +104,10 @@ class InterestPoints:
         Index (0-17) of the best set of 4 views; -1 for the baselines.
     min_spacing : float
         The spacing used, in mesh units.
+    combination : str
+        How the attention channels were combined ("equal", "itti"); "" for the baselines.
+    untouchable : int
+        Candidates skipped because the pad could not touch them first (-1: not tested).
     """
 
     vertex_ids: np.ndarray
@@ -103,6 +120,8 @@ class InterestPoints:
     method: str
     best_set: int
     min_spacing: float
+    combination: str = ""
+    untouchable: int = -1
 
     def __len__(self) -> int:
         return int(self.vertex_ids.size)
@@ -146,6 +165,7 @@ class InterestPoints:
         document = {"format": POINTS_FORMAT, "version": POINTS_VERSION, "mesh": str(source),
                     "units": "source units and frame of the mesh file", "method": self.method,
                     "best_set": int(self.best_set), "min_spacing": float(frame.length_to_source(self.min_spacing)),
+                    "combination": self.combination, "untouchable": int(self.untouchable),
                     "settings": settings or {}, "points": records,
                     "vertex_saliency": np.asarray(self.vertex_saliency, np.float64).tolist()}
         write_text(path, json.dumps(document, indent=1) + "\n")
@@ -215,16 +235,18 @@ def _read_points(path) -> InterestPoints:
                          vertex_saliency=np.asarray(document.get("vertex_saliency", []), np.float64),
                          views=tuple(views), method=str(document.get("method", "unknown")),
                          best_set=int(document.get("best_set", -1)),
-                         min_spacing=float(document.get("min_spacing", 0.0)), ids=np.array(ids, np.int64))
+                         min_spacing=float(document.get("min_spacing", 0.0)),
+                         combination=str(document.get("combination", "")),
+                         untouchable=int(document.get("untouchable", -1)), ids=np.array(ids, np.int64))
 
 
-def default_min_spacing(mesh: Mesh) -> float:
-    """8 % of the bounding-box diagonal (a sensor's half width on a 150 mm object)."""
-    V = mesh.vertices
-    return SPACING_FRACTION * float(np.linalg.norm(V.max(axis=0) - V.min(axis=0)))
+def default_min_spacing(mesh: Mesh, pad_width: float | None = None) -> float:
+    """Half the pad's width (default :func:`meshsal.touch.default_pad_width`), in mesh units."""
+    return 0.5 * (default_pad_width(mesh) if pad_width is None else float(pad_width))
 
 
-def _check(mesh: Mesh, n, method, min_spacing, threshold) -> tuple[int, float]:
+def _check(mesh: Mesh, n, method, min_spacing, threshold, pad_width=None,
+           combination="equal") -> tuple[int, float, float]:
     POINT_METHODS.get(method)
     if int(n) != n or n < 1:
         raise ValueError(f"n must be a positive integer, got {n!r}")
@@ -232,10 +254,15 @@ def _check(mesh: Mesh, n, method, min_spacing, threshold) -> tuple[int, float]:
         raise ValueError(f"mesh {mesh.name!r} has no faces: no surface to put points on")
     if not 0.0 <= threshold < 1.0:
         raise ValueError(f"threshold must lie in [0, 1), got {threshold}")
-    spacing = default_min_spacing(mesh) if min_spacing is None else float(min_spacing)
+    if combination not in COMBINATIONS:
+        raise ValueError(f"unknown combination {combination!r}; expected one of {COMBINATIONS}")
+    pad = default_pad_width(mesh) if pad_width is None else float(pad_width)
+    if not (np.isfinite(pad) and pad > 0):
+        raise ValueError(f"pad_width must be a positive length, got {pad_width}")
+    spacing = default_min_spacing(mesh, pad) if min_spacing is None else float(min_spacing)
     if not (np.isfinite(spacing) and spacing >= 0):
         raise ValueError(f"min_spacing must be a finite length >= 0, got {min_spacing}")
-    return int(n), spacing
+    return int(n), spacing, pad
 
 
 def _check_field(mesh: Mesh, vertex_saliency) -> np.ndarray:
@@ -281,17 +308,52 @@ def _concat(parts) -> _Candidates:
                          for f in ("vertex_ids", "positions", "normals", "scores")))
 
 
-def _select(first: _Candidates, fill_order: list, n: int, spacing: float) -> _Candidates:
-    """Non-maximum suppression of ``first``, then of each fill source in turn, up to ``n``."""
-    chosen = _take(first, non_maximum_suppression(first.positions, spacing, n, ids=first.vertex_ids))
+class _TouchFilter:
+    """Keeps only the candidates a pad can touch first; counts those it drops."""
+
+    def __init__(self, mesh: Mesh, pad_width: float, tolerance: float | None):
+        from .embree import embree_scene
+
+        self.mesh, self.pad_width, self.tolerance = mesh, pad_width, tolerance
+        self.scene = embree_scene(mesh)
+        self.lost = 0
+
+    def __call__(self, c: _Candidates) -> np.ndarray:
+        from .touch import touchable
+
+        return touchable(self.mesh, c.positions, c.normals, self.pad_width, self.tolerance, scene=self.scene)
+
+
+def _suppress(more: _Candidates, chosen: _Candidates, n: int, spacing: float, touch) -> _Candidates:
+    """Greedy suppression of ``more`` after ``chosen``; a candidate the pad cannot touch is skipped.
+
+    Untouchable picks are dropped and the suppression rerun, so the next
+    candidate in line takes their place exactly as if they had never been
+    proposed; only the picks are tested, not the whole list.
+    """
+    alive = np.ones(more.vertex_ids.size, dtype=bool)
+    while True:
+        index = np.flatnonzero(alive)
+        sub = _take(more, index)
+        keep = non_maximum_suppression(sub.positions, spacing, n - chosen.vertex_ids.size, ids=sub.vertex_ids,
+                                       taken_points=chosen.positions, taken_ids=chosen.vertex_ids)
+        if touch is None or keep.size == 0:
+            return _take(sub, keep)
+        bad = ~touch(_take(sub, keep))
+        if not bad.any():
+            return _take(sub, keep)
+        touch.lost += int(bad.sum())
+        alive[index[keep[bad]]] = False
+
+
+def _select(first: _Candidates, fill_order: list, n: int, spacing: float, touch=None) -> _Candidates:
+    """Suppression of ``first``, then of each fill source in turn, up to ``n`` (touchable) points."""
+    empty = _Candidates(np.empty(0, np.int64), np.empty((0, 3)), np.empty((0, 3)), np.empty(0))
+    chosen = _concat([empty, _suppress(first, empty, n, spacing, touch)])
     for make in fill_order:
         if chosen.vertex_ids.size >= n:
             break
-        more = make()
-        keep = non_maximum_suppression(more.positions, spacing, n - chosen.vertex_ids.size,
-                                       ids=more.vertex_ids, taken_points=chosen.positions,
-                                       taken_ids=chosen.vertex_ids)
-        chosen = _concat([chosen, _take(more, keep)])
+        chosen = _concat([chosen, _suppress(make(), chosen, n, spacing, touch)])
     return chosen
 
 
@@ -310,7 +372,7 @@ def _saliency_fill(mesh: Mesh, vn: np.ndarray, vertex_saliency: np.ndarray, scor
 
 
 def saliency_maps(mesh: Mesh, size: int = 128, vertex_saliency=None, quiet: bool = True,
-                  weights=None, threads: int | None = None):
+                  weights=None, threads: int | None = None, combination: str = "equal"):
     """Render the 72 views of the rig and compute each one's saliency map.
 
     Parameters
@@ -326,6 +388,8 @@ def saliency_maps(mesh: Mesh, size: int = 128, vertex_saliency=None, quiet: bool
         Channel weights of :func:`meshsal.attention.saliency`.
     threads : int, optional
         Worker threads (default: the CPU count).
+    combination : {"equal", "itti"}
+        The paper's weighted sum, or each channel weighted by N(.) too.
 
     Returns
     -------
@@ -338,7 +402,7 @@ def saliency_maps(mesh: Mesh, size: int = 128, vertex_saliency=None, quiet: bool
     cameras = [c for s in view_rig() for c in s]
     views = render_views(mesh, cameras, size=size, threads=threads)
     results = saliency_views(views, mesh, weights=weights, vertex_saliency=vertex_saliency, threads=threads,
-                             quiet=quiet)
+                             quiet=quiet, normalize=combination == "itti")
     maps = [r.map for r in results]
     return views, np.stack(maps).astype(np.float32)
 
@@ -455,7 +519,9 @@ def _best_set_values(mesh: Mesh, views, maps, set_views) -> np.ndarray:
 
 
 def attention_points(mesh: Mesh, views, maps: np.ndarray, vertex_saliency: np.ndarray, n: int = 15,
-                     min_spacing: float | None = None, threshold: float = 0.5) -> InterestPoints:
+                     min_spacing: float | None = None, threshold: float = 0.5, pad_width: float | None = None,
+                     touch: bool = True, touch_tolerance: float | None = None,
+                     combination: str = "equal") -> InterestPoints:
     """Steps 2-5 of the pipeline on views and saliency maps already computed.
 
     Parameters
@@ -466,15 +532,18 @@ def attention_points(mesh: Mesh, views, maps: np.ndarray, vertex_saliency: np.nd
     vertex_saliency : (n_vertices,) float64
     n : int
     min_spacing : float, optional
-        The sensor's half width in mesh units (default :func:`default_min_spacing`).
+        Default half of ``pad_width`` (:func:`default_min_spacing`).
     threshold : float in [0, 1)
         Peaks and salient pixels exceed ``threshold`` times their map's maximum.
+    pad_width, touch, touch_tolerance : as in :func:`interest_points`
+    combination : str
+        How ``maps`` were combined, recorded in the result.
 
     Returns
     -------
     InterestPoints with ``method="attention"``.
     """
-    n, spacing = _check(mesh, n, "attention", min_spacing, threshold)
+    n, spacing, pad = _check(mesh, n, "attention", min_spacing, threshold, pad_width, combination)
     vertex_saliency = _check_field(mesh, vertex_saliency)
     maps = np.asarray(maps)
     if maps.shape[0] != len(views):
@@ -500,11 +569,13 @@ def attention_points(mesh: Mesh, views, maps: np.ndarray, vertex_saliency: np.nd
     peaks = _Candidates(ids[order], positions[order], _normals_at(mesh, vn, faces[order], bary[order]),
                         scores[order])
     seen = _best_set_values(mesh, views, maps, set_views)
-    chosen = _select(peaks, _saliency_fill(mesh, vn, vertex_saliency, lambda i: seen[i]), n, spacing)
+    checker = _TouchFilter(mesh, pad, touch_tolerance) if touch else None
+    chosen = _select(peaks, _saliency_fill(mesh, vn, vertex_saliency, lambda i: seen[i]), n, spacing, checker)
     votes, found = _votes(graph, salient, chosen.vertex_ids, spacing)
     return InterestPoints(vertex_ids=chosen.vertex_ids, positions=chosen.positions, normals=chosen.normals,
                           scores=chosen.scores, votes=votes, vertex_saliency=vertex_saliency, views=found,
-                          method="attention", best_set=best, min_spacing=spacing)
+                          method="attention", best_set=best, min_spacing=spacing, combination=combination,
+                          untouchable=checker.lost if checker else -1)
 
 
 def _random_candidates(mesh, vn, n, rng, vertex_saliency):
@@ -538,7 +609,8 @@ def _abs_mean_curvature(mesh, vertex_saliency):
 #: The interest-point methods.  A baseline's value maps (mesh, vertex normals, n, generator, mesh
 #: saliency) to its first candidates and the field that ranks the fill; "attention" is the paper's pipeline.
 POINT_METHODS = Registry("interest-point method")
-POINT_METHODS.register("attention", None, "the paper's visual attention")
+POINT_METHODS.register("attention", None, "the paper's visual attention (equal channel weights)")
+POINT_METHODS.register("attention_itti", None, "the paper's visual attention, each channel weighted by Itti's N(.)")
 POINT_METHODS.register("random", _random_candidates, "area-weighted random surface points")
 POINT_METHODS.register("uniform", _uniform_candidates, "farthest-point sampling")
 POINT_METHODS.register("mesh_saliency", _peak_candidates(lambda mesh, s: s), "peaks of Lee et al.'s mesh saliency")
@@ -549,7 +621,8 @@ METHODS = POINT_METHODS.names()
 def interest_points(mesh: Mesh, n: int = 15, method: str = "attention", seed=0,
                     min_spacing: float | None = None, size: int = 128, threshold: float = 0.5,
                     quiet: bool = True, weights=None, vertex_saliency=None,
-                    threads: int | None = None) -> InterestPoints:
+                    threads: int | None = None, combination: str = "equal", pad_width: float | None = None,
+                    touch: bool = True, touch_tolerance: float | None = None) -> InterestPoints:
     """Choose ``n`` interest points on a mesh (module docstring for the pipeline).
 
     Parameters
@@ -557,8 +630,9 @@ def interest_points(mesh: Mesh, n: int = 15, method: str = "attention", seed=0,
     mesh : Mesh
     n : int
         How many points (fewer only if the mesh cannot hold ``n`` at ``min_spacing``).
-    method : {"attention", "random", "uniform", "mesh_saliency", "curvature"}
-        "attention": the paper's pipeline.  Baselines: "random", area-weighted
+    method : {"attention", "attention_itti", "random", "uniform", "mesh_saliency", "curvature"}
+        "attention": the paper's pipeline; "attention_itti": the same with
+        ``combination="itti"``.  Baselines: "random", area-weighted
         uniform surface samples in random order; "uniform", farthest-point
         sampling of the vertices from a random start; "mesh_saliency", peaks
         of Lee et al.'s mesh saliency; "curvature", peaks of absolute mean
@@ -566,8 +640,7 @@ def interest_points(mesh: Mesh, n: int = 15, method: str = "attention", seed=0,
     seed : int
         Seeds the random baselines (the attention pipeline is deterministic).
     min_spacing : float, optional
-        No two points closer than this (mesh units): the sensor's half width.
-        Default 8 % of the bounding-box diagonal.
+        No two points closer than this (mesh units); default half of ``pad_width``.
     size : int
         View size in pixels ("attention").
     threshold : float in [0, 1)
@@ -581,6 +654,19 @@ def interest_points(mesh: Mesh, n: int = 15, method: str = "attention", seed=0,
     threads : int, optional
         Rendering and attention threads ("attention"; default: the CPU
         count).  The points do not depend on it.
+    combination : {"equal", "itti"}
+        "attention": the paper's equal-weight sum of the channels, or each
+        channel weighted by Itti's N(.) as well.  Recorded in the result.
+    pad_width : float, optional
+        The tactile pad's width, mesh units (default
+        :func:`meshsal.touch.default_pad_width`).
+    touch : bool
+        Skip candidates the pad, pressed along their normal, would not meet
+        first (:func:`meshsal.touch.touchable`); the result's
+        ``untouchable`` counts them.
+    touch_tolerance : float, optional
+        How far above the point the first contact may lie (default
+        ``pad_width / 32``: 1 mm of a 32 mm pad).
 
     Returns
     -------
@@ -595,23 +681,27 @@ def interest_points(mesh: Mesh, n: int = 15, method: str = "attention", seed=0,
     """
     from .curvature import mesh_saliency
 
-    n, spacing = _check(mesh, n, method, min_spacing, threshold)
+    n, spacing, pad = _check(mesh, n, method, min_spacing, threshold, pad_width, combination)
     if vertex_saliency is None:
         vertex_saliency = mesh_saliency(mesh)
     vertex_saliency = _check_field(mesh, vertex_saliency)
-    if method == "attention":
+    if POINT_METHODS.get(method) is None:
+        combination = "itti" if method == "attention_itti" else combination
         views, maps = saliency_maps(mesh, size=size, vertex_saliency=vertex_saliency, quiet=quiet,
-                                    weights=weights, threads=threads)
-        return attention_points(mesh, views, maps, vertex_saliency, n=n, min_spacing=spacing,
-                                threshold=threshold)
+                                    weights=weights, threads=threads, combination=combination)
+        pts = attention_points(mesh, views, maps, vertex_saliency, n=n, min_spacing=spacing,
+                               threshold=threshold, pad_width=pad, touch=touch, touch_tolerance=touch_tolerance,
+                               combination=combination)
+        return dataclasses.replace(pts, method=method)
 
     vn = vertex_normals(mesh.vertices, mesh.faces)
     first, field = POINT_METHODS.get(method)(mesh, vn, n, np.random.default_rng(seed), vertex_saliency)
-    chosen = _select(first, _saliency_fill(mesh, vn, vertex_saliency, lambda i: field[i]), n, spacing)
+    checker = _TouchFilter(mesh, pad, touch_tolerance) if touch else None
+    chosen = _select(first, _saliency_fill(mesh, vn, vertex_saliency, lambda i: field[i]), n, spacing, checker)
     return InterestPoints(vertex_ids=chosen.vertex_ids, positions=chosen.positions, normals=chosen.normals,
                           scores=chosen.scores, votes=np.zeros(chosen.vertex_ids.size, np.int64),
                           vertex_saliency=vertex_saliency, views=tuple(() for _ in range(chosen.vertex_ids.size)),
-                          method=method, best_set=-1, min_spacing=spacing)
+                          method=method, best_set=-1, min_spacing=spacing, untouchable=checker.lost if checker else -1)
 
 
 def _spherical(view):

@@ -116,6 +116,31 @@ def test_orientation_oblique_bar_among_vertical(seed):
     assert_pops_out(attention.orientation(img), target)
 
 
+def dense_display(seed, spacing, odd_deg, base_deg):
+    """A full regular grid of thin bars (length and width scale with the spacing), one at odd_deg."""
+    rng = np.random.default_rng(seed)
+    length, width = 0.6 * spacing, max(2, spacing // 10)
+    ground = rng.uniform(0.05, 0.3)
+    img = gray(ground)
+    n = SIZE // spacing
+    offset = (SIZE - n * spacing) / 2 + spacing / 2
+    cells = [(offset + i * spacing + rng.uniform(-2, 2), offset + j * spacing + rng.uniform(-2, 2))
+             for i in range(n) for j in range(n)]
+    k = int(rng.integers(len(cells)))
+    for i, c in enumerate(cells):
+        img[bar(img.shape, c, length, width, odd_deg if i == k else base_deg)] = ground + 0.6
+    return img, disk(img.shape[:2], cells[k], spacing / 2)
+
+
+@pytest.mark.parametrize("spacing", [24, 32, 48])
+@pytest.mark.parametrize("odd_deg,base_deg", [(45, 0), (0, 45), (90, 0), (135, 45)])
+def test_orientation_odd_bar_in_a_dense_grid(spacing, odd_deg, base_deg):
+    """Pop-out in a dense display: every item has the same contrast, size and ends; only one angle differs."""
+    for seed in SEEDS:
+        img, target = dense_display(seed, spacing, odd_deg, base_deg)
+        assert_pops_out(attention.orientation(img), target)
+
+
 def srgb_from_lms(lms):
     lin = np.linalg.solve(RGB_TO_LMS.astype(np.float64), np.asarray(lms, np.float64))
     lin = np.clip(lin, 0.0, 1.0)

@@ -32,7 +32,7 @@ def test_two_copies_of_one_mesh_cannot_be_told_apart_but_two_objects_can():
     assert chance.ci_low <= 50.0 <= chance.ci_high, chance          # a leak of pose or point would show here
     fused = r.cell("uniform", "instance", "knn", 2, False, 6)
     assert fused.ci_low <= 50.0 <= fused.ci_high, fused
-    other = [_cup("cup_a"), shapes.box(half=40.0, n=30).replace(name="box")]
+    other = [_cup("cup_a"), shapes.sphere(radius=50.0, n=24).replace(name="ball")]
     r = experiment.run_experiment(other, methods=("uniform",), protocols=("instance",), classifiers=("knn",),
                                   settings=SMALL, replicates=4, cache_dir=None, quiet=True)
     assert r.cell("uniform", "instance", "knn", 2, False, 1).mean > 65.0

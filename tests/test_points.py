@@ -141,7 +141,7 @@ def test_points_are_distinct_spaced_and_votes_match_views(planted):
     mesh, _, _, pts = planted
     assert len(set(pts.vertex_ids.tolist())) == len(pts)
     assert pairwise_min(pts.positions) >= pts.min_spacing
-    np.testing.assert_allclose(pts.min_spacing, 0.08 * np.linalg.norm(np.ptp(mesh.vertices, axis=0)))
+    np.testing.assert_allclose(pts.min_spacing, 16.0 / 150.0 * np.linalg.norm(np.ptp(mesh.vertices, axis=0)))
     assert pts.votes.dtype == np.int64 and np.all((pts.votes >= 0) & (pts.votes <= 72))
     assert [len(v) for v in pts.views] == pts.votes.tolist()
     assert all(0 <= k < 72 for v in pts.views for k in v)
@@ -190,7 +190,7 @@ def test_wide_spacing_fills_from_saliency_and_never_duplicates():
 
 # ---------------------------------------------------------------- baselines
 
-@pytest.mark.parametrize("method", [m for m in METHODS if m != "attention"])
+@pytest.mark.parametrize("method", [m for m in METHODS if not m.startswith("attention")])
 def test_baselines_return_n_distinct_spaced_points(method):
     mesh, _, _ = planted_sphere()
     pts = interest_points(mesh, n=12, method=method, seed=3)
@@ -301,7 +301,8 @@ def test_cli_writes_every_file_in_the_source_frame(tmp_path, capsys):
     positions = np.array([p["position"] for p in pts])
     assert distance_to_surface(positions, source).max() < 1e-6
     assert np.allclose(np.linalg.norm([p["normal"] for p in pts], axis=1), 1.0)
-    np.testing.assert_allclose(doc["min_spacing"], 0.08 * np.linalg.norm(np.ptp(source.vertices, 0)))
+    np.testing.assert_allclose(doc["min_spacing"], 16.0 / 150.0 * np.linalg.norm(np.ptp(source.vertices, 0)))
+    assert doc["combination"] == "equal" and doc["untouchable"] >= 0
     assert (doc["format"], doc["version"]) == ("visuotactile.points", 1)
     again = InterestPoints.load(out / "points.json")             # the versioned format round-trips
     np.testing.assert_allclose(again.positions, positions)
@@ -344,3 +345,37 @@ def test_a_points_file_of_a_newer_version_or_another_format_is_refused(tmp_path)
         path.write_text(json.dumps(document))
         with pytest.raises(ValueError, match=message):
             InterestPoints.load(path)
+
+
+def test_combination_is_a_choice_and_is_recorded(tmp_path):
+    from meshsal.attention import plateau_fraction
+
+    mesh, _, _ = planted_sphere()
+    equal = interest_points(mesh, n=6, size=SIZE)
+    itti = interest_points(mesh, n=6, size=SIZE, method="attention_itti")
+    assert (equal.method, equal.combination) == ("attention", "equal")
+    assert (itti.method, itti.combination) == ("attention_itti", "itti")
+    itti.save(tmp_path / "points.json")
+    assert InterestPoints.load(tmp_path / "points.json").combination == "itti"
+    views, plain = saliency_maps(mesh, size=SIZE, combination="equal")
+    _, weighted = saliency_maps(mesh, size=SIZE, combination="itti")
+    assert not np.allclose(plain, weighted)
+    for maps in (plain, weighted):
+        shares = [plateau_fraction(m, v.mask) for m, v in zip(maps, views)]
+        assert all(0.0 <= s <= 1.0 for s in shares) and max(shares) > 0
+    with pytest.raises(ValueError, match="combination"):
+        interest_points(mesh, n=3, size=SIZE, combination="loudest")
+
+
+def test_plateau_fraction_tells_a_peak_from_a_plateau():
+    from meshsal.attention import plateau_fraction
+
+    mask = np.zeros((64, 64), bool)
+    mask[8:56, 8:56] = True
+    peak = np.zeros((64, 64), np.float32)
+    peak[30:34, 30:34] = 1.0
+    flat = np.where(mask, 0.9, 0.0).astype(np.float32)
+    flat[30, 30] = 1.0
+    assert plateau_fraction(peak, mask, erode=0) == pytest.approx(16 / 48**2)
+    assert plateau_fraction(flat, mask, erode=0) == 1.0
+    assert plateau_fraction(np.zeros((64, 64), np.float32), mask) == 0.0

@@ -29,6 +29,7 @@ __all__ = [
     "outline_radius",
     "erode_mask",
     "combine_maps",
+    "plateau_fraction",
     "saliency",
     "saliency_views",
 ]
@@ -246,7 +247,38 @@ def combine_maps(
     return scale_to_max(total)
 
 
-def saliency(view, mesh, weights: Mapping[str, float] | None = None, vertex_saliency=None) -> SaliencyResult:
+def plateau_fraction(saliency_map: np.ndarray, mask: np.ndarray, erode: int | None = None) -> float:
+    """Share of the (eroded) silhouette where the map reaches half its maximum there.
+
+    A measure of peaks against plateaus: a map that singles out a few spots
+    scores near 0, one that is high over the whole object near 1.
+
+    Parameters
+    ----------
+    saliency_map : (H, W) float
+    mask : (H, W) bool silhouette
+    erode : int, optional
+        As in :func:`combine_maps` (default :func:`outline_radius`).
+
+    Returns
+    -------
+    float in [0, 1]; 0 for an empty silhouette or a zero map.
+
+    Examples
+    --------
+    >>> m = np.zeros((64, 64), np.float32); m[30:34, 30:34] = 1.0
+    >>> round(plateau_fraction(m, np.ones((64, 64), bool), erode=0), 4)
+    0.0039
+    """
+    inside = erode_mask(mask, erode)
+    values = np.asarray(saliency_map, dtype=np.float64)[inside]
+    if values.size == 0 or not values.max() > 0:
+        return 0.0
+    return float(np.mean(values >= 0.5 * values.max()))
+
+
+def saliency(view, mesh, weights: Mapping[str, float] | None = None, vertex_saliency=None,
+             normalize: bool = True) -> SaliencyResult:
     """The eight-channel saliency map of one rendered view.
 
     Parameters
@@ -262,6 +294,9 @@ def saliency(view, mesh, weights: Mapping[str, float] | None = None, vertex_sali
         Per-vertex mesh saliency; computed with
         ``meshsal.curvature.mesh_saliency(mesh)`` when omitted.  Pass it when
         processing many views of one mesh.
+    normalize : bool
+        Weight each channel by Itti's N(.) too (see :func:`combine_maps`);
+        False is the paper's plain weighted sum.
 
     Returns
     -------
@@ -278,7 +313,7 @@ def saliency(view, mesh, weights: Mapping[str, float] | None = None, vertex_sali
     channels = image_channels(view.rgb)
     channels["curvature"] = curvature(view, vertex_saliency)
     channels = {name: channels[name] for name in CHANNELS}
-    return SaliencyResult(map=combine_maps(channels, view.mask, w), channels=channels)
+    return SaliencyResult(map=combine_maps(channels, view.mask, w, normalize=normalize), channels=channels)
 
 
 def saliency_views(
@@ -288,6 +323,7 @@ def saliency_views(
     vertex_saliency=None,
     threads: int | None = None,
     quiet: bool = True,
+    normalize: bool = True,
 ) -> list[SaliencyResult]:
     """:func:`saliency` of many views of one mesh, in a thread pool.
 
@@ -298,7 +334,7 @@ def saliency_views(
     ----------
     views : sequence of View
     mesh : Mesh
-    weights, vertex_saliency : as in :func:`saliency`
+    weights, vertex_saliency, normalize : as in :func:`saliency`
     threads : int, optional
         Worker threads (default: the CPU count).
     quiet : bool
@@ -316,7 +352,7 @@ def saliency_views(
         vertex_saliency = mesh_saliency(mesh)
 
     def one(view):
-        return saliency(view, mesh, weights, vertex_saliency)
+        return saliency(view, mesh, weights, vertex_saliency, normalize)
 
     from meshsal.progress import progress
 

@@ -45,7 +45,6 @@ __all__ = [
     "conspicuity_map",
     "conspicuity_from_pyramids",
     "scale_pairs",
-    "levels_used",
     "center_surround_map",
     "to_unit",
     "upsample",
@@ -269,18 +268,12 @@ def scale_pairs(levels: int) -> list[tuple[int, int]]:
     return pairs
 
 
-def levels_used(levels: int) -> set[int]:
-    """Pyramid levels that enter some center-surround pair (see :func:`scale_pairs`)."""
-    return {k for pair in scale_pairs(levels) for k in pair}
-
-
 def across_scale_sum(pyramid: Sequence[np.ndarray]) -> np.ndarray:
     """Sum of N(|F(c) - F(s)|) over the center-surround pairs, at the center scale 4.
 
     Parameters
     ----------
-    pyramid : list of (h_k, w_k) float32, from :func:`gaussian_pyramid`; levels
-        outside :func:`levels_used` are not read and may be None.
+    pyramid : list of (h_k, w_k) float32, from :func:`gaussian_pyramid`
 
     Returns
     -------
