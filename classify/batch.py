@@ -170,14 +170,15 @@ def _compute(path: Path, name: str, store: Path, settings: BatchSettings, timing
     methods = {}
     timings["points"] = timings["imprints"] = 0.0
     scene = meshsal.embree.embree_scene(mesh)
+    sensor = tactile.Sensor()
     for method in settings.methods:
         t = time.perf_counter()
         pts = meshsal.interest_points(mesh, n=settings.n_points, method=method, seed=settings.seed,
                                       size=settings.view_size, vertex_saliency=saliency, threads=1,
-                                      pad_width=tactile.Sensor().width_mm)
+                                      pad_width=sensor.width_mm)
         timings["points"] += time.perf_counter() - t
         t = time.perf_counter()
-        images = tactile.imprints(mesh, pts.positions, pts.normals, tactile.Sensor(), workers=1, scene=scene)
+        images = tactile.imprints(mesh, pts.positions, pts.normals, sensor, workers=1, scene=scene)
         timings["imprints"] += time.perf_counter() - t
         for key in ("vertex_ids", "positions", "normals", "scores", "votes"):
             arrays[f"{method}/{key}"] = np.asarray(getattr(pts, key))

@@ -112,16 +112,16 @@ def _batch(args) -> int:
     import os
 
     from classify.batch import BatchSettings, run_batch
-    from classify.cluster import Inline, open_executor
+    from classify.cluster import open_executor
 
     settings = BatchSettings(methods=args.methods, n_points=args.n_points, size_mm=args.size_mm,
                              view_size=args.view_size, seed=args.seed)
-    workers = args.workers if args.workers is not None or args.scheduler else (os.cpu_count() or 1)
-    if workers is not None and workers <= 1 and not args.scheduler:
-        summary = run_batch(args.directory, args.out, settings, Inline(), args.quiet)
-    else:
-        with open_executor(workers=workers, scheduler=args.scheduler) as executor:
-            summary = run_batch(args.directory, args.out, settings, executor, args.quiet)
+    workers = None
+    if not args.scheduler:
+        workers = args.workers if args.workers is not None else (os.cpu_count() or 1)
+        workers = workers if workers > 1 else None     # one worker: this process, no cluster
+    with open_executor(workers=workers, scheduler=args.scheduler) as executor:
+        summary = run_batch(args.directory, args.out, settings, executor, args.quiet)
     print(summary.markdown())
     if summary.failed:
         print(f"{summary.failed} mesh(es) failed: see {args.out}/failures.jsonl", file=sys.stderr)

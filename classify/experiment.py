@@ -285,15 +285,14 @@ def _by_name(names) -> np.ndarray:
 
 
 def _paper_protocol(method, X, y, groups, names, classifiers, params, threshold, folds, repeats, seed, features,
-                    pool, cache_dir, quiet, into, order=None):
+                    pool, cache_dir, quiet, into, order):
     """The paper protocol on one pool of imprints; its rates, confusions and kept fractions go ``into``.
 
-    Label c of the pool is object ``order[c]`` of ``names`` (identity by default); what goes ``into``
-    follows the order of ``names``.
+    Label c of the pool is object ``order[c]`` of ``names``; what goes ``into`` follows the order of ``names``.
     """
     rates, confusions, kept = into
     n = len(names)
-    back = np.argsort(np.arange(n) if order is None else order)
+    back = np.argsort(order)
     splits = paper_splits(y, groups, folds, repeats, seed)
     jobs = [(c, s, r) for c in classifiers for s in (False, True) for r in range(repeats)]
     tasks = [(X, y, groups, [x for x in splits if x.repeat == r], c, s, params, threshold, n, features)
@@ -357,7 +356,7 @@ def run_real(imprint_set, folds=5, repeats=10, seed=0, classifiers=NAMES, thresh
         for n in object_sets:
             mask = y < n
             _paper_protocol("real", X[mask], y[mask], groups[mask], names[:n], classifiers, params, threshold, folds,
-                            repeats, seed, features, pool, None, quiet, (rates, confusions, kept))
+                            repeats, seed, features, pool, None, quiet, (rates, confusions, kept), np.arange(n))
     cells = tuple(Cell(*key, **dataclasses.asdict(stats.summarize(R, seed))) for key, R in rates.items())
     settings = {"real": str(imprint_set.source), "n_imprints": int(len(y)), "folds": folds, "repeats": repeats,
                 "seed": seed, "threshold": threshold, "classifiers": list(classifiers), "features": features,

@@ -128,7 +128,8 @@ def _cmd_points(args) -> int:
     from .io import save_ply
     from .mesh import Similarity
     from .attention import plateau_fraction
-    from .points import attention_points, best_view_set, interest_points, saliency_maps
+    from .points import (POINT_METHODS, attention_combination, attention_points, best_view_set, interest_points,
+                         saliency_maps)
     from .toys import load_object
     from .transform import scale_to
 
@@ -136,12 +137,14 @@ def _cmd_points(args) -> int:
         raise ValueError(f"--size must be at least 16 pixels, got {args.size}")
     mesh = scale_to(load_object(args.mesh), args.size_mm)
     vertex_saliency = mesh_saliency(mesh)
+    combination = attention_combination(args.method, args.combination)
     views, maps = saliency_maps(mesh, size=args.size, vertex_saliency=vertex_saliency, quiet=args.quiet,
-                                combination=args.combination)
+                                combination=combination)
     rule = {"min_spacing": args.min_spacing_mm, "threshold": args.threshold, "pad_width": args.pad_mm,
             "touch": args.touch}
-    if args.method == "attention":
-        pts = attention_points(mesh, views, maps, vertex_saliency, n=args.n, combination=args.combination, **rule)
+    if POINT_METHODS.get(args.method) is None:
+        pts = attention_points(mesh, views, maps, vertex_saliency, n=args.n, combination=combination,
+                               method=args.method, **rule)
     else:
         pts = interest_points(mesh, n=args.n, method=args.method, seed=args.seed,
                               vertex_saliency=vertex_saliency, **rule)
@@ -153,7 +156,7 @@ def _cmd_points(args) -> int:
     save_ply(args.out / "saliency.ply", source_mesh, quality=vertex_saliency)
 
     settings = {"n": args.n, "method": args.method, "size_mm": args.size_mm, "view_size": args.size,
-                "threshold": args.threshold, "seed": args.seed, "combination": args.combination,
+                "threshold": args.threshold, "seed": args.seed, "combination": combination,
                 "pad_mm": args.pad_mm, "touch_check": args.touch}
     pts.save(args.out / "points.json", frame=mesh.transform, source=str(args.mesh), settings=settings)
     positions = to_source(pts.positions)
@@ -174,6 +177,6 @@ def _cmd_points(args) -> int:
     plateau = np.median([plateau_fraction(m, v.mask) for m, v in zip(maps, views)])
     lost = f", {pts.untouchable} candidates the pad could not touch first skipped" if pts.untouchable > 0 else ""
     print(f"wrote {len(pts)} {args.method} points of {args.mesh} to {args.out}{lost}; "
-          f"saliency maps ({args.combination}): median {100 * plateau:.0f} % of the silhouette above half "
+          f"saliency maps ({combination}): median {100 * plateau:.0f} % of the silhouette above half "
           f"the maximum")
     return 0

@@ -40,7 +40,6 @@ mesh too small to hold ``n`` points that far apart yields fewer.
 
 from __future__ import annotations
 
-import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
@@ -49,7 +48,7 @@ from .embree import embree_scene
 from .mesh import Mesh, face_normals, vertex_normals
 from .registry import Registry
 from .sampling import farthest_points, field_peaks, non_maximum_suppression, random_surface_points
-from .touch import default_pad_width
+from .touch import default_pad_width, touchable
 
 __all__ = [
     "METHODS",
@@ -63,6 +62,7 @@ __all__ = [
     "attention_points",
     "project_pixel_paper",
     "COMBINATIONS",
+    "attention_combination",
 ]
 
 #: How the attention channels are combined: the paper's equal weights, or Itti's N(.) on each.
@@ -240,6 +240,11 @@ def _read_points(path) -> InterestPoints:
                          untouchable=int(document.get("untouchable", -1)), ids=np.array(ids, np.int64))
 
 
+def attention_combination(method: str, combination: str = "equal") -> str:
+    """The channel combination an attention method uses: "itti" for "attention_itti", else ``combination``."""
+    return "itti" if method == "attention_itti" else combination
+
+
 def default_min_spacing(mesh: Mesh, pad_width: float | None = None) -> float:
     """Half the pad's width (default :func:`meshsal.touch.default_pad_width`), in mesh units."""
     return 0.5 * (default_pad_width(mesh) if pad_width is None else float(pad_width))
@@ -312,15 +317,11 @@ class _TouchFilter:
     """Keeps only the candidates a pad can touch first; counts those it drops."""
 
     def __init__(self, mesh: Mesh, pad_width: float, tolerance: float | None):
-        from .embree import embree_scene
-
         self.mesh, self.pad_width, self.tolerance = mesh, pad_width, tolerance
         self.scene = embree_scene(mesh)
         self.lost = 0
 
     def __call__(self, c: _Candidates) -> np.ndarray:
-        from .touch import touchable
-
         return touchable(self.mesh, c.positions, c.normals, self.pad_width, self.tolerance, scene=self.scene)
 
 
@@ -329,27 +330,31 @@ def _suppress(more: _Candidates, chosen: _Candidates, n: int, spacing: float, to
 
     Untouchable picks are dropped and the suppression rerun, so the next
     candidate in line takes their place exactly as if they had never been
-    proposed; only the picks are tested, not the whole list.
+    proposed; only picks are tested, each once, not the whole list.
     """
     alive = np.ones(more.vertex_ids.size, dtype=bool)
+    tested = np.zeros(more.vertex_ids.size, dtype=bool)
     while True:
         index = np.flatnonzero(alive)
         sub = _take(more, index)
         keep = non_maximum_suppression(sub.positions, spacing, n - chosen.vertex_ids.size, ids=sub.vertex_ids,
                                        taken_points=chosen.positions, taken_ids=chosen.vertex_ids)
-        if touch is None or keep.size == 0:
+        picks = index[keep]
+        new = picks[~tested[picks]]
+        if touch is None or new.size == 0:
             return _take(sub, keep)
-        bad = ~touch(_take(sub, keep))
-        if not bad.any():
+        tested[new] = True
+        bad = new[~touch(_take(more, new))]
+        if bad.size == 0:
             return _take(sub, keep)
-        touch.lost += int(bad.sum())
-        alive[index[keep[bad]]] = False
+        touch.lost += int(bad.size)
+        alive[bad] = False
 
 
 def _select(first: _Candidates, fill_order: list, n: int, spacing: float, touch=None) -> _Candidates:
     """Suppression of ``first``, then of each fill source in turn, up to ``n`` (touchable) points."""
     empty = _Candidates(np.empty(0, np.int64), np.empty((0, 3)), np.empty((0, 3)), np.empty(0))
-    chosen = _concat([empty, _suppress(first, empty, n, spacing, touch)])
+    chosen = _suppress(first, empty, n, spacing, touch)
     for make in fill_order:
         if chosen.vertex_ids.size >= n:
             break
@@ -521,7 +526,7 @@ def _best_set_values(mesh: Mesh, views, maps, set_views) -> np.ndarray:
 def attention_points(mesh: Mesh, views, maps: np.ndarray, vertex_saliency: np.ndarray, n: int = 15,
                      min_spacing: float | None = None, threshold: float = 0.5, pad_width: float | None = None,
                      touch: bool = True, touch_tolerance: float | None = None,
-                     combination: str = "equal") -> InterestPoints:
+                     combination: str = "equal", method: str = "attention") -> InterestPoints:
     """Steps 2-5 of the pipeline on views and saliency maps already computed.
 
     Parameters
@@ -538,12 +543,14 @@ def attention_points(mesh: Mesh, views, maps: np.ndarray, vertex_saliency: np.nd
     pad_width, touch, touch_tolerance : as in :func:`interest_points`
     combination : str
         How ``maps`` were combined, recorded in the result.
+    method : str
+        The attention method's name recorded in the result ("attention" or "attention_itti").
 
     Returns
     -------
-    InterestPoints with ``method="attention"``.
+    InterestPoints
     """
-    n, spacing, pad = _check(mesh, n, "attention", min_spacing, threshold, pad_width, combination)
+    n, spacing, pad = _check(mesh, n, method, min_spacing, threshold, pad_width, combination)
     vertex_saliency = _check_field(mesh, vertex_saliency)
     maps = np.asarray(maps)
     if maps.shape[0] != len(views):
@@ -574,7 +581,7 @@ def attention_points(mesh: Mesh, views, maps: np.ndarray, vertex_saliency: np.nd
     votes, found = _votes(graph, salient, chosen.vertex_ids, spacing)
     return InterestPoints(vertex_ids=chosen.vertex_ids, positions=chosen.positions, normals=chosen.normals,
                           scores=chosen.scores, votes=votes, vertex_saliency=vertex_saliency, views=found,
-                          method="attention", best_set=best, min_spacing=spacing, combination=combination,
+                          method=method, best_set=best, min_spacing=spacing, combination=combination,
                           untouchable=checker.lost if checker else -1)
 
 
@@ -686,13 +693,12 @@ def interest_points(mesh: Mesh, n: int = 15, method: str = "attention", seed=0,
         vertex_saliency = mesh_saliency(mesh)
     vertex_saliency = _check_field(mesh, vertex_saliency)
     if POINT_METHODS.get(method) is None:
-        combination = "itti" if method == "attention_itti" else combination
+        combination = attention_combination(method, combination)
         views, maps = saliency_maps(mesh, size=size, vertex_saliency=vertex_saliency, quiet=quiet,
                                     weights=weights, threads=threads, combination=combination)
-        pts = attention_points(mesh, views, maps, vertex_saliency, n=n, min_spacing=spacing,
-                               threshold=threshold, pad_width=pad, touch=touch, touch_tolerance=touch_tolerance,
-                               combination=combination)
-        return dataclasses.replace(pts, method=method)
+        return attention_points(mesh, views, maps, vertex_saliency, n=n, min_spacing=spacing,
+                                threshold=threshold, pad_width=pad, touch=touch, touch_tolerance=touch_tolerance,
+                                combination=combination, method=method)
 
     vn = vertex_normals(mesh.vertices, mesh.faces)
     first, field = POINT_METHODS.get(method)(mesh, vn, n, np.random.default_rng(seed), vertex_saliency)

@@ -33,11 +33,12 @@ def default_pad_width(mesh: Mesh) -> float:
     return PAD_FRACTION * float(np.linalg.norm(hi - lo))
 
 
-def _frame(normal: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    helper = np.array([1.0, 0.0, 0.0]) if abs(normal[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
-    u = np.cross(normal, helper)
-    u /= np.linalg.norm(u)
-    return u, np.cross(normal, u)
+def _frames(normals: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Two unit vectors spanning each unit normal's tangent plane, (k, 3) each; any roll will do."""
+    helper = np.where(np.abs(normals[:, :1]) < 0.9, [[1.0, 0.0, 0.0]], [[0.0, 1.0, 0.0]])
+    u = np.cross(normals, helper)
+    u /= np.linalg.norm(u, axis=1, keepdims=True)
+    return u, np.cross(normals, u)
 
 
 def contact_gap(mesh: Mesh, positions: np.ndarray, normals: np.ndarray, pad_width: float,
@@ -94,16 +95,12 @@ def contact_gap(mesh: Mesh, positions: np.ndarray, normals: np.ndarray, pad_widt
     lo, hi = mesh.vertices.min(axis=0), mesh.vertices.max(axis=0)
     height = 2.0 * float(np.linalg.norm(hi - lo)) + radius
     scene = embree_scene(mesh) if scene is None else scene
-    gaps = np.zeros(P.shape[0])
-    for i, (p, n) in enumerate(zip(P, N)):
-        u, v = _frame(n)
-        origins = p + height * n + a[:, None] * u + b[:, None] * v
-        hit = scene.run(origins.astype(np.float32), np.repeat(-n[None], a.size, axis=0).astype(np.float32),
-                        output=1)
-        found = hit["primID"] >= 0
-        if found.any():
-            gaps[i] = max(0.0, height - float(np.min(hit["tfar"][found])))
-    return gaps
+    U, V = _frames(N)
+    origins = (P + height * N)[:, None] + a[None, :, None] * U[:, None] + b[None, :, None] * V[:, None]
+    hit = scene.run(np.ascontiguousarray(origins.reshape(-1, 3), np.float32),
+                    np.ascontiguousarray(np.repeat(-N, a.size, axis=0), np.float32), output=1)
+    travel = np.where(hit["primID"] >= 0, hit["tfar"], np.inf).reshape(P.shape[0], a.size).min(axis=1)
+    return np.where(np.isfinite(travel), np.maximum(0.0, height - travel), 0.0)
 
 
 def touchable(mesh: Mesh, positions: np.ndarray, normals: np.ndarray, pad_width: float,
