@@ -61,9 +61,13 @@ class BatchSettings:
     seed: int = 0
 
     def __post_init__(self):
-        from meshsal.points import POINT_METHODS
+        from meshsal.points import MODEL_METHODS, POINT_METHODS
 
         methods = POINT_METHODS.check(self.methods)
+        needs_model = [m for m in methods if m in MODEL_METHODS]
+        if needs_model:
+            raise ValueError(f"{', '.join(needs_model)}: a learned method needs a touch model fitted on training "
+                             f"instances ('visuotactile experiment'), which a batch of single meshes has not")
         if int(self.n_points) != self.n_points or self.n_points < 1:
             raise ValueError(f"n_points must be a positive integer, got {self.n_points!r}")
         if not self.size_mm > 0 or self.view_size < 16:
@@ -168,15 +172,17 @@ def _compute(path: Path, name: str, store: Path, settings: BatchSettings, timing
     timings["mesh_saliency"] = time.perf_counter() - t
     arrays = {"vertex_saliency": saliency}
     methods = {}
-    timings["points"] = timings["imprints"] = 0.0
+    timings["imprints"] = 0.0
     scene = meshsal.embree.embree_scene(mesh)
     sensor = tactile.Sensor()
-    for method in settings.methods:
-        t = time.perf_counter()
-        pts = meshsal.interest_points(mesh, n=settings.n_points, method=method, seed=settings.seed,
+    t = time.perf_counter()
+    # One rendering serves every attention method.
+    picked = meshsal.points_by_method(mesh, settings.methods, n=settings.n_points, seed=settings.seed,
                                       size=settings.view_size, vertex_saliency=saliency, threads=1,
                                       pad_width=sensor.width_mm)
-        timings["points"] += time.perf_counter() - t
+    timings["points"] = time.perf_counter() - t
+    for method in settings.methods:
+        pts = picked[method]
         t = time.perf_counter()
         images = tactile.imprints(mesh, pts.positions, pts.normals, sensor, workers=1, scene=scene)
         timings["imprints"] += time.perf_counter() - t

@@ -27,7 +27,7 @@ import numpy as np
 from meshsal.atomic import atomic_path
 
 __all__ = ["default_dir", "hash_arrays", "code_fingerprint", "file_fingerprint", "library_versions", "cache_key",
-           "cached"]
+           "cached", "load", "store"]
 
 #: The distributions whose numbers reach a cached result.
 LIBRARIES = ("numpy", "scipy", "scikit-learn", "opencv-contrib-python-headless", "embreex", "libigl", "pymeshlab")
@@ -128,14 +128,32 @@ def cached(directory, key: str, compute: Callable[[], dict[str, np.ndarray]]) ->
     """
     if directory is None:
         return compute()
-    path = Path(directory) / f"{key}.npz"
-    if path.exists():
-        try:
-            with np.load(path, allow_pickle=False) as data:
-                return {name: data[name] for name in data.files}
-        except (OSError, ValueError, zipfile.BadZipFile, EOFError):
-            pass  # a damaged entry (disk full, foreign file): recompute and overwrite it
+    found = load(directory, key)
+    if found is not None:
+        return found
     arrays = compute()
+    store(directory, key, arrays)
+    return arrays
+
+
+def load(directory, key: str) -> dict[str, np.ndarray] | None:
+    """The arrays stored under ``key``, or None when absent, damaged or ``directory`` is None."""
+    if directory is None:
+        return None
+    path = Path(directory) / f"{key}.npz"
+    if not path.exists():
+        return None
+    try:
+        with np.load(path, allow_pickle=False) as data:
+            return {name: data[name] for name in data.files}
+    except (OSError, ValueError, zipfile.BadZipFile, EOFError):
+        return None  # a damaged entry (disk full, foreign file): the caller recomputes and overwrites it
+
+
+def store(directory, key: str, arrays: dict[str, np.ndarray]) -> None:
+    """Write ``arrays`` under ``key`` atomically (nothing when ``directory`` is None)."""
+    if directory is None:
+        return
+    path = Path(directory) / f"{key}.npz"
     with atomic_path(path) as tmp:
         np.savez(tmp, **arrays)
-    return arrays

@@ -20,6 +20,10 @@ Every acquisition session is one call of ``tactile.acquire`` under
 free roll per touch, drawn from a generator seeded with (seed, object name,
 replicate, instance, session).  None of those draws depends on the point
 method, so every method meets the same instances and devices (paired).
+
+The learned methods also need each instance's *touch survey*
+(:func:`touch_survey`): a candidate pool with its visual features and, on
+training instances only, one touch of every candidate.
 """
 
 from __future__ import annotations
@@ -32,7 +36,7 @@ import numpy as np
 from classify import cache as cache_mod
 
 __all__ = ["Settings", "name_seed", "nominal_mesh", "mesh_hash", "instance_spec", "paper_sample",
-           "instance_sample"]
+           "instance_sample", "instance_samples", "touch_survey", "learned_sample"]
 
 
 def _typical():
@@ -137,21 +141,22 @@ def instance_spec(settings: Settings, name: str, replicate: int, index: int):
                          settings.brightness_spread)
 
 
-def _points(mesh, method, settings: Settings, seed: int, threads):
-    import meshsal
-
+def _rule_kwargs(settings: Settings, threads) -> dict:
     # The pad's real width: instances differ in size, the sensor does not.
-    kwargs = {"n": settings.n_points, "method": method, "seed": seed, "quiet": True, "threads": threads,
-              "pad_width": settings.sensor.width_mm}
+    kwargs = {"n": settings.n_points, "quiet": True, "threads": threads, "pad_width": settings.sensor.width_mm}
     if settings.view_size is not None:
         kwargs["size"] = settings.view_size
-    return meshsal.interest_points(mesh, **kwargs)
+    return kwargs
 
 
 def _key(kind, nominal, name, method, settings, *parts):
     code = cache_mod.code_fingerprint("meshsal", "tactile") + cache_mod.file_fingerprint(__file__)
     return cache_mod.cache_key(kind, mesh_hash(nominal), name, method, settings.key(), list(parts), code,
                                cache_mod.library_versions())
+
+
+def _point_seed(settings: Settings, name: str, replicate: int, index: int) -> int:
+    return int(_rng(settings, name, replicate, index, 2).integers(2**31 - 1))
 
 
 def paper_sample(nominal, name: str, method: str, settings: Settings, cache_dir=None, threads=None) -> dict:
@@ -169,7 +174,10 @@ def paper_sample(nominal, name: str, method: str, settings: Settings, cache_dir=
     import tactile
 
     def compute():
-        pts = _points(nominal, method, settings, int(_rng(settings, name, 0, 0, 2).integers(2**31 - 1)), threads)
+        import meshsal
+
+        pts = meshsal.interest_points(nominal, method=method, seed=_point_seed(settings, name, 0, 0),
+                                      **_rule_kwargs(settings, threads))
         images = tactile.imprints(nominal, pts.positions, pts.normals, settings.sensor)
         return {"positions": np.asarray(pts.positions, np.float64), "normals": np.asarray(pts.normals, np.float64),
                 "imprints": np.asarray(images, np.float32)}
@@ -177,35 +185,130 @@ def paper_sample(nominal, name: str, method: str, settings: Settings, cache_dir=
     return cache_mod.cached(cache_dir, _key("paper", nominal, name, method, settings), compute)
 
 
-def instance_sample(nominal, name: str, method: str, settings: Settings, replicate: int, index: int,
-                    cache_dir=None, threads=None) -> dict:
-    """Instance ``index`` of replicate ``replicate``: its points and the imprints of its sessions.
+def _sessions(mesh, pts, settings: Settings, name: str, replicate: int, index: int, scene) -> dict:
+    """The acquisition sessions of one instance at its points: the same devices and rolls for every method."""
+    import tactile
+
+    sessions = 1 if index == 0 else settings.train_sessions
+    stack = [tactile.acquire(mesh, pts.positions, pts.normals, settings.sensor, settings.perturbation,
+                             _rng(settings, name, replicate, index, 1, s), scene=scene)
+             for s in range(sessions)]
+    return {"positions": np.asarray(pts.positions, np.float64), "normals": np.asarray(pts.normals, np.float64),
+            "imprints": np.asarray(stack, np.float32).reshape(sessions, len(pts), *stack[0].shape[1:])}
+
+
+def instance_samples(nominal, name: str, methods, settings: Settings, replicate: int, index: int,
+                     survey: bool = False, cache_dir=None, threads=None) -> dict:
+    """Instance ``index`` of replicate ``replicate``: each method's points and the imprints of its sessions.
 
     Instance 0 is the test instance (one session), the others train
-    (``settings.train_sessions`` sessions each).  ``threads`` as in
-    :func:`paper_sample`.
+    (``settings.train_sessions`` sessions each).  The instance is built,
+    rendered and its mesh saliency computed once for all ``methods``
+    (``meshsal.points_by_method``); each method's sample is cached on its
+    own, so adding a method later reuses the others.  ``threads``
+    (rendering and attention threads, default the CPU count) changes
+    nothing in the result.
+
+    With ``survey``, also the instance's touch survey for the learned
+    methods (:func:`touch_survey`), under key ``"survey"``.
 
     Returns
     -------
-    dict with ``positions``, ``normals`` (k, 3) float64 in the instance's
-    frame and ``imprints`` (sessions, k, rows, cols) float32.
+    dict method -> dict with ``positions``, ``normals`` (k, 3) float64 in
+    the instance's frame and ``imprints`` (sessions, k, rows, cols) float32
     """
     import meshsal
-    import tactile
     from meshsal.instances import make_instance
 
-    sessions = 1 if index == 0 else settings.train_sessions
+    methods = list(dict.fromkeys(methods))
+    keys = {m: _key("instance", nominal, name, m, settings, replicate, index) for m in methods}
+    if survey:
+        keys["survey"] = _key("survey", nominal, name, "", settings, replicate, index)
+    out = {m: cache_mod.load(cache_dir, key) for m, key in keys.items()}
+    missing = [m for m in methods if out[m] is None]
+    if not missing and (not survey or out["survey"] is not None):
+        return out
+    mesh = make_instance(nominal, instance_spec(settings, name, replicate, index))
+    vertex_saliency = meshsal.mesh_saliency(mesh)
+    attention = [m for m in missing if m in meshsal.points.ATTENTION_METHODS]
+    seen = None
+    if attention or (survey and out["survey"] is None):
+        seen = meshsal.points.view_channels(mesh, size=settings.view_size or 128, vertex_saliency=vertex_saliency,
+                                            threads=threads)
+    scene = meshsal.embree.embree_scene(mesh)
+    picked = meshsal.points_by_method(mesh, missing, seed=_point_seed(settings, name, replicate, index),
+                                      vertex_saliency=vertex_saliency, seen=seen, **_rule_kwargs(settings, threads))
+    for m in missing:
+        out[m] = _sessions(mesh, picked[m], settings, name, replicate, index, scene)
+        cache_mod.store(cache_dir, keys[m], out[m])
+    if survey and out["survey"] is None:
+        out["survey"] = touch_survey(mesh, seen, vertex_saliency, settings, name, replicate, index, scene)
+        cache_mod.store(cache_dir, keys["survey"], out["survey"])
+    return out
+
+
+def touch_survey(mesh, seen, vertex_saliency, settings: Settings, name: str, replicate: int, index: int,
+                 scene) -> dict:
+    """What the learned methods need of one instance: its candidate pool and their visual features.
+
+    On a training instance (``index >= 1``) the pool is also touched once
+    (its own device and rolls) and the imprints' roll-invariant polar
+    descriptors kept: the distinctiveness of each candidate is measured on
+    those (``classify.learned``).  The test instance is never touched here.
+
+    Returns
+    -------
+    dict with ``pool`` (P,) int64 vertex ids, ``features`` (P, len(meshsal.learned.FEATURES))
+    float64 and, for a training instance, ``descriptors`` (P, d) float32
+    """
+    import tactile
+    from meshsal.learned import candidate_pool, point_features
+    from meshsal.mesh import vertex_normals
+    from meshsal.points import attention_maps
+    from tactile.features import describe
+
+    pool = candidate_pool(mesh, settings.n_points, _rng(settings, name, replicate, index, 6))
+    features = point_features(mesh, seen.views, seen.results, attention_maps(seen, "equal"), vertex_saliency, pool,
+                              0.5 * settings.sensor.width_mm)
+    out = {"pool": pool.astype(np.int64), "features": features}
+    if index >= 1:
+        vn = vertex_normals(mesh.vertices, mesh.faces)
+        images = tactile.acquire(mesh, mesh.vertices[pool], vn[pool], settings.sensor, settings.perturbation,
+                                 _rng(settings, name, replicate, index, 7), scene=scene)
+        out["descriptors"] = describe(np.asarray(images, np.float32), "polar").astype(np.float32)
+    return out
+
+
+def learned_sample(nominal, name: str, method: str, settings: Settings, replicate: int, index: int, model,
+                   survey: dict, cache_dir=None, threads=None) -> dict:
+    """A model method's sample of one instance (as :func:`instance_samples`), given the replicate's model.
+
+    "learned" chooses from the instance's surveyed pool without rendering
+    again; "attention_learned" renders with the model's channel weights.
+    """
+    import meshsal
+    from meshsal.instances import make_instance
+
+    model_hash = cache_mod.hash_arrays(model.mean, model.scale, model.coef, np.array([model.intercept]),
+                                       np.array(list(model.channel_weights.values())))
 
     def compute():
         mesh = make_instance(nominal, instance_spec(settings, name, replicate, index))
-        pts = _points(mesh, method, settings, int(_rng(settings, name, replicate, index, 2).integers(2**31 - 1)),
-                      threads)
-        scene = meshsal.embree.embree_scene(mesh)
-        stack = [tactile.acquire(mesh, pts.positions, pts.normals, settings.sensor, settings.perturbation,
-                                 _rng(settings, name, replicate, index, 1, s), scene=scene)
-                 for s in range(sessions)]
-        return {"positions": np.asarray(pts.positions, np.float64), "normals": np.asarray(pts.normals, np.float64),
-                "imprints": np.asarray(stack, np.float32).reshape(sessions, len(pts), *stack[0].shape[1:])}
+        vertex_saliency = meshsal.mesh_saliency(mesh)
+        kwargs = _rule_kwargs(settings, threads)
+        if method == "learned":
+            pts = meshsal.points.learned_points(mesh, survey["pool"], survey["features"], model, vertex_saliency,
+                                                n=kwargs["n"], pad_width=kwargs["pad_width"])
+        else:
+            pts = meshsal.points_by_method(mesh, [method], seed=_point_seed(settings, name, replicate, index),
+                                           vertex_saliency=vertex_saliency, model=model, **kwargs)[method]
+        return _sessions(mesh, pts, settings, name, replicate, index, meshsal.embree.embree_scene(mesh))
 
-    return cache_mod.cached(cache_dir, _key("instance", nominal, name, method, settings, replicate, index),
-                            compute)
+    return cache_mod.cached(cache_dir, _key("instance", nominal, name, method, settings, replicate, index,
+                                            model_hash), compute)
+
+
+def instance_sample(nominal, name: str, method: str, settings: Settings, replicate: int, index: int,
+                    cache_dir=None, threads=None) -> dict:
+    """One method's :func:`instance_samples` (not for the model methods)."""
+    return instance_samples(nominal, name, [method], settings, replicate, index, False, cache_dir, threads)[method]

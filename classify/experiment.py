@@ -20,6 +20,7 @@ from __future__ import annotations
 import dataclasses
 import time
 from contextlib import nullcontext
+from pathlib import Path
 
 import numpy as np
 from threadpoolctl import threadpool_limits
@@ -28,10 +29,11 @@ from classify import cache as cache_mod
 from classify import dataset, stats
 from classify.cluster import Inline, worker_pool
 from classify.classifiers import CLASSIFIERS, NAMES, make
+from classify.learned import fit_replicate_model
 from classify.protocols import (PROTOCOL_REGISTRY, PROTOCOLS, InstanceData, InstanceOutcome, PaperOutcome,
                                 instance_job, paper_job, paper_splits)
 from classify.results import Cell, Comparison, ConfusionMatrix, ExperimentResult, format_tables, write_outputs
-from meshsal.points import METHODS, POINT_METHODS
+from meshsal.points import METHODS, MODEL_METHODS, POINT_METHODS
 from meshsal.progress import progress
 from tactile.features import FEATURES
 
@@ -75,10 +77,21 @@ def _paper_sample_task(task):
         return dataset.paper_sample(nominal, name, method, settings, cache_dir, threads)
 
 
-def _instance_sample_task(task):
-    nominal, name, method, settings, r, j, cache_dir, threads = task
+def _instance_samples_task(task):
+    nominal, name, methods, settings, r, j, survey, cache_dir, threads = task
     with threadpool_limits(1):
-        return dataset.instance_sample(nominal, name, method, settings, r, j, cache_dir, threads)
+        return dataset.instance_samples(nominal, name, methods, settings, r, j, survey, cache_dir, threads)
+
+
+def _model_task(surveys):
+    with threadpool_limits(1):
+        return fit_replicate_model(surveys)
+
+
+def _learned_sample_task(task):
+    nominal, name, method, settings, r, j, model, survey, cache_dir, threads = task
+    with threadpool_limits(1):
+        return dataset.learned_sample(nominal, name, method, settings, r, j, model, survey, cache_dir, threads)
 
 
 def _paper_task(task):
@@ -129,6 +142,9 @@ def run_experiment(objects=None, methods=("attention",), protocols=PROTOCOLS, cl
     ----------
     objects : None (the six toys), names/paths (see :func:`load_objects`) or meshes
     methods : interest-point methods (``METHODS``)
+        The model methods ("learned", "attention_learned") fit a touch
+        model per replicate on its training instances
+        (:mod:`classify.learned`) and run in the instance protocol only.
     protocols : subset of ``PROTOCOLS``
     classifiers : subset of ``classify.NAMES``
     settings : classify.dataset.Settings
@@ -154,8 +170,9 @@ def run_experiment(objects=None, methods=("attention",), protocols=PROTOCOLS, cl
         ``classify.cluster.open_executor`` (a Dask cluster).
     cache_dir : path, None (no cache) or ``"default"`` (:func:`classify.cache.default_dir`)
     out_dir : path or None
-        Where ``results.json``, ``results.csv``, ``confusion_<classifier>.png``
-        and ``touches.png`` go (nothing written when None).
+        Where ``results.json``, ``results.csv``, ``confusion_<classifier>.png``,
+        ``touches.png`` and, with a learned method, each replicate's touch
+        model (``touch_models/replicate_<r>.json``) go (nothing written when None).
     quiet : no progress bars on stderr
 
     Returns
@@ -183,6 +200,9 @@ def run_experiment(objects=None, methods=("attention",), protocols=PROTOCOLS, cl
         cache_dir = cache_mod.default_dir()
     params = dict(params or {})
     names, nominal = load_objects(objects, settings)
+    # A touch model needs training instances: the paper protocol has none.
+    paper_methods = [m for m in methods if m not in MODEL_METHODS]
+    models = []
     n_all = len(names)
     object_sets = tuple(sorted({min(4, n_all), n_all}))
     timings, rates, confusions, kept = {}, {}, [], {}
@@ -191,16 +211,16 @@ def run_experiment(objects=None, methods=("attention",), protocols=PROTOCOLS, cl
     with threadpool_limits(1), (nullcontext(executor) if executor is not None else worker_pool(n_jobs)) as pool:
         # Workers render with one thread each; alone, the stage renders with every core.
         threads = None if isinstance(pool, Inline) else 1
-        if "paper" in protocols:
+        if "paper" in protocols and paper_methods:
             t0 = time.perf_counter()
-            pairs = [(m, i) for m in methods for i in range(n_all)]
+            pairs = [(m, i) for m in paper_methods for i in range(n_all)]
             done = progress(pool.map(_paper_sample_task, [(nominal[i], names[i], m, settings, cache_dir,
                                                           threads) for m, i in pairs]),
                             total=len(pairs), desc="paper: points+imprints", quiet=quiet)
             samples = dict(zip(pairs, done))
             timings["paper_points_and_imprints"] = time.perf_counter() - t0
             t0 = time.perf_counter()
-            for m in methods:
+            for m in paper_methods:
                 for n in object_sets:
                     order = _by_name(names[:n])
                     X = np.concatenate([samples[m, i]["imprints"] for i in order])
@@ -213,12 +233,8 @@ def run_experiment(objects=None, methods=("attention",), protocols=PROTOCOLS, cl
 
         if "instance" in protocols:
             t0 = time.perf_counter()
-            index = range(settings.train_instances + 1)
-            keys = [(r, m, i, j) for r in range(replicates) for m in methods for i in range(n_all) for j in index]
-            done = progress(pool.map(_instance_sample_task, [(nominal[i], names[i], m, settings, r, j,
-                                                             cache_dir, threads) for r, m, i, j in keys]),
-                            total=len(keys), desc="instances: points+imprints", quiet=quiet)
-            samples = dict(zip(keys, done))
+            samples, models = _instance_stage(nominal, names, methods, settings, replicates, pool, cache_dir, threads,
+                                              quiet)
             timings["instance_points_and_imprints"] = time.perf_counter() - t0
             t0 = time.perf_counter()
             for m in methods:
@@ -271,12 +287,50 @@ def run_experiment(objects=None, methods=("attention",), protocols=PROTOCOLS, cl
                               for c in classifiers},
         "libraries": cache_mod.library_versions(),
         "cache_dir": None if cache_dir is None else str(cache_dir),
+        "learned_channel_weights": [m.channel_weights for m in models],
     }
     result = ExperimentResult(cells, tuple(comparisons), tuple(confusions), names, object_sets, classifiers,
                               run_settings, kept, timings, rates)
     if out_dir is not None:
         write_outputs(result, out_dir)
+        for r, model in enumerate(models):
+            model.save(Path(out_dir) / "touch_models" / f"replicate_{r:02d}.json")
     return result
+
+
+def _instance_stage(nominal, names, methods, settings, replicates, pool, cache_dir, threads, quiet):
+    """Every instance's points and imprints for every method, and each replicate's touch model.
+
+    One task per instance computes all methods that need no model, sharing
+    its rendering, plus its touch survey when a model method is asked for;
+    then each replicate's model is fitted on its training instances'
+    surveys; then the model methods run on every instance.
+    """
+    plain = [m for m in methods if m not in MODEL_METHODS]
+    learned = [m for m in methods if m in MODEL_METHODS]
+    keys = [(r, i, j) for r in range(replicates) for i in range(len(names))
+            for j in range(settings.train_instances + 1)]
+    done = progress(pool.map(_instance_samples_task, [(nominal[i], names[i], plain, settings, r, j, bool(learned),
+                                                       cache_dir, threads) for r, i, j in keys]),
+                    total=len(keys), desc="instances: points+imprints", quiet=quiet)
+    samples, surveys = {}, {}
+    for (r, i, j), out in zip(keys, done):
+        for m in plain:
+            samples[r, m, i, j] = out[m]
+        if learned:
+            surveys[r, i, j] = out["survey"]
+    if not learned:
+        return samples, []
+    models = list(progress(pool.map(_model_task, [{(names[i], j): surveys[r, i, j] for q, i, j in keys if q == r}
+                                                  for r in range(replicates)]),
+                           total=replicates, desc="instances: touch models", quiet=quiet))
+    tasks = [(r, m, i, j) for m in learned for r, i, j in keys]
+    done = progress(pool.map(_learned_sample_task, [(nominal[i], names[i], m, settings, r, j, models[r],
+                                                     surveys[r, i, j], cache_dir, threads)
+                                                    for r, m, i, j in tasks]),
+                    total=len(tasks), desc="instances: learned points+imprints", quiet=quiet)
+    samples.update(zip(tasks, done))
+    return samples, models
 
 
 def _by_name(names) -> np.ndarray:

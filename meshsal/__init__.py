@@ -30,10 +30,13 @@ _EXPORTS = {
     "mesh_saliency": "curvature",
     "InterestPoints": "points",
     "interest_points": "points",
+    "points_by_method": "points",
+    "TouchModel": "learned",
+    "fit_touch_model": "learned",
     "project_pixel_paper": "points",
 }
 _SUBMODULES = {"render", "tracer", "toys", "ycb", "objects", "instances", "reproducible", "registry", "sdf",
                "attention", "curvature", "points", "sampling", "overlay", "embree", "io", "transform", "progress",
-               "atomic"}
+               "atomic", "learned", "touch"}
 
 __getattr__, __dir__, __all__ = attach(__name__, _EXPORTS, _SUBMODULES)

@@ -109,8 +109,12 @@ def _add_points(subparsers) -> None:
     p.add_argument("--min-spacing-mm", type=float, default=None,
                    help="no two points closer than this, in mm after scaling (default half of --pad-mm)")
     p.add_argument("--combination", choices=COMBINATIONS, default="equal",
-                   help="how the eight attention channels are summed: the paper's equal weights, or each "
-                        "also weighted by Itti's N(.) (default equal)")
+                   help="how the eight attention channels are summed: the paper's equal weights, each also "
+                        "weighted by Itti's N(.), or the weights learned in a touch model (--model) "
+                        "(default equal)")
+    p.add_argument("--model", type=Path, default=None,
+                   help="touch model JSON (written by 'visuotactile experiment' to touch_models/) for the "
+                        "learned methods and the learned combination")
     p.add_argument("--no-touch-check", dest="touch", action="store_false",
                    help="keep points the pad, pressed along the normal, would not meet first")
     p.add_argument("--size", type=int, default=128, help="rendered view size in pixels (default 128)")
@@ -128,26 +132,29 @@ def _cmd_points(args) -> int:
     from .io import save_ply
     from .mesh import Similarity
     from .attention import plateau_fraction
-    from .points import (POINT_METHODS, attention_combination, attention_points, best_view_set, interest_points,
-                         saliency_maps)
+    from .learned import TouchModel
+    from .points import (MODEL_METHODS, attention_combination, attention_maps, best_view_set, points_by_method,
+                         view_channels)
     from .toys import load_object
     from .transform import scale_to
 
     if args.size < 16:
         raise ValueError(f"--size must be at least 16 pixels, got {args.size}")
+    combination = attention_combination(args.method, args.combination)
+    if (args.method in MODEL_METHODS or combination == "learned") and args.model is None:
+        raise ValueError(f"--method {args.method} --combination {args.combination} needs --model FILE, a touch "
+                         f"model written by 'visuotactile experiment' (its touch_models/ folder)")
+    model = None if args.model is None else TouchModel.load(args.model)
     mesh = scale_to(load_object(args.mesh), args.size_mm)
     vertex_saliency = mesh_saliency(mesh)
-    combination = attention_combination(args.method, args.combination)
-    views, maps = saliency_maps(mesh, size=args.size, vertex_saliency=vertex_saliency, quiet=args.quiet,
-                                combination=combination)
+    seen = view_channels(mesh, size=args.size, vertex_saliency=vertex_saliency, quiet=args.quiet)
+    weights = model.channel_weights if combination == "learned" else None
     rule = {"min_spacing": args.min_spacing_mm, "threshold": args.threshold, "pad_width": args.pad_mm,
             "touch": args.touch}
-    if POINT_METHODS.get(args.method) is None:
-        pts = attention_points(mesh, views, maps, vertex_saliency, n=args.n, combination=combination,
-                               method=args.method, **rule)
-    else:
-        pts = interest_points(mesh, n=args.n, method=args.method, seed=args.seed,
-                              vertex_saliency=vertex_saliency, **rule)
+    pts = points_by_method(mesh, [args.method], n=args.n, seed=args.seed, vertex_saliency=vertex_saliency,
+                           seen=seen, combination=args.combination, weights=weights, model=model,
+                           **rule)[args.method]
+    views, maps = seen.views, attention_maps(seen, combination, weights)
 
     to_source = mesh.transform.to_source
     top = float(vertex_saliency.max())
@@ -157,7 +164,8 @@ def _cmd_points(args) -> int:
 
     settings = {"n": args.n, "method": args.method, "size_mm": args.size_mm, "view_size": args.size,
                 "threshold": args.threshold, "seed": args.seed, "combination": combination,
-                "pad_mm": args.pad_mm, "touch_check": args.touch}
+                "pad_mm": args.pad_mm, "touch_check": args.touch,
+                "model": None if args.model is None else str(args.model), "channel_weights": weights}
     pts.save(args.out / "points.json", frame=mesh.transform, source=str(args.mesh), settings=settings)
     positions = to_source(pts.positions)
     normals = mesh.transform.direction_to_source(pts.normals)

@@ -47,7 +47,7 @@ import numpy as np
 from .embree import embree_scene
 from .mesh import Mesh, face_normals, vertex_normals
 from .registry import Registry
-from .sampling import farthest_points, field_peaks, non_maximum_suppression, random_surface_points
+from .sampling import farthest_points, field_peaks, random_surface_points
 from .touch import default_pad_width, touchable
 
 __all__ = [
@@ -62,11 +62,23 @@ __all__ = [
     "attention_points",
     "project_pixel_paper",
     "COMBINATIONS",
+    "ATTENTION_METHODS",
+    "MODEL_METHODS",
     "attention_combination",
+    "ViewChannels",
+    "view_channels",
+    "attention_maps",
+    "learned_points",
+    "points_by_method",
 ]
 
-#: How the attention channels are combined: the paper's equal weights, or Itti's N(.) on each.
-COMBINATIONS = ("equal", "itti")
+#: How the attention channels are combined: the paper's equal weights, Itti's N(.) on each, or
+#: weights learned from touches (``meshsal.learned``; given as ``weights``).
+COMBINATIONS = ("equal", "itti", "learned")
+#: The attention methods and the combination each uses ("attention" takes the one asked for).
+ATTENTION_METHODS = {"attention": "equal", "attention_itti": "itti", "attention_learned": "learned"}
+#: Methods that need a fitted ``meshsal.learned.TouchModel`` (``model=``).
+MODEL_METHODS = ("learned", "attention_learned")
 
 POINTS_FORMAT = "visuotactile.points"
 POINTS_VERSION = 1
@@ -241,8 +253,8 @@ def _read_points(path) -> InterestPoints:
 
 
 def attention_combination(method: str, combination: str = "equal") -> str:
-    """The channel combination an attention method uses: "itti" for "attention_itti", else ``combination``."""
-    return "itti" if method == "attention_itti" else combination
+    """The channel combination an attention method uses: its own, or ``combination`` for "attention" and others."""
+    return ATTENTION_METHODS[method] if method in ATTENTION_METHODS and method != "attention" else combination
 
 
 def default_min_spacing(mesh: Mesh, pad_width: float | None = None) -> float:
@@ -328,27 +340,40 @@ class _TouchFilter:
 def _suppress(more: _Candidates, chosen: _Candidates, n: int, spacing: float, touch) -> _Candidates:
     """Greedy suppression of ``more`` after ``chosen``; a candidate the pad cannot touch is skipped.
 
-    Untouchable picks are dropped and the suppression rerun, so the next
-    candidate in line takes their place exactly as if they had never been
-    proposed; only picks are tested, each once, not the whole list.
+    A skipped candidate blocks nothing, so the next one in line takes its
+    place exactly as if it had never been proposed.  Touch tests run in
+    batches of the candidates next in line, each tested once at most.
     """
-    alive = np.ones(more.vertex_ids.size, dtype=bool)
-    tested = np.zeros(more.vertex_ids.size, dtype=bool)
-    while True:
-        index = np.flatnonzero(alive)
-        sub = _take(more, index)
-        keep = non_maximum_suppression(sub.positions, spacing, n - chosen.vertex_ids.size, ids=sub.vertex_ids,
-                                       taken_points=chosen.positions, taken_ids=chosen.vertex_ids)
-        picks = index[keep]
-        new = picks[~tested[picks]]
-        if touch is None or new.size == 0:
-            return _take(sub, keep)
-        tested[new] = True
-        bad = new[~touch(_take(more, new))]
-        if bad.size == 0:
-            return _take(sub, keep)
-        touch.lost += int(bad.size)
-        alive[bad] = False
+    from scipy.spatial import cKDTree
+
+    need = n - chosen.vertex_ids.size
+    if need <= 0 or more.vertex_ids.size == 0:
+        return _take(more, np.empty(0, np.int64))
+    tree = cKDTree(more.positions)
+    # "No two closer than spacing": points exactly that far apart may both stay.
+    radius = np.nextafter(spacing, 0.0) if spacing > 0 else 0.0
+    alive = ~np.isin(more.vertex_ids, chosen.vertex_ids)
+    for point in chosen.positions:
+        alive[tree.query_ball_point(point, radius)] = False
+    verdict = np.zeros(more.vertex_ids.size, np.int8)      # 0 untested, 1 touchable, -1 not
+    picks = []
+    i = 0
+    while len(picks) < need:
+        rest = np.flatnonzero(alive[i:])
+        if rest.size == 0:
+            break
+        i += int(rest[0])
+        if touch is not None and verdict[i] == 0:
+            batch = i + np.flatnonzero(alive[i:] & (verdict[i:] == 0))[:need - len(picks)]
+            verdict[batch] = np.where(touch(_take(more, batch)), 1, -1)
+        alive[i] = False
+        if touch is not None and verdict[i] < 0:
+            touch.lost += 1
+            continue
+        picks.append(i)
+        alive[tree.query_ball_point(more.positions[i], radius)] = False
+        alive[more.vertex_ids == more.vertex_ids[i]] = False
+    return _take(more, np.asarray(picks, np.int64))
 
 
 def _select(first: _Candidates, fill_order: list, n: int, spacing: float, touch=None) -> _Candidates:
@@ -618,6 +643,8 @@ def _abs_mean_curvature(mesh, vertex_saliency):
 POINT_METHODS = Registry("interest-point method")
 POINT_METHODS.register("attention", None, "the paper's visual attention (equal channel weights)")
 POINT_METHODS.register("attention_itti", None, "the paper's visual attention, each channel weighted by Itti's N(.)")
+POINT_METHODS.register("attention_learned", None, "the paper's visual attention, channel weights learned from touches")
+POINT_METHODS.register("learned", None, "points by touch distinctiveness predicted from vision (meshsal.learned)")
 POINT_METHODS.register("random", _random_candidates, "area-weighted random surface points")
 POINT_METHODS.register("uniform", _uniform_candidates, "farthest-point sampling")
 POINT_METHODS.register("mesh_saliency", _peak_candidates(lambda mesh, s: s), "peaks of Lee et al.'s mesh saliency")
@@ -625,11 +652,153 @@ POINT_METHODS.register("curvature", _peak_candidates(_abs_mean_curvature), "peak
 METHODS = POINT_METHODS.names()
 
 
+@dataclass(frozen=True, eq=False)
+class ViewChannels:
+    """A mesh's 72 rendered views and their eight channel maps: render once, combine as each method needs.
+
+    ``views`` list of 72 View in rig order; ``results`` the matching
+    ``meshsal.attention.SaliencyResult`` (their ``channels`` are what count).
+    """
+
+    views: list
+    results: list
+
+
+def view_channels(mesh: Mesh, size: int = 128, vertex_saliency=None, threads: int | None = None,
+                  quiet: bool = True) -> ViewChannels:
+    """Render the rig's 72 views and compute each one's channels (arguments as in :func:`saliency_maps`)."""
+    from .attention import saliency_views
+    from .render import render_views, view_rig
+
+    cameras = [c for s in view_rig() for c in s]
+    views = render_views(mesh, cameras, size=size, threads=threads)
+    return ViewChannels(views, saliency_views(views, mesh, vertex_saliency=vertex_saliency, threads=threads,
+                                              quiet=quiet, normalize=False))
+
+
+def attention_maps(seen: ViewChannels, combination: str = "equal", weights=None) -> np.ndarray:
+    """(72, H, W) float32 saliency maps combined from channels already computed.
+
+    The same maps as :func:`saliency_maps` with that ``combination`` and
+    ``weights`` ("learned" is a weighted sum with the given weights).
+    """
+    from .attention import combine_maps
+
+    return np.stack([combine_maps(r.channels, v.mask, weights, normalize=combination == "itti")
+                     for v, r in zip(seen.views, seen.results)]).astype(np.float32)
+
+
+def learned_points(mesh: Mesh, pool: np.ndarray, features: np.ndarray, model, vertex_saliency: np.ndarray,
+                   n: int = 15, min_spacing: float | None = None, pad_width: float | None = None,
+                   touch: bool = True, touch_tolerance: float | None = None) -> InterestPoints:
+    """The "learned" method on a candidate pool whose features are known.
+
+    Candidates are ranked by ``model.predict(features)`` (ties by pool
+    order), then chosen under the same spacing and touch rules as every
+    method, with the same mesh-saliency fill.
+
+    Parameters
+    ----------
+    mesh : Mesh
+    pool : (k,) int vertex ids (:func:`meshsal.learned.candidate_pool`)
+    features : (k, len(meshsal.learned.FEATURES)) float (:func:`meshsal.learned.point_features`)
+    model : meshsal.learned.TouchModel
+    vertex_saliency : (n_vertices,) float64
+    n, min_spacing, pad_width, touch, touch_tolerance : as in :func:`interest_points`
+
+    Returns
+    -------
+    InterestPoints (``scores`` the predicted distinctiveness; filled points score below every pool point)
+    """
+    n, spacing, pad = _check(mesh, n, "learned", min_spacing, 0.0, pad_width)
+    vertex_saliency = _check_field(mesh, vertex_saliency)
+    pool = np.asarray(pool, dtype=np.int64)
+    predicted = np.asarray(model.predict(features), dtype=np.float64)
+    if predicted.shape != pool.shape:
+        raise ValueError(f"{pool.size} pool vertices but {predicted.size} rows of features")
+    order = np.lexsort((np.arange(pool.size), -predicted))
+    vn = vertex_normals(mesh.vertices, mesh.faces)
+    floor = float(predicted.min()) - 1.0 if predicted.size else 0.0
+    checker = _TouchFilter(mesh, pad, touch_tolerance) if touch else None
+    chosen = _select(_vertex_candidates(mesh, vn, pool[order], predicted[order]),
+                     _saliency_fill(mesh, vn, vertex_saliency, lambda i: np.full(i.size, floor)), n, spacing,
+                     checker)
+    return InterestPoints(vertex_ids=chosen.vertex_ids, positions=chosen.positions, normals=chosen.normals,
+                          scores=chosen.scores, votes=np.zeros(chosen.vertex_ids.size, np.int64),
+                          vertex_saliency=vertex_saliency, views=tuple(() for _ in range(chosen.vertex_ids.size)),
+                          method="learned", best_set=-1, min_spacing=spacing,
+                          untouchable=checker.lost if checker else -1)
+
+
+def points_by_method(mesh: Mesh, methods, n: int = 15, seed=0, min_spacing: float | None = None, size: int = 128,
+                     threshold: float = 0.5, quiet: bool = True, weights=None, vertex_saliency=None,
+                     threads: int | None = None, combination: str = "equal", pad_width: float | None = None,
+                     touch: bool = True, touch_tolerance: float | None = None, model=None,
+                     seen: ViewChannels | None = None) -> dict:
+    """:func:`interest_points` of several methods on one mesh, rendering and computing channels once.
+
+    Parameters are those of :func:`interest_points`, plus ``seen``: the
+    mesh's :func:`view_channels` if already computed (else rendered here
+    when a method needs the views).  "attention_learned" uses
+    ``model.channel_weights``; "attention" with ``combination="learned"``
+    uses ``weights``.
+
+    Returns
+    -------
+    dict method -> InterestPoints, for each of ``methods`` (the same as one
+    :func:`interest_points` call each)
+    """
+    from .curvature import mesh_saliency
+
+    methods = list(dict.fromkeys(methods))
+    checked = {m: _check(mesh, n, m, min_spacing, threshold, pad_width, combination) for m in methods}
+    for m in methods:
+        if m in MODEL_METHODS and model is None:
+            raise ValueError(f"method {m!r} needs a fitted touch model (model=, a meshsal.learned.TouchModel)")
+        if m == "attention" and combination == "learned" and weights is None:
+            raise ValueError("combination 'learned' needs channel weights (weights=, e.g. a TouchModel's "
+                             "channel_weights)")
+    if vertex_saliency is None:
+        vertex_saliency = mesh_saliency(mesh)
+    vertex_saliency = _check_field(mesh, vertex_saliency)
+    if seen is None and any(m in ATTENTION_METHODS or m in MODEL_METHODS for m in methods):
+        seen = view_channels(mesh, size=size, vertex_saliency=vertex_saliency, threads=threads, quiet=quiet)
+    vn = vertex_normals(mesh.vertices, mesh.faces)
+    out = {}
+    for m in methods:
+        n, spacing, pad = checked[m]
+        if m in ATTENTION_METHODS:
+            mode = attention_combination(m, combination)
+            maps = attention_maps(seen, mode, model.channel_weights if m == "attention_learned" else weights)
+            out[m] = attention_points(mesh, seen.views, maps, vertex_saliency, n=n, min_spacing=spacing,
+                                      threshold=threshold, pad_width=pad, touch=touch,
+                                      touch_tolerance=touch_tolerance, combination=mode, method=m)
+        elif m == "learned":
+            from .learned import candidate_pool, point_features
+
+            pool = candidate_pool(mesh, n, seed)
+            features = point_features(mesh, seen.views, seen.results, attention_maps(seen, "equal"),
+                                      vertex_saliency, pool, spacing, threshold)
+            out[m] = learned_points(mesh, pool, features, model, vertex_saliency, n=n, min_spacing=spacing,
+                                    pad_width=pad, touch=touch, touch_tolerance=touch_tolerance)
+        else:
+            first, field = POINT_METHODS.get(m)(mesh, vn, n, np.random.default_rng(seed), vertex_saliency)
+            checker = _TouchFilter(mesh, pad, touch_tolerance) if touch else None
+            chosen = _select(first, _saliency_fill(mesh, vn, vertex_saliency, lambda i: field[i]), n, spacing,
+                             checker)
+            out[m] = InterestPoints(vertex_ids=chosen.vertex_ids, positions=chosen.positions,
+                                    normals=chosen.normals, scores=chosen.scores,
+                                    votes=np.zeros(chosen.vertex_ids.size, np.int64), vertex_saliency=vertex_saliency,
+                                    views=tuple(() for _ in range(chosen.vertex_ids.size)), method=m, best_set=-1,
+                                    min_spacing=spacing, untouchable=checker.lost if checker else -1)
+    return out
+
+
 def interest_points(mesh: Mesh, n: int = 15, method: str = "attention", seed=0,
                     min_spacing: float | None = None, size: int = 128, threshold: float = 0.5,
                     quiet: bool = True, weights=None, vertex_saliency=None,
                     threads: int | None = None, combination: str = "equal", pad_width: float | None = None,
-                    touch: bool = True, touch_tolerance: float | None = None) -> InterestPoints:
+                    touch: bool = True, touch_tolerance: float | None = None, model=None) -> InterestPoints:
     """Choose ``n`` interest points on a mesh (module docstring for the pipeline).
 
     Parameters
@@ -637,9 +806,13 @@ def interest_points(mesh: Mesh, n: int = 15, method: str = "attention", seed=0,
     mesh : Mesh
     n : int
         How many points (fewer only if the mesh cannot hold ``n`` at ``min_spacing``).
-    method : {"attention", "attention_itti", "random", "uniform", "mesh_saliency", "curvature"}
+    method : {"attention", "attention_itti", "attention_learned", "learned", "random", "uniform", \
+"mesh_saliency", "curvature"}
         "attention": the paper's pipeline; "attention_itti": the same with
-        ``combination="itti"``.  Baselines: "random", area-weighted
+        ``combination="itti"``; "attention_learned": with a model's learned
+        channel weights; "learned": the candidates of
+        :func:`meshsal.learned.candidate_pool` ranked by a model's predicted
+        touch distinctiveness (:func:`learned_points`).  Baselines: "random", area-weighted
         uniform surface samples in random order; "uniform", farthest-point
         sampling of the vertices from a random start; "mesh_saliency", peaks
         of Lee et al.'s mesh saliency; "curvature", peaks of absolute mean
@@ -674,6 +847,9 @@ def interest_points(mesh: Mesh, n: int = 15, method: str = "attention", seed=0,
     touch_tolerance : float, optional
         How far above the point the first contact may lie (default
         ``pad_width / 32``: 1 mm of a 32 mm pad).
+    model : meshsal.learned.TouchModel, optional
+        Needed by "learned" (points by predicted touch distinctiveness) and
+        "attention_learned" (the model's channel weights).
 
     Returns
     -------
@@ -686,28 +862,10 @@ def interest_points(mesh: Mesh, n: int = 15, method: str = "attention", seed=0,
     >>> pts.positions.shape, pts.normals.shape, len(pts.views)
     ((15, 3), (15, 3), 15)
     """
-    from .curvature import mesh_saliency
-
-    n, spacing, pad = _check(mesh, n, method, min_spacing, threshold, pad_width, combination)
-    if vertex_saliency is None:
-        vertex_saliency = mesh_saliency(mesh)
-    vertex_saliency = _check_field(mesh, vertex_saliency)
-    if POINT_METHODS.get(method) is None:
-        combination = attention_combination(method, combination)
-        views, maps = saliency_maps(mesh, size=size, vertex_saliency=vertex_saliency, quiet=quiet,
-                                    weights=weights, threads=threads, combination=combination)
-        return attention_points(mesh, views, maps, vertex_saliency, n=n, min_spacing=spacing,
-                                threshold=threshold, pad_width=pad, touch=touch, touch_tolerance=touch_tolerance,
-                                combination=combination, method=method)
-
-    vn = vertex_normals(mesh.vertices, mesh.faces)
-    first, field = POINT_METHODS.get(method)(mesh, vn, n, np.random.default_rng(seed), vertex_saliency)
-    checker = _TouchFilter(mesh, pad, touch_tolerance) if touch else None
-    chosen = _select(first, _saliency_fill(mesh, vn, vertex_saliency, lambda i: field[i]), n, spacing, checker)
-    return InterestPoints(vertex_ids=chosen.vertex_ids, positions=chosen.positions, normals=chosen.normals,
-                          scores=chosen.scores, votes=np.zeros(chosen.vertex_ids.size, np.int64),
-                          vertex_saliency=vertex_saliency, views=tuple(() for _ in range(chosen.vertex_ids.size)),
-                          method=method, best_set=-1, min_spacing=spacing, untouchable=checker.lost if checker else -1)
+    return points_by_method(mesh, [method], n=n, seed=seed, min_spacing=min_spacing, size=size,
+                            threshold=threshold, quiet=quiet, weights=weights, vertex_saliency=vertex_saliency,
+                            threads=threads, combination=combination, pad_width=pad_width, touch=touch,
+                            touch_tolerance=touch_tolerance, model=model)[method]
 
 
 def _spherical(view):

@@ -9,6 +9,7 @@ import pytest
 from meshsal.mesh import Mesh
 from meshsal.points import (
     METHODS,
+    MODEL_METHODS,
     InterestPoints,
     attention_points,
     best_view_set,
@@ -190,7 +191,7 @@ def test_wide_spacing_fills_from_saliency_and_never_duplicates():
 
 # ---------------------------------------------------------------- baselines
 
-@pytest.mark.parametrize("method", [m for m in METHODS if not m.startswith("attention")])
+@pytest.mark.parametrize("method", [m for m in METHODS if not m.startswith("attention") and m not in MODEL_METHODS])
 def test_baselines_return_n_distinct_spaced_points(method):
     mesh, _, _ = planted_sphere()
     pts = interest_points(mesh, n=12, method=method, seed=3)

@@ -110,13 +110,39 @@ def test_combine_maps_promotes_a_peaked_channel_over_a_flat_one():
     flat = np.ones(mask.shape, np.float32)
     channels = {"intensity": blob, "contrast": flat}
     weights = {"intensity": 1.0, "contrast": 1.0}
-    plain = combine_maps(channels, mask, weights, normalize=False)
-    normalized = combine_maps(channels, mask, weights)
+    # Without the floor, N(.) alone must keep the flat channel out.
+    plain = combine_maps(channels, mask, weights, normalize=False, floor=None)
+    normalized = combine_maps(channels, mask, weights, floor=None)
     # Without N(.) the flat channel lifts the whole object to half the peak;
     # with N(.) a channel that is the same everywhere carries no information.
     assert plain[100, 20] == pytest.approx(0.5, abs=0.01)
     assert normalized[100, 20] < 0.01
     assert np.unravel_index(np.argmax(normalized), mask.shape) == (40, 90)
+
+
+def test_combine_maps_shows_a_hot_spot_not_a_plateau():
+    # Known answer: a channel high all over the object (a shallow dome, 0.85 to 0.95),
+    # one constant over it, and one small hot spot at (40, 90).
+    mask = np.zeros((128, 128), bool)
+    mask[8:120, 8:120] = True
+    rows, cols = np.indices(mask.shape)
+    channels = {name: np.zeros(mask.shape, np.float32) for name in CHANNELS}
+    channels["symmetry"] = (0.95 - 0.1 * (np.hypot(rows - 64, cols - 64) / 80) ** 2).astype(np.float32)
+    channels["color"] = np.full(mask.shape, 0.8, np.float32)
+    channels["curvature"] = np.exp(-((rows - 40) ** 2 + (cols - 90) ** 2) / (2 * 2.5**2)).astype(np.float32)
+    without_constant = dict(channels, color=np.zeros(mask.shape, np.float32))
+    far = erode_mask(mask) & (np.hypot(rows - 40, cols - 90) > 10)
+    for normalize in (False, True):
+        m = combine_maps(channels, mask, normalize=normalize)
+        # Before the median was removed, half the maximum covered all the object with
+        # equal weights and 19% of it with N(.).
+        assert attention.plateau_fraction(m, mask) < 0.01, normalize
+        assert np.hypot(*np.subtract(np.unravel_index(np.argmax(m), m.shape), (40, 90))) <= 1.0
+        assert m[far].max() < 0.1
+        # The constant channel contributes nothing at all.
+        np.testing.assert_array_equal(m, combine_maps(without_constant, mask, normalize=normalize))
+    with pytest.raises(ValueError, match="percentile"):
+        combine_maps(channels, mask, floor=101.0)
 
 
 def test_combine_maps_validates_weights_and_channels():
@@ -163,7 +189,9 @@ def test_weights_selecting_one_channel_reproduce_it(sphere, view, result, name):
     field, _ = planted_field(sphere, view)
     one = saliency(view, sphere, weights={name: 2.5}, vertex_saliency=field)
     inside = erode_mask(view.mask)
+    # The channel on the eroded silhouette, above its median there, scaled to max.
     channel = np.where(inside, result.channels[name], 0.0)
+    channel = np.where(inside, np.maximum(channel - np.median(channel[inside]), 0.0), 0.0)
     expected = channel / channel.max() if channel.max() > 0 else channel
     np.testing.assert_allclose(one.map, expected, atol=1e-5)
 

@@ -4,10 +4,11 @@ import numpy as np
 import pytest
 
 from meshsal.mesh import Mesh
-from meshsal.points import METHODS, interest_points
+from meshsal.points import METHODS, MODEL_METHODS, interest_points
 from meshsal.touch import contact_gap, default_pad_width, touchable
 
 import shapes
+from models import one_feature_model
 
 PAD = 32.0
 
@@ -80,7 +81,8 @@ def test_bad_inputs():
 def test_every_method_proposes_only_touchable_points(method):
     mesh = spiky_ball()
     pad = default_pad_width(mesh)
-    pts = interest_points(mesh, n=10, method=method, size=48, seed=3)
+    model = one_feature_model("curvature") if method in MODEL_METHODS else None
+    pts = interest_points(mesh, n=10, method=method, size=48, seed=3, model=model)
     assert pts.untouchable >= 0
     assert touchable(mesh, pts.positions, pts.normals, pad).all()
     assert pts.min_spacing == pytest.approx(pad / 2)
