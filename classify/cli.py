@@ -30,7 +30,8 @@ def register(subparsers) -> None:
                      "k = 1..n touches, calibrated posteriors multiplied). Rates come with 95 %% bootstrap "
                      "intervals over replicates and objects; with several --methods, paired differences against "
                      "--baseline. Prints Markdown tables and writes results.json, results.csv, "
-                     "confusion_<classifier>.png and touches.png under --out. With --real, reports recognition "
+                     "confusion_<classifier>.png and touches.png under --out (with a learned method, each "
+                     "replicate's touch model in touch_models/). With --real, reports recognition "
                      "on a saved ImprintSet (the paper's Table 2 layout) instead."),
     )
     p.add_argument("--objects", nargs="+", metavar="OBJECTS",
