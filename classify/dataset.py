@@ -36,7 +36,7 @@ import numpy as np
 from classify import cache as cache_mod
 
 __all__ = ["Settings", "name_seed", "nominal_mesh", "mesh_hash", "instance_spec", "paper_sample",
-           "instance_sample", "instance_samples", "touch_survey", "learned_sample"]
+           "instance_samples", "touch_survey", "learned_sample"]
 
 
 def _typical():
@@ -306,9 +306,3 @@ def learned_sample(nominal, name: str, method: str, settings: Settings, replicat
 
     return cache_mod.cached(cache_dir, _key("instance", nominal, name, method, settings, replicate, index,
                                             model_hash), compute)
-
-
-def instance_sample(nominal, name: str, method: str, settings: Settings, replicate: int, index: int,
-                    cache_dir=None, threads=None) -> dict:
-    """One method's :func:`instance_samples` (not for the model methods)."""
-    return instance_samples(nominal, name, [method], settings, replicate, index, False, cache_dir, threads)[method]

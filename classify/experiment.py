@@ -269,7 +269,8 @@ def run_experiment(objects=None, methods=("attention",), protocols=PROTOCOLS, cl
     comparisons = []
     if len(methods) > 1:
         for key, R in rates.items():
-            if key[0] != baseline:
+            # A model method as the baseline has no paper-protocol rates to compare with.
+            if key[0] != baseline and (baseline,) + key[1:] in rates:
                 d = stats.paired_difference(R, rates[(baseline,) + key[1:]], settings.seed)
                 comparisons.append(Comparison(key[0], baseline, *key[1:], d.mean, d.ci_low, d.ci_high, d.p_value,
                                               d.replicates))

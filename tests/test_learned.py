@@ -224,3 +224,14 @@ def test_cli_learned_points_from_a_model_file(tmp_path, capsys):
     document = json.loads((tmp_path / "w" / "points.json").read_text())
     assert document["combination"] == "learned"
     assert document["settings"]["channel_weights"] == dict.fromkeys(CHANNELS, 1.0)
+
+
+def test_a_learned_baseline_runs_both_protocols_and_compares_where_it_can():
+    from classify.experiment import run_experiment
+
+    settings = dataset.Settings(n_points=3, view_size=48, train_instances=2, train_sessions=1)
+    result = run_experiment(["cow", "cup"], methods=("learned", "uniform"), baseline="learned", replicates=1,
+                            folds=2, repeats=1, classifiers=("knn",), settings=settings, cache_dir=None, quiet=True,
+                            n_jobs=1)
+    assert {c.method for c in result.cells if c.protocol == "paper"} == {"uniform"}
+    assert {(c.method, c.protocol) for c in result.comparisons} == {("uniform", "instance")}
