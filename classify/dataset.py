@@ -36,7 +36,7 @@ import numpy as np
 from classify import cache as cache_mod
 
 __all__ = ["Settings", "name_seed", "nominal_mesh", "mesh_hash", "instance_spec", "paper_sample",
-           "instance_samples", "touch_survey", "learned_sample"]
+           "instance_samples", "touch_survey"]
 
 
 def _typical():
@@ -197,8 +197,13 @@ def _sessions(mesh, pts, settings: Settings, name: str, replicate: int, index: i
             "imprints": np.asarray(stack, np.float32).reshape(sessions, len(pts), *stack[0].shape[1:])}
 
 
+def _model_hash(model) -> str:
+    return cache_mod.hash_arrays(model.mean, model.scale, model.coef, np.array([model.intercept]),
+                                 np.array(list(model.channel_weights.values())))
+
+
 def instance_samples(nominal, name: str, methods, settings: Settings, replicate: int, index: int,
-                     survey: bool = False, cache_dir=None, threads=None) -> dict:
+                     survey: bool = False, cache_dir=None, threads=None, model=None, surveyed=None) -> dict:
     """Instance ``index`` of replicate ``replicate``: each method's points and the imprints of its sessions.
 
     Instance 0 is the test instance (one session), the others train
@@ -210,7 +215,10 @@ def instance_samples(nominal, name: str, methods, settings: Settings, replicate:
     nothing in the result.
 
     With ``survey``, also the instance's touch survey for the learned
-    methods (:func:`touch_survey`), under key ``"survey"``.
+    methods (:func:`touch_survey`), under key ``"survey"``.  The model
+    methods take the replicate's ``model`` (``meshsal.learned.TouchModel``);
+    "learned" chooses from the instance's ``surveyed`` pool without
+    rendering, "attention_learned" renders with the model's channel weights.
 
     Returns
     -------
@@ -221,7 +229,9 @@ def instance_samples(nominal, name: str, methods, settings: Settings, replicate:
     from meshsal.instances import make_instance
 
     methods = list(dict.fromkeys(methods))
-    keys = {m: _key("instance", nominal, name, m, settings, replicate, index) for m in methods}
+    model_part = [] if model is None else [_model_hash(model)]
+    keys = {m: _key("instance", nominal, name, m, settings, replicate, index,
+                    *(model_part if m in meshsal.points.MODEL_METHODS else [])) for m in methods}
     if survey:
         keys["survey"] = _key("survey", nominal, name, "", settings, replicate, index)
     out = {m: cache_mod.load(cache_dir, key) for m, key in keys.items()}
@@ -236,8 +246,13 @@ def instance_samples(nominal, name: str, methods, settings: Settings, replicate:
         seen = meshsal.points.view_channels(mesh, size=settings.view_size or 128, vertex_saliency=vertex_saliency,
                                             threads=threads)
     scene = meshsal.embree.embree_scene(mesh)
-    picked = meshsal.points_by_method(mesh, missing, seed=_point_seed(settings, name, replicate, index),
-                                      vertex_saliency=vertex_saliency, seen=seen, **_rule_kwargs(settings, threads))
+    rules = _rule_kwargs(settings, threads)
+    picked = meshsal.points_by_method(mesh, [m for m in missing if m != "learned"], vertex_saliency=vertex_saliency,
+                                      seed=_point_seed(settings, name, replicate, index), seen=seen, model=model,
+                                      **rules)
+    if "learned" in missing:
+        picked["learned"] = meshsal.points.learned_points(mesh, surveyed["pool"], surveyed["features"], model,
+                                                          vertex_saliency, n=rules["n"], pad_width=rules["pad_width"])
     for m in missing:
         out[m] = _sessions(mesh, picked[m], settings, name, replicate, index, scene)
         cache_mod.store(cache_dir, keys[m], out[m])
@@ -277,32 +292,3 @@ def touch_survey(mesh, seen, vertex_saliency, settings: Settings, name: str, rep
                                  _rng(settings, name, replicate, index, 7), scene=scene)
         out["descriptors"] = describe(np.asarray(images, np.float32), "polar").astype(np.float32)
     return out
-
-
-def learned_sample(nominal, name: str, method: str, settings: Settings, replicate: int, index: int, model,
-                   survey: dict, cache_dir=None, threads=None) -> dict:
-    """A model method's sample of one instance (as :func:`instance_samples`), given the replicate's model.
-
-    "learned" chooses from the instance's surveyed pool without rendering
-    again; "attention_learned" renders with the model's channel weights.
-    """
-    import meshsal
-    from meshsal.instances import make_instance
-
-    model_hash = cache_mod.hash_arrays(model.mean, model.scale, model.coef, np.array([model.intercept]),
-                                       np.array(list(model.channel_weights.values())))
-
-    def compute():
-        mesh = make_instance(nominal, instance_spec(settings, name, replicate, index))
-        vertex_saliency = meshsal.mesh_saliency(mesh)
-        kwargs = _rule_kwargs(settings, threads)
-        if method == "learned":
-            pts = meshsal.points.learned_points(mesh, survey["pool"], survey["features"], model, vertex_saliency,
-                                                n=kwargs["n"], pad_width=kwargs["pad_width"])
-        else:
-            pts = meshsal.points_by_method(mesh, [method], seed=_point_seed(settings, name, replicate, index),
-                                           vertex_saliency=vertex_saliency, model=model, **kwargs)[method]
-        return _sessions(mesh, pts, settings, name, replicate, index, meshsal.embree.embree_scene(mesh))
-
-    return cache_mod.cached(cache_dir, _key("instance", nominal, name, method, settings, replicate, index,
-                                            model_hash), compute)

@@ -78,20 +78,16 @@ def _paper_sample_task(task):
 
 
 def _instance_samples_task(task):
-    nominal, name, methods, settings, r, j, survey, cache_dir, threads = task
+    nominal, name, methods, settings, r, j, survey, cache_dir, threads, model, surveyed = task
     with threadpool_limits(1):
-        return dataset.instance_samples(nominal, name, methods, settings, r, j, survey, cache_dir, threads)
+        return dataset.instance_samples(nominal, name, methods, settings, r, j, survey, cache_dir, threads, model,
+                                        surveyed)
 
 
 def _model_task(surveys):
     with threadpool_limits(1):
         return fit_replicate_model(surveys)
 
-
-def _learned_sample_task(task):
-    nominal, name, method, settings, r, j, model, survey, cache_dir, threads = task
-    with threadpool_limits(1):
-        return dataset.learned_sample(nominal, name, method, settings, r, j, model, survey, cache_dir, threads)
 
 
 def _paper_task(task):
@@ -312,7 +308,7 @@ def _instance_stage(nominal, names, methods, settings, replicates, pool, cache_d
     keys = [(r, i, j) for r in range(replicates) for i in range(len(names))
             for j in range(settings.train_instances + 1)]
     done = progress(pool.map(_instance_samples_task, [(nominal[i], names[i], plain, settings, r, j, bool(learned),
-                                                       cache_dir, threads) for r, i, j in keys]),
+                                                       cache_dir, threads, None, None) for r, i, j in keys]),
                     total=len(keys), desc="instances: points+imprints", quiet=quiet)
     samples, surveys = {}, {}
     for (r, i, j), out in zip(keys, done):
@@ -325,12 +321,13 @@ def _instance_stage(nominal, names, methods, settings, replicates, pool, cache_d
     models = list(progress(pool.map(_model_task, [{(names[i], j): surveys[r, i, j] for q, i, j in keys if q == r}
                                                   for r in range(replicates)]),
                            total=replicates, desc="instances: touch models", quiet=quiet))
-    tasks = [(r, m, i, j) for m in learned for r, i, j in keys]
-    done = progress(pool.map(_learned_sample_task, [(nominal[i], names[i], m, settings, r, j, models[r],
-                                                     surveys[r, i, j], cache_dir, threads)
-                                                    for r, m, i, j in tasks]),
-                    total=len(tasks), desc="instances: learned points+imprints", quiet=quiet)
-    samples.update(zip(tasks, done))
+    done = progress(pool.map(_instance_samples_task, [(nominal[i], names[i], learned, settings, r, j, False,
+                                                       cache_dir, threads, models[r], surveys[r, i, j])
+                                                      for r, i, j in keys]),
+                    total=len(keys), desc="instances: learned points+imprints", quiet=quiet)
+    for (r, i, j), out in zip(keys, done):
+        for m in learned:
+            samples[r, m, i, j] = out[m]
     return samples, models
 
 

@@ -99,13 +99,12 @@ def point_features(mesh: Mesh, views, results, maps: np.ndarray, vertex_saliency
     -------
     (k, len(FEATURES)) float64
     """
-    from .curvature import mean_curvature
-    from .points import _edge_graph, _salient_vertices, _votes
+    from .points import _abs_mean_curvature, _edge_graph, _salient_vertices, _votes
 
     ids = np.asarray(vertex_ids, dtype=np.int64)
     means, seen = _channel_means(mesh, views, results)
     votes, _ = _votes(_edge_graph(mesh), _salient_vertices(mesh, views, maps, threshold), ids, spacing)
-    curvature = np.abs(mean_curvature(mesh.vertices, mesh.faces))[ids]
+    curvature = _abs_mean_curvature(mesh, vertex_saliency)[ids]
     columns = [means[:, ids].T, seen[ids, None], votes[:, None].astype(np.float64),
                np.asarray(vertex_saliency, np.float64)[ids, None], curvature[:, None]]
     return np.concatenate(columns, axis=1)

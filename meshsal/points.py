@@ -719,14 +719,20 @@ def learned_points(mesh: Mesh, pool: np.ndarray, features: np.ndarray, model, ve
     order = np.lexsort((np.arange(pool.size), -predicted))
     vn = vertex_normals(mesh.vertices, mesh.faces)
     floor = float(predicted.min()) - 1.0 if predicted.size else 0.0
+    first = _vertex_candidates(mesh, vn, pool[order], predicted[order])
+    return _without_views(mesh, vn, first, lambda i: np.full(i.size, floor), vertex_saliency, "learned", n,
+                          spacing, pad, touch, touch_tolerance)
+
+
+def _without_views(mesh: Mesh, vn, first: _Candidates, fill_score, vertex_saliency, method, n, spacing, pad, touch,
+                   touch_tolerance) -> InterestPoints:
+    """A method that needs no view of its own: ``first`` candidates, then the mesh-saliency fill, under the rules."""
     checker = _TouchFilter(mesh, pad, touch_tolerance) if touch else None
-    chosen = _select(_vertex_candidates(mesh, vn, pool[order], predicted[order]),
-                     _saliency_fill(mesh, vn, vertex_saliency, lambda i: np.full(i.size, floor)), n, spacing,
-                     checker)
+    chosen = _select(first, _saliency_fill(mesh, vn, vertex_saliency, fill_score), n, spacing, checker)
     return InterestPoints(vertex_ids=chosen.vertex_ids, positions=chosen.positions, normals=chosen.normals,
                           scores=chosen.scores, votes=np.zeros(chosen.vertex_ids.size, np.int64),
                           vertex_saliency=vertex_saliency, views=tuple(() for _ in range(chosen.vertex_ids.size)),
-                          method="learned", best_set=-1, min_spacing=spacing,
+                          method=method, best_set=-1, min_spacing=spacing,
                           untouchable=checker.lost if checker else -1)
 
 
@@ -764,12 +770,21 @@ def points_by_method(mesh: Mesh, methods, n: int = 15, seed=0, min_spacing: floa
     if seen is None and any(m in ATTENTION_METHODS or m in MODEL_METHODS for m in methods):
         seen = view_channels(mesh, size=size, vertex_saliency=vertex_saliency, threads=threads, quiet=quiet)
     vn = vertex_normals(mesh.vertices, mesh.faces)
+    combined = {}
+
+    def maps_of(mode, mode_weights):
+        # "attention" and "learned" both read the equal-weight maps: combine each set once.
+        key = (mode, None if mode_weights is None else tuple(sorted(mode_weights.items())))
+        if key not in combined:
+            combined[key] = attention_maps(seen, mode, mode_weights)
+        return combined[key]
+
     out = {}
     for m in methods:
         n, spacing, pad = checked[m]
         if m in ATTENTION_METHODS:
             mode = attention_combination(m, combination)
-            maps = attention_maps(seen, mode, model.channel_weights if m == "attention_learned" else weights)
+            maps = maps_of(mode, model.channel_weights if m == "attention_learned" else weights)
             out[m] = attention_points(mesh, seen.views, maps, vertex_saliency, n=n, min_spacing=spacing,
                                       threshold=threshold, pad_width=pad, touch=touch,
                                       touch_tolerance=touch_tolerance, combination=mode, method=m)
@@ -777,20 +792,14 @@ def points_by_method(mesh: Mesh, methods, n: int = 15, seed=0, min_spacing: floa
             from .learned import candidate_pool, point_features
 
             pool = candidate_pool(mesh, n, seed)
-            features = point_features(mesh, seen.views, seen.results, attention_maps(seen, "equal"),
-                                      vertex_saliency, pool, spacing, threshold)
+            features = point_features(mesh, seen.views, seen.results, maps_of("equal", None), vertex_saliency, pool,
+                                      spacing, threshold)
             out[m] = learned_points(mesh, pool, features, model, vertex_saliency, n=n, min_spacing=spacing,
                                     pad_width=pad, touch=touch, touch_tolerance=touch_tolerance)
         else:
             first, field = POINT_METHODS.get(m)(mesh, vn, n, np.random.default_rng(seed), vertex_saliency)
-            checker = _TouchFilter(mesh, pad, touch_tolerance) if touch else None
-            chosen = _select(first, _saliency_fill(mesh, vn, vertex_saliency, lambda i: field[i]), n, spacing,
-                             checker)
-            out[m] = InterestPoints(vertex_ids=chosen.vertex_ids, positions=chosen.positions,
-                                    normals=chosen.normals, scores=chosen.scores,
-                                    votes=np.zeros(chosen.vertex_ids.size, np.int64), vertex_saliency=vertex_saliency,
-                                    views=tuple(() for _ in range(chosen.vertex_ids.size)), method=m, best_set=-1,
-                                    min_spacing=spacing, untouchable=checker.lost if checker else -1)
+            out[m] = _without_views(mesh, vn, first, lambda i: field[i], vertex_saliency, m, n, spacing, pad, touch,
+                                    touch_tolerance)
     return out
 
 

@@ -20,6 +20,7 @@ import sys
 import numpy as np
 
 from classify import stats
+from classify.report import format_diff, format_rate
 from meshsal import toys, ycb
 from meshsal.jsonfile import read_json
 
@@ -66,13 +67,12 @@ def main() -> int:
             row = [method]
             for k in SHOWN:
                 s = stats.summarize(rates[k], seed)
-                row.append(f"{s.mean:.1f} [{s.ci_low:.1f}, {s.ci_high:.1f}]")
+                row.append(format_rate(s.mean, s.ci_low, s.ci_high))
                 if method == baseline:
                     row.append("baseline")
                 else:
                     d = stats.paired_difference(rates[k], cells[baseline][k][:, columns], seed)
-                    p = "p<0.001" if d.p_value < 0.001 else f"p={d.p_value:.3f}"
-                    row.append(f"{d.mean:+.1f} [{d.ci_low:+.1f}, {d.ci_high:+.1f}] {p}")
+                    row.append(format_diff(d.mean, d.ci_low, d.ci_high, d.p_value))
             row.append(_touches_to(rates, k_max))
             print("| " + " | ".join(row) + " |")
     return 0
