@@ -39,10 +39,15 @@ def _corpus(folder: Path, count: int) -> Path:
     return folder
 
 
+def _finished(store: Path) -> list[Path]:
+    """The store's entries written to the end (a write in flight has a hidden temporary name)."""
+    return sorted(p for p in (store / "meshes").rglob("*.npz") if not p.name.startswith("."))
+
+
 def _entries(store: Path) -> dict:
     """Every entry's arrays and meta, timings and file paths left out."""
     out = {}
-    for path in sorted((store / "meshes").rglob("*.npz")):
+    for path in _finished(store):
         with np.load(path) as archive:
             meta = json.loads(str(archive["meta"]))
             meta.pop("timings_s")
@@ -96,7 +101,7 @@ def test_a_killed_worker_loses_nothing_and_every_mesh_is_stored_once(tmp_path, d
 
     def kill_one_worker_when_work_has_started():
         end = time.monotonic() + 120
-        while time.monotonic() < end and not list((store / "meshes").rglob("*.npz")):
+        while time.monotonic() < end and not _finished(store):
             time.sleep(0.05)
         dask_cluster.workers[0].send_signal(signal.SIGKILL)
         killer_done.append(dask_cluster.workers[0].wait(timeout=30))
@@ -121,14 +126,15 @@ def test_a_killed_run_resumes_where_it_stopped(corpus, serial_store, tmp_path):
                "--methods", "attention,uniform", "--n-points", "6", "--view-size", "32", "--quiet"]
     run = subprocess.Popen(command, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
     end = time.monotonic() + 120
-    while time.monotonic() < end and len(list((store / "meshes").rglob("*.npz"))) < 2:
+    while time.monotonic() < end and len(_finished(store)) < 2:
         time.sleep(0.05)
     run.send_signal(signal.SIGKILL)
     run.wait(timeout=30)
-    first = {p for p in (store / "meshes").rglob("*.npz") if not p.name.startswith(".")}
+    first = _finished(store)
     assert 2 <= len(first) < 8                                      # killed with work left to do
     summary = batch.run_batch(corpus, store, SETTINGS, quiet=True)
     assert summary.skipped == len(first) and summary.done == 8 - len(first)
+    assert not list((store / "meshes").rglob(".*"))                 # a write cut short by the kill is gone
     _assert_same(_entries(serial_store), _entries(store))
     again = batch.run_batch(corpus, store, SETTINGS, quiet=True)
     assert (again.done, again.skipped) == (0, 8)
