@@ -10,10 +10,12 @@ point lies from the nearest point of that replicate's training instances.
 It prints, per object set, the median of that distance and the share of test
 points within ``--near`` mm of a training point, as a Markdown table.
 
-    .venv/bin/python scripts/repeatability.py [--objects toys,ycb] [--replicates 5]
-        [--methods attention,attention_itti,random,uniform,mesh_saliency] [--near 5] [--cache-dir DIR]
+    .venv/bin/python scripts/repeatability.py [--objects toys,ycb] [--replicates 5] [--near 5]
+        [--methods attention,attention_itti,attention_learned,learned,random,uniform,mesh_saliency]
+        [--cache-dir DIR]
 
-The learned methods need a touch model per replicate and are left out.
+The learned methods use each replicate's touch model, fitted as the
+experiment fits it: on the training instances' surveys of every object given.
 """
 
 from __future__ import annotations
@@ -25,6 +27,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from classify import dataset
+from classify.learned import fit_replicate_model
 from classify.experiment import load_objects
 from meshsal import toys, ycb
 from meshsal.mesh import Similarity
@@ -43,6 +46,9 @@ def nearest_training_distances(test: np.ndarray, training: list[np.ndarray]) -> 
     return cKDTree(np.concatenate(training)).query(test)[0]
 
 
+METHODS = ("attention", "attention_itti", "attention_learned", "learned", "random", "uniform", "mesh_saliency")
+
+
 def _group(name: str) -> str:
     return "toys" if name in toys.NAMES else "YCB" if name in ycb.NAMES else "other"
 
@@ -51,27 +57,33 @@ def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--objects", default="toys,ycb")
     parser.add_argument("--replicates", type=int, default=5)
-    parser.add_argument("--methods", default="attention,attention_itti,random,uniform,mesh_saliency")
+    parser.add_argument("--methods", default=",".join(METHODS))
     parser.add_argument("--near", type=float, default=5.0, help="mm (default 5)")
     parser.add_argument("--cache-dir", default=None)
     args = parser.parse_args()
     methods = POINT_METHODS.check(args.methods.split(","))
-    if set(methods) & set(MODEL_METHODS):
-        parser.error(f"the model methods ({', '.join(MODEL_METHODS)}) need a touch model; leave them out")
+    plain = [m for m in methods if m not in MODEL_METHODS]
+    learned = [m for m in methods if m in MODEL_METHODS]
     settings = dataset.Settings()
     names, nominal = load_objects([args.objects], settings)
+    instances = range(settings.train_instances + 1)
     groups = [_group(n) for n in names]
     sets = list(dict.fromkeys(groups))
     distances = {(s, m): [] for s in sets for m in methods}
-    tasks = [(r, i) for r in range(args.replicates) for i in range(len(names))]
-    for r, i in progress(tasks, total=len(tasks), desc="instances", quiet=False):
-        samples = [dataset.instance_samples(nominal[i], names[i], methods, settings, r, j, cache_dir=args.cache_dir)
-                   for j in range(settings.train_instances + 1)]
-        group = groups[i]
-        for m in methods:
-            test, *training = (nominal_positions(settings, names[i], r, j, sample[m]["positions"])
-                               for j, sample in enumerate(samples))
-            distances[group, m].append(nearest_training_distances(test, training))
+    for r in progress(range(args.replicates), total=args.replicates, desc="replicates", quiet=False):
+        samples = {(i, j): dataset.instance_samples(nominal[i], names[i], plain, settings, r, j, survey=bool(learned),
+                                                    cache_dir=args.cache_dir)
+                   for i in range(len(names)) for j in instances}
+        if learned:
+            model = fit_replicate_model({(names[i], j): out["survey"] for (i, j), out in samples.items()})
+            for (i, j), out in samples.items():
+                out.update(dataset.instance_samples(nominal[i], names[i], learned, settings, r, j,
+                                                    cache_dir=args.cache_dir, model=model, surveyed=out["survey"]))
+        for i, name in enumerate(names):
+            for m in methods:
+                test, *training = (nominal_positions(settings, name, r, j, samples[i, j][m]["positions"])
+                                   for j in instances)
+                distances[groups[i], m].append(nearest_training_distances(test, training))
     print("| method | " + " | ".join(f"{s}: median distance (mm) | {s}: within {args.near:g} mm" for s in sets) + " |")
     print("|---|" + ":---:|:---:|" * len(sets))
     for m in methods:
