@@ -282,7 +282,7 @@ def touch_survey(mesh, seen, vertex_saliency, settings: Settings, name: str, rep
     from meshsal.points import attention_maps
     from tactile.features import describe
 
-    pool = candidate_pool(mesh, settings.n_points, _rng(settings, name, replicate, index, 6))
+    pool = candidate_pool(mesh, settings.n_points)
     features = point_features(mesh, seen.views, seen.results, attention_maps(seen, "equal"), vertex_saliency, pool,
                               0.5 * settings.sensor.width_mm)
     out = {"pool": pool.astype(np.int64), "features": features}

@@ -6,7 +6,8 @@ candidate points and see how well their imprints tell the object apart
 (``classify.learned.distinctiveness``).  This module holds the vision side:
 
 * :func:`candidate_pool`: the points a learned method may choose from,
-  farthest-point samples spread over the whole surface;
+  farthest-point samples spread over the whole surface, the same on every
+  instance of an object;
 * :func:`point_features`: what vision knows about each candidate, the
   ``FEATURES``: the eight channel values averaged over the views that see
   it, how many views see it, its attention votes, its mesh saliency and
@@ -39,8 +40,13 @@ MODEL_FORMAT = "visuotactile.touch_model"
 MODEL_VERSION = 1
 
 
-def candidate_pool(mesh: Mesh, n: int = 15, seed=0) -> np.ndarray:
-    """``POOL_FACTOR * n`` vertices spread over the surface (farthest-point order from a seeded start).
+def candidate_pool(mesh: Mesh, n: int = 15) -> np.ndarray:
+    """``POOL_FACTOR * n`` vertices spread over the surface, in farthest-point order.
+
+    The first is the vertex farthest from the vertices' mean, so the pool
+    depends on the shape alone: a turned, resized or repainted instance of an
+    object offers the same candidates, and whatever a model picks among them
+    can be found again on the next instance.
 
     Returns
     -------
@@ -55,8 +61,9 @@ def candidate_pool(mesh: Mesh, n: int = 15, seed=0) -> np.ndarray:
     from .sampling import farthest_points
 
     used = np.unique(mesh.faces)
-    start = int(np.random.default_rng(seed).integers(used.size))
-    return used[farthest_points(mesh.vertices[used], min(POOL_FACTOR * int(n), used.size), start=start)]
+    points = mesh.vertices[used]
+    start = int(np.argmax(np.linalg.norm(points - points.mean(axis=0), axis=1)))
+    return used[farthest_points(points, min(POOL_FACTOR * int(n), used.size), start=start)]
 
 
 def _channel_means(mesh: Mesh, views, results) -> tuple[np.ndarray, np.ndarray]:

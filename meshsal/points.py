@@ -791,7 +791,7 @@ def points_by_method(mesh: Mesh, methods, n: int = 15, seed=0, min_spacing: floa
         elif m == "learned":
             from .learned import candidate_pool, point_features
 
-            pool = candidate_pool(mesh, n, seed)
+            pool = candidate_pool(mesh, n)
             features = point_features(mesh, seen.views, seen.results, maps_of("equal", None), vertex_saliency, pool,
                                       spacing, threshold)
             out[m] = learned_points(mesh, pool, features, model, vertex_saliency, n=n, min_spacing=spacing,

@@ -8,9 +8,10 @@ import pytest
 from classify import dataset
 from classify.experiment import _instance_stage
 from classify.learned import distinctiveness, fit_replicate_model
-from meshsal import toys
+from meshsal import toys, ycb
 from meshsal.attention import CHANNELS
 from meshsal.curvature import mesh_saliency
+from meshsal.instances import InstanceSpec, make_instance, random_rotation
 from meshsal.learned import FEATURES, POOL_FACTOR, TouchModel, candidate_pool, fit_touch_model, point_features
 from meshsal.points import attention_maps, interest_points, learned_points, points_by_method, view_channels
 from meshsal.touch import touchable
@@ -103,16 +104,23 @@ def test_a_confusable_touch_has_a_negative_margin():
 
 # ---------------------------------------------------------------- features and points
 
-def test_pool_spreads_over_the_surface_and_follows_its_seed():
-    mesh = icosphere(50.0, 3)
-    pool = candidate_pool(mesh, n=5, seed=0)
+def test_pool_spreads_over_the_surface_from_its_farthest_vertex():
+    mesh, top = bumpy_sphere()
+    pool = candidate_pool(mesh, n=5)
     assert pool.size == POOL_FACTOR * 5 == np.unique(pool).size
-    assert candidate_pool(mesh, n=5, seed=0).tolist() == pool.tolist()
-    assert candidate_pool(mesh, n=5, seed=1).tolist() != pool.tolist()
-    # Farthest points on a sphere: no two of the first 12 closer than a third of the radius.
+    assert mesh.vertices[pool[0]] @ top == pytest.approx(np.abs(mesh.vertices @ top).max())   # the bump's tip
+    # Farthest points: no two of the first 12 closer than a third of the radius.
     P = mesh.vertices[pool[:12]]
     d = np.linalg.norm(P[:, None] - P[None], axis=2) + np.eye(12) * 1e9
     assert d.min() > 50.0 / 3
+
+
+def test_pool_is_the_same_on_a_turned_resized_instance():
+    mesh, _ = bumpy_sphere()
+    # Roughened, so that no two candidates tie for farthest (a sphere's symmetry would).
+    mesh = mesh.replace(vertices=mesh.vertices * np.random.default_rng(0).uniform(0.99, 1.01, (mesh.n_vertices, 1)))
+    spec = InstanceSpec(random_rotation(np.random.default_rng(3)), 1.04, 0, 0.0, 1.0)
+    assert candidate_pool(make_instance(mesh, spec), n=5).tolist() == candidate_pool(mesh, n=5).tolist()
 
 
 def test_point_features_know_the_bump():
@@ -132,7 +140,7 @@ def test_point_features_know_the_bump():
 def test_learned_points_go_where_the_model_says():
     mesh, top = icosphere(50.0, 3), np.array([0.0, 0.0, 1.0])
     vs = mesh_saliency(mesh)
-    pool = candidate_pool(mesh, n=6, seed=0)
+    pool = candidate_pool(mesh, n=6)
     height = mesh.vertices[pool] @ top
     features = np.zeros((pool.size, len(FEATURES)))
     features[:, FEATURES.index("votes")] = height              # a model that wants the top
@@ -196,6 +204,15 @@ def test_the_instance_stage_trains_each_model_on_training_instances_only():
     # The test instance's survey is never touched: it has no descriptors to train on.
     test_survey = dataset.instance_samples(nominal[0], "cow", [], settings, 0, 0, survey=True)["survey"]
     assert "descriptors" not in test_survey and test_survey["features"].shape[1] == len(FEATURES)
+
+
+def test_every_instance_of_an_object_offers_the_same_candidates():
+    settings = dataset.Settings(n_points=3, view_size=32)
+    nominal = dataset.nominal_mesh(ycb.load("banana"), settings)
+    pools = [dataset.instance_samples(nominal, "banana", [], settings, r, j, survey=True)["survey"]["pool"]
+             for r, j in [(0, 0), (0, 1), (1, 2)]]
+    assert pools[0].size == 3 * POOL_FACTOR
+    assert pools[0].tolist() == pools[1].tolist() == pools[2].tolist()
 
 
 def test_a_batch_of_single_meshes_refuses_the_learned_methods():
