@@ -27,12 +27,14 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from classify import dataset
-from classify.learned import fit_replicate_model
 from classify.experiment import load_objects
+from classify.learned import fit_replicate_model
 from meshsal import toys, ycb
 from meshsal.mesh import Similarity
 from meshsal.points import MODEL_METHODS, POINT_METHODS
 from meshsal.progress import progress
+
+METHODS = ("attention", "attention_itti", "attention_learned", "learned", "random", "uniform", "mesh_saliency")
 
 
 def nominal_positions(settings: dataset.Settings, name: str, replicate: int, index: int, positions) -> np.ndarray:
@@ -44,9 +46,6 @@ def nominal_positions(settings: dataset.Settings, name: str, replicate: int, ind
 def nearest_training_distances(test: np.ndarray, training: list[np.ndarray]) -> np.ndarray:
     """(k,) float64: each test point's distance to the nearest training point."""
     return cKDTree(np.concatenate(training)).query(test)[0]
-
-
-METHODS = ("attention", "attention_itti", "attention_learned", "learned", "random", "uniform", "mesh_saliency")
 
 
 def _group(name: str) -> str:
