@@ -37,8 +37,8 @@ from meshsal.points import METHODS, MODEL_METHODS, POINT_METHODS
 from meshsal.progress import progress
 from tactile.features import FEATURES
 
-__all__ = ["PROTOCOLS", "METHODS", "DEFAULT_REPLICATES", "FULL_REPLICATES", "load_objects", "run_experiment",
-           "run_real", "format_tables", "write_outputs"]
+__all__ = ["PROTOCOLS", "METHODS", "DEFAULT_REPLICATES", "FULL_REPLICATES", "load_objects", "instance_stage",
+           "run_experiment", "run_real", "format_tables", "write_outputs"]
 
 #: Replicates of the instance protocol in a quick run (the default) and in a full run.
 DEFAULT_REPLICATES = 5
@@ -87,7 +87,6 @@ def _instance_samples_task(task):
 def _model_task(surveys):
     with threadpool_limits(1):
         return fit_replicate_model(surveys)
-
 
 
 def _paper_task(task):
@@ -229,7 +228,7 @@ def run_experiment(objects=None, methods=("attention",), protocols=PROTOCOLS, cl
 
         if "instance" in protocols:
             t0 = time.perf_counter()
-            samples, models = _instance_stage(nominal, names, methods, settings, replicates, pool, cache_dir, threads,
+            samples, models = instance_stage(nominal, names, methods, settings, replicates, pool, cache_dir, threads,
                                               quiet)
             timings["instance_points_and_imprints"] = time.perf_counter() - t0
             t0 = time.perf_counter()
@@ -295,13 +294,29 @@ def run_experiment(objects=None, methods=("attention",), protocols=PROTOCOLS, cl
     return result
 
 
-def _instance_stage(nominal, names, methods, settings, replicates, pool, cache_dir, threads, quiet):
+def instance_stage(nominal, names, methods, settings, replicates, pool, cache_dir, threads, quiet):
     """Every instance's points and imprints for every method, and each replicate's touch model.
 
     One task per instance computes all methods that need no model, sharing
     its rendering, plus its touch survey when a model method is asked for;
     then each replicate's model is fitted on its training instances'
     surveys; then the model methods run on every instance.
+
+    Parameters
+    ----------
+    nominal, names : the objects' nominal meshes and names (:func:`load_objects`)
+    methods : point methods
+    settings : classify.dataset.Settings
+    replicates : int
+    pool : executor with ``map`` (``classify.cluster``)
+    cache_dir : str, Path or None
+    threads : rendering and attention threads per task (None: the CPU count); changes nothing
+    quiet : bool, no progress bars
+
+    Returns
+    -------
+    samples : dict (replicate, method, object index, instance index) -> sample (``dataset.instance_samples``)
+    models : list of meshsal.learned.TouchModel, one per replicate ([] without a model method)
     """
     plain = [m for m in methods if m not in MODEL_METHODS]
     learned = [m for m in methods if m in MODEL_METHODS]

@@ -3,10 +3,10 @@
 Under the instance protocol every instance is turned, resized and repainted,
 and each point method runs on the instance's own rendering.  A test touch is
 easy to recognize when training touched the same place.  For each object,
-replicate and method this script takes the experiment's own instances
-(``classify.dataset.instance_samples``, the same seeds), maps every point
-back to the object's nominal frame, and measures how far each test-instance
-point lies from the nearest point of that replicate's training instances.
+replicate and method this script takes the experiment's own instances (the
+same seeds), maps every point back to the object's nominal frame, and
+measures how far each test-instance point lies from the nearest point of
+that replicate's training instances.
 It prints, per object set, the median of that distance and the share of test
 points within ``--near`` mm of a training point, as a Markdown table.
 
@@ -14,8 +14,9 @@ points within ``--near`` mm of a training point, as a Markdown table.
         [--methods attention,attention_itti,attention_learned,learned,random,uniform,mesh_saliency]
         [--cache-dir DIR]
 
-The learned methods use each replicate's touch model, fitted as the
-experiment fits it: on the training instances' surveys of every object given.
+The points come from the experiment's own instance stage
+(``classify.experiment.instance_stage``): the learned methods use each
+replicate's touch model, fitted on the training instances of every object given.
 """
 
 from __future__ import annotations
@@ -27,12 +28,11 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from classify import dataset
-from classify.experiment import load_objects
-from classify.learned import fit_replicate_model
+from classify.cluster import Inline
+from classify.experiment import instance_stage, load_objects
 from meshsal import toys, ycb
 from meshsal.mesh import Similarity
-from meshsal.points import MODEL_METHODS, POINT_METHODS
-from meshsal.progress import progress
+from meshsal.points import POINT_METHODS
 
 METHODS = ("attention", "attention_itti", "attention_learned", "learned", "random", "uniform", "mesh_saliency")
 
@@ -61,27 +61,18 @@ def main() -> int:
     parser.add_argument("--cache-dir", default=None)
     args = parser.parse_args()
     methods = POINT_METHODS.check(args.methods.split(","))
-    plain = [m for m in methods if m not in MODEL_METHODS]
-    learned = [m for m in methods if m in MODEL_METHODS]
     settings = dataset.Settings()
     names, nominal = load_objects([args.objects], settings)
-    instances = range(settings.train_instances + 1)
+    samples, _ = instance_stage(nominal, names, methods, settings, args.replicates, Inline(), args.cache_dir,
+                                threads=None, quiet=False)
     groups = [_group(n) for n in names]
     sets = list(dict.fromkeys(groups))
     distances = {(s, m): [] for s in sets for m in methods}
-    for r in progress(range(args.replicates), total=args.replicates, desc="replicates", quiet=False):
-        samples = {(i, j): dataset.instance_samples(nominal[i], names[i], plain, settings, r, j, survey=bool(learned),
-                                                    cache_dir=args.cache_dir)
-                   for i in range(len(names)) for j in instances}
-        if learned:
-            model = fit_replicate_model({(names[i], j): out["survey"] for (i, j), out in samples.items()})
-            for (i, j), out in samples.items():
-                out.update(dataset.instance_samples(nominal[i], names[i], learned, settings, r, j,
-                                                    cache_dir=args.cache_dir, model=model, surveyed=out["survey"]))
+    for r in range(args.replicates):
         for i, name in enumerate(names):
             for m in methods:
-                test, *training = (nominal_positions(settings, name, r, j, samples[i, j][m]["positions"])
-                                   for j in instances)
+                test, *training = (nominal_positions(settings, name, r, j, samples[r, m, i, j]["positions"])
+                                   for j in range(settings.train_instances + 1))
                 distances[groups[i], m].append(nearest_training_distances(test, training))
     print("| method | " + " | ".join(f"{s}: median distance (mm) | {s}: within {args.near:g} mm" for s in sets) + " |")
     print("|---|" + ":---:|:---:|" * len(sets))

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from classify import dataset
-from classify.experiment import _instance_stage
+from classify.experiment import instance_stage
 from classify.learned import distinctiveness, fit_replicate_model
 from meshsal import toys, ycb
 from meshsal.attention import CHANNELS
@@ -191,7 +191,7 @@ def test_the_instance_stage_trains_each_model_on_training_instances_only():
     settings = dataset.Settings(n_points=3, view_size=48, train_instances=2, train_sessions=1)
     names = ("cow", "cup")
     nominal = tuple(dataset.nominal_mesh(toys.make(n), settings) for n in names)
-    samples, models = _instance_stage(nominal, names, ["uniform", "learned"], settings, 2, Inline(), None, 1, True)
+    samples, models = instance_stage(nominal, names, ["uniform", "learned"], settings, 2, Inline(), None, 1, True)
     assert len(models) == 2
     for model in models:
         assert sorted(model.trained_on) == ["cow/1", "cow/2", "cup/1", "cup/2"]

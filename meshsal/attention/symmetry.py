@@ -99,17 +99,10 @@ distinct keypoint locations) and ``min_strength`` of the strongest
 symmetry's votes: a single pair always defines some axis, two agreeing pairs
 are evidence.
 
-:func:`support_map` draws the *support* of the kept symmetries: Gaussians
-as wide as the supporting keypoints (``sigma = splat * size``, OpenCV's size
-being twice the feature scale), plus for every supporting pair a Gaussian at
-the point its symmetry leaves fixed (a mirror pair's midpoint, on the axis; a
-rotation pair's centre), half as wide as the pair's distance to it, so that
-the symmetric shape between the features is filled; heights are the
-symmetry's strength.  An image with no keypoints, no matched pairs or no
-symmetry gives a zero map.  (This was the channel until the local mirror
-correlation replaced it: a constellation of SIFT pairs singled out a
-symmetric textured patch among asymmetric ones with the same texture
-statistics in only one or two of four trials.)
+This was the channel until the local mirror correlation replaced it: a
+constellation of SIFT pairs singled out a symmetric textured patch among
+asymmetric ones with the same texture statistics in only one or two of four
+trials.  It stays as an analysis of where and how an image is symmetric.
 
 Coordinates are pixels, ``x`` = column, ``y`` = row (row 0 at the top);
 angles are radians in that frame (OpenCV keypoint angles, clockwise on
@@ -126,7 +119,7 @@ from numpy.lib.stride_tricks import sliding_window_view
 
 from .pyramid import center_surround_map, check_image, gaussian_pyramid, upsample
 
-__all__ = ["symmetry", "symmetries", "support_map", "Symmetries", "Keypoints", "sift_keypoints", "mirror_descriptors"]
+__all__ = ["symmetry", "symmetries", "Symmetries", "Keypoints", "sift_keypoints", "mirror_descriptors"]
 
 # Hough space of bilateral axes: 2-degree theta bins, r bins of 1% of the
 # image diagonal; the blur spreads a vote over about its localisation error.
@@ -138,8 +131,6 @@ _CENTRE_BIN = 0.01
 _CENTRE_BLUR = 1.5
 # A pair supports a peak when its vote falls within this many bins of it.
 _SUPPORT = 3.0
-# Support maps are drawn on a grid of this many pixels.
-_SPLAT_CELL = 4
 # SIFT margin (pixels at its working scale) around the non-flat part of the image.
 _CROP_MARGIN = 8
 
@@ -552,75 +543,6 @@ def _check_params(n_features, work_scale, k, match_ratio, sigma_s, sigma_d, n_ax
         raise ValueError(f"symmetry: min_strength must be in [0, 1], got {min_strength}")
     if int(min_pairs) < 1:
         raise ValueError(f"symmetry: min_pairs must be at least 1, got {min_pairs}")
-
-
-def _splat(shape, xy, sigma, amplitude) -> np.ndarray:
-    """Sum of Gaussians of peak height ``amplitude`` at ``xy`` (pixels), as (H, W) float32.
-
-    Drawn on a grid of ``_SPLAT_CELL`` pixels (finer than the finest
-    center-surround scale that reads the map), one blur per half-octave of
-    sigma, then resized to the image.
-    """
-    h, w = shape
-    gh, gw = -(-h // _SPLAT_CELL), -(-w // _SPLAT_CELL)
-    grid = np.zeros((gh, gw), np.float32)
-    g_sigma = np.maximum(sigma / _SPLAT_CELL, 0.5)
-    level = np.floor(np.log2(g_sigma) * 2.0) / 2.0
-    cols = np.clip(np.rint((xy[:, 0] + 0.5) / _SPLAT_CELL - 0.5).astype(np.int64), 0, gw - 1)
-    rows = np.clip(np.rint((xy[:, 1] + 0.5) / _SPLAT_CELL - 0.5).astype(np.int64), 0, gh - 1)
-    for lv in np.unique(level):
-        sel = level == lv
-        s = float(2.0 ** (lv + 0.25))
-        impulses = np.bincount(
-            rows[sel] * gw + cols[sel], weights=amplitude[sel] * (2.0 * np.pi * s * s), minlength=gh * gw
-        )
-        impulses = impulses.reshape(gh, gw).astype(np.float32)
-        ksize = 2 * int(np.ceil(3.0 * s)) + 1
-        grid += cv2.GaussianBlur(impulses, (ksize, ksize), sigmaX=s, sigmaY=s, borderType=cv2.BORDER_CONSTANT)
-    return cv2.resize(grid, (w, h), interpolation=cv2.INTER_LINEAR)
-
-
-def support_map(sym: Symmetries, shape: tuple[int, int], splat: float = 1.0) -> np.ndarray:
-    """The support of the kept symmetries as an (H, W) float32 map.
-
-    Every kept axis or centre contributes, at a height equal to its strength
-    relative to the strongest: a Gaussian of sigma ``splat * size`` at each
-    supporting keypoint, and for each supporting pair a Gaussian at the point
-    the symmetry maps onto itself nearest to the pair (a mirror pair's
-    midpoint on the axis, a rotation pair's centre) with sigma half the
-    pair's distance to that point, which fills the symmetric shape between
-    its features.
-
-    Parameters
-    ----------
-    sym : Symmetries
-    shape : (H, W)
-    splat : float
-        Sigma of a keypoint's Gaussian in units of its SIFT size.
-
-    Returns
-    -------
-    (H, W) float32, non-negative; zeros without symmetries.
-    """
-    kp = sym.keypoints
-    strengths = np.concatenate([sym.axes[:, 2], sym.centres[:, 2]])
-    if not strengths.size:
-        return np.zeros(shape, np.float32)
-    top = strengths.max()
-    xy, sigma, amp = [], [], []
-    for (_, _, s), pairs in zip(sym.axes, sym.axis_pairs):
-        idx = np.unique(pairs)
-        pi, pj = kp.xy[pairs[:, 0]], kp.xy[pairs[:, 1]]
-        xy += [kp.xy[idx], 0.5 * (pi + pj)]
-        sigma += [splat * kp.size[idx], 0.25 * np.hypot(*(pj - pi).T)]
-        amp.append(np.full(len(idx) + len(pairs), s / top))
-    for (x, y, s), pairs in zip(sym.centres, sym.centre_pairs):
-        idx = np.unique(pairs)
-        radius = 0.5 * (np.hypot(*(kp.xy[pairs[:, 0]] - (x, y)).T) + np.hypot(*(kp.xy[pairs[:, 1]] - (x, y)).T))
-        xy += [kp.xy[idx], np.tile((x, y), (len(pairs), 1))]
-        sigma += [splat * kp.size[idx], 0.5 * radius]
-        amp.append(np.full(len(idx) + len(pairs), s / top))
-    return _splat(shape, np.concatenate(xy), np.concatenate(sigma), np.concatenate(amp))
 
 
 # --- the channel: local mirror correlation ------------------------------------
