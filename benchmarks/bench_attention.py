@@ -25,9 +25,10 @@ from pathlib import Path
 import numpy as np
 
 import meshsal
-from meshsal import attention, render
+from meshsal import attention
+from meshsal.views import render
 from meshsal.attention.combine import channel_function
-from meshsal.curvature import mesh_saliency
+from meshsal.mesh.curvature import mesh_saliency
 
 DEFAULT_MESHES = Path(__file__).resolve().parents[1].parent / "shared" / "meshes"
 

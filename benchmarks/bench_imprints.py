@@ -64,7 +64,7 @@ def main(argv=None) -> int:
 
     import meshsal
     import tactile
-    from meshsal.embree import embree_scene
+    from meshsal.mesh.embree import embree_scene
     from tactile.section import imprints_exact
 
     path = args.meshes_dir / args.mesh
@@ -113,7 +113,7 @@ def main(argv=None) -> int:
     print(f"load average (1/5/15 min): {load_before} before, {load_after} after\n")
     print("| measure | seconds | imprints/s | note |")
     print("|---|---|---|---|")
-    print(f"| Embree scene build | {small['scene']:.4f} | | once per mesh (`meshsal.embree.embree_scene`) |")
+    print(f"| Embree scene build | {small['scene']:.4f} | | once per mesh (`meshsal.mesh.embree.embree_scene`) |")
     print(f"| pose fit, 15 points | {small['poses']:.4f} | | shared by both paths, included in both |")
     print(f"| fast, 15 imprints, scene built in the call | {small['fast']:.4f} | {15 / small['fast']:.0f} | "
           "`imprints(mesh, P, N, sensor)` |")

@@ -19,9 +19,9 @@ from pathlib import Path
 
 from meshsal import load_mesh, scale_to
 from meshsal.attention import saliency
-from meshsal.curvature import mesh_saliency
+from meshsal.mesh.curvature import mesh_saliency
 from meshsal.points import attention_points, interest_points
-from meshsal.render import render_views, view_rig
+from meshsal.views.render import render_views, view_rig
 
 DEFAULT_MESHES = Path(__file__).resolve().parents[2] / "shared" / "meshes"
 MESHES = (("cow (spot, textured)", "spot/spot.obj"), ("nefertiti", "nefertiti.obj"))

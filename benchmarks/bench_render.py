@@ -1,8 +1,8 @@
 """Benchmark: the 72 views at 256x256 of nefertiti (100k faces), end to end, against Open3D.
 
-Prints pixels (primary rays) per second of ``meshsal.render.render_views``
+Prints pixels (primary rays) per second of ``meshsal.views.render.render_views``
 (everything a View holds: ray generation, Embree tracing, shading, the
-pixel-to-surface maps): with its tracer prebuilt (``meshsal.tracer``: the
+pixel-to-surface maps): with its tracer prebuilt (``meshsal.views.tracer``: the
 fast Embree scene, the rays that slip through it traced again robustly),
 with everything built in the call, with a robust Embree scene answering
 every ray, and of the tracer alone.  In the same run it casts a ray for
@@ -30,10 +30,10 @@ from pathlib import Path
 import numpy as np
 
 from meshsal import load_mesh
-from meshsal.embree import embree_scene
+from meshsal.mesh.embree import embree_scene
 from meshsal.mesh import bounding_sphere
-from meshsal.render import _candidates, _hull_points, _pixel_grid, _rays, render_views, view_rig
-from meshsal.tracer import tracer
+from meshsal.views.render import _candidates, _hull_points, _pixel_grid, _rays, render_views, view_rig
+from meshsal.views.tracer import tracer
 
 DEFAULT_MESHES = Path(__file__).resolve().parents[2] / "shared" / "meshes"
 

@@ -1,40 +1,49 @@
 """classify: recognize objects from tactile imprints.
 
-The five classifiers of the paper (``NAMES``, ``make``) and the experiment
-behind its Tables 1 and 2 (``run_experiment``, ``run_real``): interest
-points -> imprints -> recognition under the paper's protocol and on fresh
-object instances, with bootstrap intervals and paired comparisons.  Public names are
+The sub-packages: ``recognizers`` (the five classifiers of the paper and
+touch fusion), ``experiment`` (the recognition experiment behind the
+paper's Tables 1 and 2 as typed stages: objects -> instance samples ->
+protocols -> cells), ``reporting`` (statistics, tables, files) and
+``runtime`` (where work runs, the cache, corpus batches).  Public names are
 loaded on first use, so that the ``visuotactile`` command (``classify.cli``)
-starts without importing scikit-learn.
+starts without importing scikit-learn; modules of the flat layout before 0.2
+(``classify.dataset``, ``classify.stats``...) still import, as the modules
+that replaced them.
 """
 
-from meshsal.lazy import attach
+from meshsal.util.lazy import attach
 
 _EXPORTS = {
-    "NAMES": "classifiers",
-    "CLASSIFIERS": "classifiers",
-    "make": "classifiers",
-    "as_matrix": "classifiers",
-    "KNN": "classifiers",
-    "NaiveBayes": "classifiers",
-    "DecisionTree": "classifiers",
-    "EvolutionarySVM": "classifiers",
-    "DeepNet": "classifiers",
+    "NAMES": "recognizers.classifiers",
+    "CLASSIFIERS": "recognizers.classifiers",
+    "make": "recognizers.classifiers",
+    "as_matrix": "recognizers.classifiers",
+    "KNN": "recognizers.classifiers",
+    "NaiveBayes": "recognizers.classifiers",
+    "DecisionTree": "recognizers.classifiers",
+    "EvolutionarySVM": "recognizers.classifiers",
+    "DeepNet": "recognizers.classifiers",
     "METHODS": "experiment",
-    "run_batch": "batch",
-    "load_store": "batch",
-    "PROTOCOLS": "protocols",
-    "Settings": "dataset",
-    "Cell": "results",
-    "Comparison": "results",
-    "ConfusionMatrix": "results",
-    "ExperimentResult": "results",
+    "run_batch": "runtime.batch",
+    "load_store": "runtime.batch",
+    "PROTOCOLS": "experiment.protocols",
+    "Settings": "experiment",
+    "Cell": "reporting.results",
+    "Comparison": "reporting.results",
+    "ConfusionMatrix": "reporting.results",
+    "ExperimentResult": "reporting.results",
     "run_experiment": "experiment",
     "run_real": "experiment",
-    "format_tables": "results",
-    "write_outputs": "results",
+    "format_tables": "reporting.results",
+    "write_outputs": "reporting.results",
 }
-_SUBMODULES = {"classifiers", "evolutionary_svm", "experiment", "protocols", "dataset", "fusion", "stats", "results",
-               "report", "cache", "cli", "batch", "cluster"}
+_SUBMODULES = {"recognizers", "experiment", "reporting", "runtime", "cli"}
+#: Where each module of the flat layout went.
+_MOVED = {
+    "classifiers": "recognizers.classifiers", "evolutionary_svm": "recognizers.evolutionary_svm",
+    "fusion": "recognizers.fusion", "dataset": "experiment.samples", "learned": "experiment.survey",
+    "protocols": "experiment.protocols", "results": "reporting.results", "report": "reporting.report",
+    "stats": "reporting.stats", "cluster": "runtime.cluster", "cache": "runtime.cache", "batch": "runtime.batch",
+}
 
-__getattr__, __dir__, __all__ = attach(__name__, _EXPORTS, _SUBMODULES)
+__getattr__, __dir__, __all__ = attach(__name__, _EXPORTS, _SUBMODULES, _MOVED)

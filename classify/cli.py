@@ -13,9 +13,9 @@ import sys
 
 def register(subparsers) -> None:
     """Add the recognition subcommands (``experiment``, ``batch``)."""
-    from classify.classifiers import CLASSIFIERS
+    from classify.recognizers.classifiers import CLASSIFIERS
     from classify.experiment import DEFAULT_REPLICATES, FULL_REPLICATES
-    from classify.protocols import PROTOCOL_REGISTRY, PROTOCOLS
+    from classify.experiment.protocols import PROTOCOL_REGISTRY, PROTOCOLS
     from meshsal.points import POINT_METHODS
 
     p = subparsers.add_parser(
@@ -84,7 +84,7 @@ def register(subparsers) -> None:
                      "--workers processes (default: one per core), or an existing cluster at --scheduler. Each "
                      "mesh's entry is written atomically to STORE/meshes/<name>.npz; a rerun skips the meshes "
                      "already there; a broken mesh goes to STORE/failures.jsonl and does not stop the batch. "
-                     "Load the store with classify.batch.load_store(STORE)."),
+                     "Load the store with classify.runtime.batch.load_store(STORE)."),
     )
     b.add_argument("directory", metavar="DIR", help="folder of meshes (searched recursively)")
     b.add_argument("--out", required=True, metavar="STORE", help="the store folder (created or resumed)")
@@ -112,8 +112,8 @@ def _add_cluster_options(p, default_workers):
 def _batch(args) -> int:
     import os
 
-    from classify.batch import BatchSettings, run_batch
-    from classify.cluster import open_executor
+    from classify.runtime.batch import BatchSettings, run_batch
+    from classify.runtime.cluster import open_executor
 
     settings = BatchSettings(methods=args.methods, n_points=args.n_points, size_mm=args.size_mm,
                              view_size=args.view_size, seed=args.seed)
@@ -137,8 +137,8 @@ def _csv_list(text: str) -> tuple:
 
 
 def _experiment(args) -> int:
-    from classify.classifiers import NAMES
-    from classify.dataset import Settings
+    from classify.recognizers.classifiers import NAMES
+    from classify.experiment.samples import Settings
     from classify.experiment import DEFAULT_REPLICATES, FULL_REPLICATES, format_tables, run_experiment, run_real
 
     classifiers = args.classifiers or NAMES
@@ -158,7 +158,7 @@ def _experiment(args) -> int:
     sensor = tactile.Sensor() if args.mode is None else tactile.Sensor(mode=args.mode)
     settings = Settings(n_points=args.n_points, size_mm=args.size_mm, view_size=args.view_size, sensor=sensor,
                         train_instances=args.train_instances, train_sessions=args.train_sessions, seed=args.seed)
-    from classify.cluster import open_executor
+    from classify.runtime.cluster import open_executor
 
     with open_executor(workers=args.workers, scheduler=args.scheduler, n_jobs=args.jobs) as executor:
         result = run_experiment(objects=args.objects, methods=args.methods, protocols=args.protocols,
@@ -191,7 +191,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     """Run one subcommand; returns the exit status (0 success, 1 bad input or failure)."""
-    from meshsal.reproducible import pin_blas_kernel
+    from meshsal.util.reproducible import pin_blas_kernel
 
     pin_blas_kernel()
     args = build_parser().parse_args(argv)

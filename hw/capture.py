@@ -15,9 +15,9 @@ import sys
 import time
 from dataclasses import dataclass
 
-from .press import PressDetector
-from .protocol import PROTOCOLS, FrameParser
-from .session import Session
+from hw.press import PressDetector
+from hw.protocol import PROTOCOLS, FrameParser
+from hw.session import Session
 
 __all__ = ["PortError", "NoFramesError", "CaptureResult", "open_port", "capture", "add_arguments", "run", "main"]
 
@@ -237,7 +237,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def run(args) -> int:
     """Handler of the capture subcommand."""
-    from .plan import load_plan
+    from hw.plan import load_plan
 
     plan = load_plan(args.points) if args.points else None
     detector = PressDetector(baseline_frames=args.baseline_frames, threshold=args.threshold)

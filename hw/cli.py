@@ -9,7 +9,7 @@ def register(subparsers) -> None:
     """Add this package's subcommands to the ``visuotactile`` parser."""
     from meshsal.points import POINT_METHODS
 
-    from . import capture
+    from hw import capture
 
     p = subparsers.add_parser(
         "capture", help="record presses from a tactile sensor on a serial port",
@@ -49,7 +49,7 @@ def register(subparsers) -> None:
 
 
 def _cmd_export(args) -> int:
-    from .session import export_imprints
+    from hw.session import export_imprints
 
     imprint_set = export_imprints(args.session, rows=args.rows, cols=args.cols, full_scale=args.full_scale)
     imprint_set.save(args.out)
@@ -60,9 +60,9 @@ def _cmd_export(args) -> int:
 
 
 def _cmd_plan(args) -> int:
-    from meshsal.toys import load_object
+    from meshsal.objects.toys import load_object
 
-    from .plan import make_plan, save_plan
+    from hw.plan import make_plan, save_plan
 
     mesh = load_object(args.mesh)
     plan = make_plan(mesh, n=args.n, method=args.method, size_mm=args.size_mm, seed=args.seed, quiet=args.quiet,

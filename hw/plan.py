@@ -22,7 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
-from meshsal.jsonfile import read_json
+from meshsal.util.jsonfile import read_json
 from meshsal.mesh import Similarity
 
 __all__ = ["FORMAT", "ProbePoint", "Plan", "sensor_rotations", "quaternion_from_matrix", "matrix_from_quaternion",
@@ -222,7 +222,7 @@ def save_plan(plan: Plan, path) -> tuple[Path, Path]:
 
     Returns the two paths written.
     """
-    from meshsal.atomic import write_text
+    from meshsal.util.atomic import write_text
 
     path = Path(path)
     csv_path = path.with_suffix(".csv")

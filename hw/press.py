@@ -16,7 +16,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .protocol import Frame
+from hw.protocol import Frame
 
 __all__ = ["Baseline", "Press", "PressDetector"]
 

@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .press import Baseline, Press
+from hw.press import Baseline, Press
 
 __all__ = ["FORMAT", "SCHEMA_VERSION", "Session", "PressRecord", "export_imprints", "resample"]
 

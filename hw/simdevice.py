@@ -25,7 +25,7 @@ import tty
 
 import numpy as np
 
-from .protocol import HEADER_SIZE, PROTOCOLS, SYNC, VERSION, encode
+from hw.protocol import HEADER_SIZE, PROTOCOLS, SYNC, VERSION, encode
 
 __all__ = ["SimulatedSensor", "open_pty", "serve", "press_targets", "main"]
 
@@ -266,7 +266,7 @@ def _parser() -> argparse.ArgumentParser:
     from tactile.sensor import SENSOR_MODES
 
     p = argparse.ArgumentParser(prog="python -m hw.simdevice", description=__doc__.split("\n\n")[0])
-    p.add_argument("--object", required=True, help="a toy name (meshsal.toys.NAMES) or a mesh file")
+    p.add_argument("--object", required=True, help="a toy name (meshsal.objects.toys.NAMES) or a mesh file")
     p.add_argument("--size-mm", type=float, default=150.0, help="object diagonal in mm (default 150)")
     p.add_argument("--points", metavar="PLAN_JSON", help="press the points of this probe plan")
     p.add_argument("--n", type=int, default=15, help="interest points without a plan (default 15)")
@@ -304,9 +304,9 @@ def main(argv: list[str] | None = None) -> int:
     try:
         import meshsal
         import tactile
-        from meshsal.toys import load_object
+        from meshsal.objects.toys import load_object
 
-        from .plan import load_plan
+        from hw.plan import load_plan
 
         plan = load_plan(args.points) if args.points else None
         mesh = meshsal.scale_to(load_object(args.object), plan.size_mm if plan is not None else args.size_mm)
@@ -321,7 +321,7 @@ def main(argv: list[str] | None = None) -> int:
                               lead_frames=args.lead_frames, noise=args.noise, full_scale=args.full_scale,
                               garbage=args.garbage, bitflips=args.bitflips, drop=args.drop, rate=args.rate)
         if args.dump:
-            from meshsal.atomic import atomic_path
+            from meshsal.util.atomic import atomic_path
 
             with atomic_path(args.dump) as tmp:
                 np.savez(tmp, imprints=imprints.astype(np.float32), point_ids=ids, positions=positions,

@@ -1,11 +1,16 @@
-"""meshsal: meshes, rendering, visual attention and interest points.
+"""meshsal: meshes, objects, rendering, visual attention and interest points.
 
-Mesh -> 72 rendered views -> eight-channel saliency per view -> interest
-points fused on the mesh.  Public names are loaded on first use, so that
-``import meshsal`` stays cheap for the command line.
+The sub-packages follow the data: ``mesh`` (the record, its files and
+geometry) -> ``objects`` (the embedded objects and fresh instances of any
+object) -> ``views`` (the 72-view renderer) -> ``attention`` (conspicuity
+maps) -> ``points`` (where to touch).  ``util`` holds the toolkit's
+infrastructure (atomic writes, progress bars, registries).  Public names are
+loaded on first use, so that ``import meshsal`` stays cheap for the command
+line; modules of the flat layout before 0.2 (``meshsal.toys``,
+``meshsal.learned``...) still import, as the modules that replaced them.
 """
 
-from .lazy import attach
+from meshsal.util.lazy import attach
 
 _EXPORTS = {
     "Mesh": "mesh",
@@ -17,26 +22,33 @@ _EXPORTS = {
     "bounding_sphere": "mesh",
     "closed_orientation": "mesh",
     "vertex_adjacency": "mesh",
-    "load_mesh": "io",
-    "save_ply": "io",
-    "MeshRepairWarning": "io",
-    "scale_to": "transform",
-    "normalize": "transform",
-    "Camera": "render",
-    "View": "render",
-    "view_rig": "render",
-    "render_views": "render",
-    "mean_curvature": "curvature",
-    "mesh_saliency": "curvature",
+    "load_mesh": "mesh.io",
+    "save_ply": "mesh.io",
+    "MeshRepairWarning": "mesh.io",
+    "scale_to": "mesh.transform",
+    "normalize": "mesh.transform",
+    "mean_curvature": "mesh.curvature",
+    "mesh_saliency": "mesh.curvature",
+    "Camera": "views.render",
+    "View": "views.render",
+    "view_rig": "views.render",
+    "render_views": "views.render",
     "InterestPoints": "points",
     "interest_points": "points",
     "points_by_method": "points",
-    "TouchModel": "learned",
-    "fit_touch_model": "learned",
+    "TouchModel": "points.learned",
+    "fit_touch_model": "points.learned",
     "project_pixel_paper": "points",
 }
-_SUBMODULES = {"render", "tracer", "toys", "ycb", "objects", "instances", "reproducible", "registry", "sdf",
-               "attention", "curvature", "points", "sampling", "overlay", "embree", "io", "transform", "progress",
-               "atomic", "learned", "touch"}
+_SUBMODULES = {"util", "mesh", "objects", "views", "attention", "points", "cli"}
+#: Where each module of the flat layout went.
+_MOVED = {
+    "atomic": "util.atomic", "progress": "util.progress", "registry": "util.registry", "jsonfile": "util.jsonfile",
+    "lazy": "util.lazy", "reproducible": "util.reproducible",
+    "io": "mesh.io", "transform": "mesh.transform", "curvature": "mesh.curvature", "embree": "mesh.embree",
+    "toys": "objects.toys", "sdf": "objects.sdf", "ycb": "objects.ycb", "instances": "objects.instances",
+    "render": "views.render", "tracer": "views.tracer", "overlay": "views.overlay",
+    "learned": "points.learned", "touch": "points.touch", "sampling": "points.sampling",
+}
 
-__getattr__, __dir__, __all__ = attach(__name__, _EXPORTS, _SUBMODULES)
+__getattr__, __dir__, __all__ = attach(__name__, _EXPORTS, _SUBMODULES, _MOVED)

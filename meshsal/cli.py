@@ -26,9 +26,9 @@ def _add_toys(subparsers) -> None:
 
 
 def _cmd_toys(args) -> int:
-    from . import toys
-    from .io import save_ply
-    from .progress import progress
+    from meshsal.objects import toys
+    from meshsal.mesh.io import save_ply
+    from meshsal.util.progress import progress
 
     for name in progress(toys.NAMES, desc="toys", quiet=args.quiet):
         save_ply(args.out / f"{name}.ply", toys.make(name, seed=args.seed))
@@ -55,11 +55,11 @@ def _to_uint8(image: np.ndarray) -> np.ndarray:
 
 
 def _cmd_render(args) -> int:
-    from .atomic import write_png
-    from .overlay import tile
-    from .progress import progress
-    from .render import render_views, view_rig
-    from .toys import load_object
+    from meshsal.util.atomic import write_png
+    from meshsal.views.overlay import tile
+    from meshsal.util.progress import progress
+    from meshsal.views.render import render_views, view_rig
+    from meshsal.objects.toys import load_object
 
     if args.size < 16:
         raise ValueError(f"--size must be at least 16 pixels, got {args.size}")
@@ -68,7 +68,7 @@ def _cmd_render(args) -> int:
     views = render_views(mesh, cameras, size=args.size)
     results = [None] * len(views)
     if args.saliency:
-        from .attention import saliency_views
+        from meshsal.attention import saliency_views
 
         results = saliency_views(views, mesh)
     maps = []
@@ -88,7 +88,7 @@ def _cmd_render(args) -> int:
 
 
 def _add_points(subparsers) -> None:
-    from .points import COMBINATIONS, POINT_METHODS
+    from meshsal.points import COMBINATIONS, POINT_METHODS
 
     p = subparsers.add_parser(
         "points", help="choose interest points on a mesh by visual attention (or a baseline)",
@@ -126,17 +126,17 @@ def _add_points(subparsers) -> None:
 
 
 def _cmd_points(args) -> int:
-    from . import overlay
-    from .atomic import write_png, write_text
-    from .curvature import mesh_saliency
-    from .io import save_ply
-    from .mesh import Similarity
-    from .attention import plateau_fraction
-    from .learned import TouchModel
-    from .points import (MODEL_METHODS, attention_combination, attention_maps, best_view_set, points_by_method,
+    from meshsal.views import overlay
+    from meshsal.util.atomic import write_png, write_text
+    from meshsal.mesh.curvature import mesh_saliency
+    from meshsal.mesh.io import save_ply
+    from meshsal.mesh import Similarity
+    from meshsal.attention import plateau_fraction
+    from meshsal.points.learned import TouchModel
+    from meshsal.points import (MODEL_METHODS, attention_combination, attention_maps, best_view_set, points_by_method,
                          view_channels)
-    from .toys import load_object
-    from .transform import scale_to
+    from meshsal.objects.toys import load_object
+    from meshsal.mesh.transform import scale_to
 
     if args.size < 16:
         raise ValueError(f"--size must be at least 16 pixels, got {args.size}")

@@ -6,7 +6,7 @@ rates from the run's all-object recognition, so the classes are all of the
 run's objects), prints each method's rate after 1, 5 and 15 touches with
 its 95 % bootstrap interval, its paired difference against the baseline
 with interval and Wilcoxon p, and the fewest touches whose mean reaches
-95 %.  Statistics are those of the experiment (:mod:`classify.stats`), on
+95 %.  Statistics are those of the experiment (:mod:`classify.reporting.stats`), on
 the set's columns of each replicate-by-object rate matrix.
 
     .venv/bin/python scripts/compare_methods.py OUT/results.json [--classifier knn] [--selection]
@@ -19,10 +19,10 @@ import sys
 
 import numpy as np
 
-from classify import stats
-from classify.report import format_diff, format_rate
-from meshsal import toys, ycb
-from meshsal.jsonfile import read_json
+from classify.reporting import stats
+from classify.reporting.report import format_diff, format_rate
+from meshsal.objects import toys, ycb
+from meshsal.util.jsonfile import read_json
 
 SETS = {"Toys": toys.NAMES, "YCB": ycb.NAMES}
 SHOWN = (1, 5, 15)

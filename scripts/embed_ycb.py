@@ -1,4 +1,4 @@
-"""Maintainer script: embed the ten YCB objects of ../shared/meshes/ycb as meshsal/data/ycb/*.ply.
+"""Maintainer script: embed the ten YCB objects of ../shared/meshes/ycb as meshsal/objects/data/ycb/*.ply.
 
 Each OBJ is loaded with meshsal.load_mesh; a texture, where there is one, is
 baked into vertex colours (the mean of the texture at the vertex's face
@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 
 import meshsal
-from meshsal.io import save_ply
+from meshsal.mesh.io import save_ply
 
 
 def baked_colors(mesh: meshsal.Mesh) -> np.ndarray:
@@ -31,7 +31,7 @@ def baked_colors(mesh: meshsal.Mesh) -> np.ndarray:
 
 
 def main(source: Path) -> None:
-    target = Path(__file__).resolve().parents[1] / "meshsal" / "data" / "ycb"
+    target = Path(__file__).resolve().parents[1] / "meshsal" / "objects" / "data" / "ycb"
     for obj in sorted(source.glob("*.obj")):
         mesh = meshsal.load_mesh(obj)
         colors = baked_colors(mesh) if mesh.texture is not None else mesh.vertex_colors

@@ -27,10 +27,10 @@ import sys
 import numpy as np
 from scipy.spatial import cKDTree
 
-from classify import dataset
-from classify.cluster import Inline
+from classify.experiment import samples as dataset
+from classify.runtime.cluster import Inline
 from classify.experiment import instance_stage, load_objects
-from meshsal import toys, ycb
+from meshsal.objects import toys, ycb
 from meshsal.mesh import Similarity
 from meshsal.points import POINT_METHODS
 

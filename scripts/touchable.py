@@ -15,7 +15,7 @@ import sys
 
 import meshsal
 from meshsal.objects import load_ref, resolve_objects
-from meshsal.transform import scale_to_principal
+from meshsal.mesh.transform import scale_to_principal
 
 
 def main() -> int:

@@ -5,13 +5,13 @@ pressure images (fast Embree path :func:`imprints`, exact reference
 :func:`imprint_exact`) -> perturbed acquisitions (:func:`acquire`) ->
 similarity-based selection (:func:`select_by_similarity`) -> imprint sets on
 disk (:class:`ImprintSet`).  To take imprints on one mesh over many calls,
-build its Embree scene once (``meshsal.embree.embree_scene(mesh)``) and pass
+build its Embree scene once (``meshsal.mesh.embree.embree_scene(mesh)``) and pass
 it as ``scene=`` to :func:`imprints` or :func:`imprint`.  Public names are
 loaded on first use, so that ``import tactile`` stays cheap for the command
 line.
 """
 
-from meshsal.lazy import attach
+from meshsal.util.lazy import attach
 
 _EXPORTS = {
     "Sensor": "sensor",

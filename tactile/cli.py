@@ -48,8 +48,8 @@ def read_points(path) -> tuple:
 
 def _cmd_imprints(args) -> int:
     from meshsal import scale_to
-    from meshsal.toys import load_object
-    from meshsal.atomic import write_png
+    from meshsal.objects.toys import load_object
+    from meshsal.util.atomic import write_png
     from tactile.imprint_set import ImprintSet
     from tactile.picture import imprint_grid
     from tactile.raycast import imprints

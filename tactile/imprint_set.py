@@ -118,7 +118,7 @@ class ImprintSet:
 
     def save(self, path) -> None:
         """Write the set to ``path`` (.npz), atomically."""
-        from meshsal.atomic import atomic_path
+        from meshsal.util.atomic import atomic_path
 
         path = Path(path)
         if path.suffix != ".npz":

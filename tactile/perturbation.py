@@ -153,7 +153,7 @@ def acquire(mesh: Mesh, positions, normals, sensor: Sensor | None = None, pertur
     workers : int, optional
         Ray-casting threads.
     scene : optional
-        ``meshsal.embree.embree_scene(mesh)``: pass the same mesh's scene to
+        ``meshsal.mesh.embree.embree_scene(mesh)``: pass the same mesh's scene to
         amortize the BVH build over many acquisitions.
 
     Returns

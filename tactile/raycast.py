@@ -15,7 +15,7 @@ The pads are split into chunks that the calling thread and worker threads
 cast and turn into images concurrently (Embree releases the GIL).  Building the
 scene (the BVH of the mesh) costs more than casting a few dozen imprints:
 callers that take many imprints on one mesh build it once with
-``meshsal.embree.embree_scene(mesh)`` and pass it as ``scene``.
+``meshsal.mesh.embree.embree_scene(mesh)`` and pass it as ``scene``.
 """
 
 from __future__ import annotations
@@ -62,7 +62,7 @@ def mesh_scene(mesh: Mesh, scene=None):
     ----------
     mesh : Mesh
     scene : embreex scene, optional
-        From ``meshsal.embree.embree_scene(mesh)`` on this very mesh (after
+        From ``meshsal.mesh.embree.embree_scene(mesh)`` on this very mesh (after
         any scaling).  A few rays checked against a few of the mesh's faces
         catch a scene of another mesh or of the mesh before scaling; a scene
         of a slightly edited copy of the mesh may pass unnoticed.
@@ -74,26 +74,26 @@ def mesh_scene(mesh: Mesh, scene=None):
 
     Examples
     --------
-    >>> from meshsal.embree import embree_scene
+    >>> from meshsal.mesh.embree import embree_scene
     >>> tri = Mesh(vertices=[[0, 0, 0], [1, 0, 0], [0, 1, 0]], faces=[[0, 1, 2]])
     >>> mesh_scene(tri, embree_scene(tri)) is not None
     True
     >>> mesh_scene(tri.replace(vertices=tri.vertices * 3), embree_scene(tri))  # doctest: +ELLIPSIS
     Traceback (most recent call last):
     ...
-    ValueError: scene does not hold mesh '': build it with meshsal.embree.embree_scene(mesh) from the same mesh...
+    ValueError: scene does not hold mesh '': build it with meshsal.mesh.embree.embree_scene(mesh) from the same mesh...
     """
-    from meshsal.embree import embree_scene
+    from meshsal.mesh.embree import embree_scene
 
     if mesh.n_faces == 0:
         raise ValueError(f"mesh {mesh.name!r} has no faces")
     if scene is None:
         return embree_scene(mesh)
     if not callable(getattr(scene, "run", None)):
-        raise ValueError(f"scene must be an Embree scene from meshsal.embree.embree_scene, got {type(scene).__name__}")
+        raise ValueError(f"scene must be an Embree scene from meshsal.mesh.embree.embree_scene, got {type(scene).__name__}")
     if not _holds_mesh(scene, mesh):
         raise ValueError(f"scene does not hold mesh {mesh.name!r}: build it with "
-                         "meshsal.embree.embree_scene(mesh) from the same mesh, after any scaling")
+                         "meshsal.mesh.embree.embree_scene(mesh) from the same mesh, after any scaling")
     return scene
 
 
@@ -164,7 +164,7 @@ def cast_depths(mesh: Mesh, poses: Poses, sensor: Sensor, workers: int | None = 
         Threads casting ray chunks concurrently (Embree releases the GIL);
         defaults to the number of CPUs.
     scene : embreex scene, optional
-        ``meshsal.embree.embree_scene(mesh)``: pass the same mesh's scene to
+        ``meshsal.mesh.embree.embree_scene(mesh)``: pass the same mesh's scene to
         amortize the BVH build over calls (see :func:`mesh_scene`); built
         here when omitted.
 
@@ -228,7 +228,7 @@ def imprints(mesh: Mesh, positions, normals, sensor: Sensor | None = None, angle
     workers : int, optional
         Ray-casting threads; defaults to the number of CPUs.
     scene : embreex scene, optional
-        ``meshsal.embree.embree_scene(mesh)``: pass the same mesh's scene to
+        ``meshsal.mesh.embree.embree_scene(mesh)``: pass the same mesh's scene to
         amortize the BVH build when taking imprints on one mesh over several
         calls (building it costs more than a few dozen imprints).  It is
         checked against the mesh with a few rays (:func:`mesh_scene`); built
@@ -240,7 +240,7 @@ def imprints(mesh: Mesh, positions, normals, sensor: Sensor | None = None, angle
 
     Examples
     --------
-    >>> from meshsal.embree import embree_scene
+    >>> from meshsal.mesh.embree import embree_scene
     >>> from meshsal.mesh import Mesh
     >>> plane = Mesh(vertices=[[-50, 0, -50], [50, 0, -50], [50, 0, 50], [-50, 0, 50]],
     ...              faces=[[0, 2, 1], [0, 3, 2]])
@@ -262,7 +262,7 @@ def imprint(mesh: Mesh, position, normal, sensor: Sensor | None = None, angle_de
             scene=None) -> np.ndarray:
     """The imprint at one point: :func:`imprints` for k = 1, (rows, cols) float32 in [0, 1].
 
-    Pass ``scene=meshsal.embree.embree_scene(mesh)`` when taking imprints one
+    Pass ``scene=meshsal.mesh.embree.embree_scene(mesh)`` when taking imprints one
     at a time on the same mesh, to build its BVH once.
     """
     return imprints(mesh, np.reshape(position, (1, 3)), np.reshape(normal, (1, 3)), sensor, [angle_deg],

@@ -19,7 +19,7 @@ from dataclasses import asdict, dataclass
 import numpy as np
 
 from meshsal.mesh import Mesh
-from meshsal.registry import Registry
+from meshsal.util.registry import Registry
 
 __all__ = [
     "MODES",

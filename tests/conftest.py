@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 
-from meshsal.reproducible import pin_blas_kernel
+from meshsal.util.reproducible import pin_blas_kernel
 
 pin_blas_kernel()   # before anything imports NumPy: the same BLAS kernels, hence numbers, on every x86-64 CPU
 

@@ -3,7 +3,7 @@
 import numpy as np
 
 from meshsal.attention import CHANNELS
-from meshsal.learned import FEATURES, TouchModel
+from meshsal.points.learned import FEATURES, TouchModel
 
 
 def one_feature_model(name: str) -> TouchModel:

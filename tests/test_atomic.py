@@ -4,7 +4,7 @@ import os
 
 import pytest
 
-from meshsal import atomic
+from meshsal.util import atomic
 
 
 def test_the_file_is_flushed_before_the_rename_and_the_directory_after(tmp_path, monkeypatch):

@@ -14,9 +14,9 @@ import numpy as np
 import pytest
 import shapes
 
-from classify import batch
+from classify.runtime import batch
 from classify.cli import main
-from classify.cluster import open_executor
+from classify.runtime.cluster import open_executor
 
 SETTINGS = batch.BatchSettings(methods=("attention", "uniform"), n_points=6, view_size=32)
 

@@ -8,7 +8,7 @@ from sklearn.model_selection import train_test_split
 from sklearn.svm import SVC
 
 import classify
-from classify.evolutionary_svm import solve_dual
+from classify.recognizers.evolutionary_svm import solve_dual
 
 
 def _separable_imprints(n_per_class=30, n_classes=4, seed=0):

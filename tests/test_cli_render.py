@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from classify.cli import main
-from meshsal.io import save_ply
+from meshsal.mesh.io import save_ply
 from shapes import icosphere
 
 
@@ -62,7 +62,8 @@ def test_render_rejects_a_tiny_size(sphere_file, tmp_path, capsys):
 
 
 def test_toys_writes_six_coloured_plys(tmp_path):
-    from meshsal import load_mesh, toys
+    from meshsal import load_mesh
+    from meshsal.objects import toys
 
     assert main(["toys", "--out", str(tmp_path), "--quiet"]) == 0
     for name in toys.NAMES:

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 from scipy.spatial import cKDTree
 
-from meshsal.curvature import gaussian_average, mean_curvature, mesh_saliency, vertex_areas
+from meshsal.mesh.curvature import gaussian_average, mean_curvature, mesh_saliency, vertex_areas
 from meshsal.mesh import Mesh
 
 import shapes
@@ -95,7 +95,7 @@ def test_gaussian_average_matches_brute_force(max_cells):
 
 
 def test_mesh_saliency_agrees_with_the_definition(monkeypatch):
-    import meshsal.curvature
+    import meshsal.mesh.curvature
 
     V, F = icosphere(4)
     rng = np.random.default_rng(8)
@@ -104,7 +104,7 @@ def test_mesh_saliency_agrees_with_the_definition(monkeypatch):
         V = V * (1 + rng.uniform(0.05, 0.15) * np.exp(-angle ** 2 / (2 * 0.15 ** 2)))[:, None]
     mesh = Mesh(vertices=V, faces=F)
     fast = mesh_saliency(mesh)
-    monkeypatch.setattr(meshsal.curvature, "gaussian_average", brute_force_average)
+    monkeypatch.setattr(meshsal.mesh.curvature, "gaussian_average", brute_force_average)
     exact = mesh_saliency(mesh)
     assert np.corrcoef(fast, exact)[0, 1] > 0.98
 

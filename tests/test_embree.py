@@ -6,7 +6,7 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from meshsal.embree import _attach_directly, _scene_handle, embree_scene, is_robust
+from meshsal.mesh.embree import _attach_directly, _scene_handle, embree_scene, is_robust
 from shapes import bumps, icosphere
 
 

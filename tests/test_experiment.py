@@ -11,15 +11,15 @@ import meshsal
 import tactile
 from classify import experiment
 from classify.cli import main
-from classify.dataset import Settings
-from classify.report import CSV_COLUMNS
-from meshsal.instances import random_rotation
+from classify.experiment.samples import Settings
+from classify.reporting.report import CSV_COLUMNS
+from meshsal.objects.instances import random_rotation
 
 SMALL = Settings(n_points=6, train_instances=2, train_sessions=1)
 
 
 def _cup(name, turn=None):
-    cup = meshsal.toys.make("cup")
+    cup = meshsal.objects.toys.make("cup")
     V = cup.vertices if turn is None else cup.vertices @ turn.T
     return meshsal.Mesh(V, cup.faces, vertex_colors=cup.vertex_colors, name=name)
 
@@ -162,7 +162,7 @@ def test_real_imprint_set_gives_table_2_with_folds_grouped_by_point(tmp_path, ca
 
 
 def test_results_csv_is_identical_in_process_on_a_local_cluster_and_on_a_tcp_cluster(tmp_path, dask_cluster):
-    from classify.cluster import open_executor
+    from classify.runtime.cluster import open_executor
 
     kwargs = dict(methods=("uniform",), classifiers=("knn", "naive_bayes", "decision_tree"), settings=SMALL,
                   replicates=2, repeats=2, folds=3, cache_dir=None, quiet=True)

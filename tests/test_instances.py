@@ -5,9 +5,9 @@ import pytest
 import shapes
 
 import meshsal
-from meshsal import instances
+from meshsal.objects import instances
 from meshsal.mesh import Similarity
-from meshsal.transform import principal_diagonal, scale_to_principal
+from meshsal.mesh.transform import principal_diagonal, scale_to_principal
 
 
 def test_random_rotations_are_proper_and_uniform():
@@ -63,10 +63,10 @@ def test_instance_turns_resizes_and_recolours_and_leads_back_to_the_file():
 
 
 def test_toy_instances_take_a_new_paint_not_a_hue_turn():
-    cup = scale_to_principal(meshsal.toys.make("cup"), 150.0)
+    cup = scale_to_principal(meshsal.objects.toys.make("cup"), 150.0)
     inst = instances.make_instance(cup, instances.InstanceSpec(np.eye(3), 1.0, 7, 0.0, 1.0))
     assert np.allclose(inst.vertices, cup.vertices)
-    assert np.array_equal(inst.vertex_colors, meshsal.toys.make("cup", seed=7).vertex_colors)
+    assert np.array_equal(inst.vertex_colors, meshsal.objects.toys.make("cup", seed=7).vertex_colors)
 
 
 def test_draw_instance_refuses_bad_spreads():

@@ -10,7 +10,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from meshsal.io import MeshRepairWarning, load_mesh, load_vertex_quality, save_ply
+from meshsal.mesh.io import MeshRepairWarning, load_mesh, load_vertex_quality, save_ply
 from meshsal.mesh import Mesh, MeshError, face_areas
 
 SQUARE = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], dtype=np.float64)
@@ -394,7 +394,7 @@ def test_random_bytes_raise_mesh_error(tmp_path, ext, prefix, body):
 GARBAGE_SCRIPT = """
 import sys, warnings
 import numpy as np
-from meshsal.io import load_mesh, save_ply
+from meshsal.mesh.io import load_mesh, save_ply
 from meshsal.mesh import Mesh, MeshError
 warnings.simplefilter("ignore")
 root = sys.argv[1]

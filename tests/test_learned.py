@@ -5,17 +5,17 @@ import json
 import numpy as np
 import pytest
 
-from classify import dataset
+from classify.experiment import samples as dataset
 from classify.experiment import instance_stage
-from classify.learned import distinctiveness, fit_replicate_model
-from meshsal import toys, ycb
+from classify.experiment.survey import distinctiveness, fit_replicate_model
+from meshsal.objects import toys, ycb
 from meshsal.attention import CHANNELS
-from meshsal.curvature import mesh_saliency
-from meshsal.instances import InstanceSpec, make_instance, random_rotation
-from meshsal.learned import FEATURES, POOL_FACTOR, TouchModel, candidate_pool, fit_touch_model, point_features
+from meshsal.mesh.curvature import mesh_saliency
+from meshsal.objects.instances import InstanceSpec, make_instance, random_rotation
+from meshsal.points.learned import FEATURES, POOL_FACTOR, TouchModel, candidate_pool, fit_touch_model, point_features
 from meshsal.points import attention_maps, interest_points, learned_points, points_by_method, view_channels
-from meshsal.touch import touchable
-from classify.cluster import Inline
+from meshsal.points.touch import touchable
+from classify.runtime.cluster import Inline
 
 from models import one_feature_model
 from shapes import icosphere
@@ -216,7 +216,7 @@ def test_every_instance_of_an_object_offers_the_same_candidates():
 
 
 def test_a_batch_of_single_meshes_refuses_the_learned_methods():
-    from classify.batch import BatchSettings
+    from classify.runtime.batch import BatchSettings
 
     with pytest.raises(ValueError, match="learned.*touch model"):
         BatchSettings(methods=("uniform", "learned"))

@@ -6,7 +6,8 @@ import shapes
 
 import meshsal
 from classify.cli import main
-from meshsal import objects, ycb
+from meshsal import objects
+from meshsal.objects import ycb
 
 
 @pytest.mark.parametrize("name", ycb.NAMES)
@@ -28,7 +29,7 @@ def test_baked_colours_are_the_textures_own(shared_mesh):
 
 
 def test_sets_names_and_files_resolve_in_order(tmp_path):
-    assert [r.name for r in objects.resolve_objects(["toys,ycb"])] == list(meshsal.toys.NAMES + ycb.NAMES)
+    assert [r.name for r in objects.resolve_objects(["toys,ycb"])] == list(meshsal.objects.toys.NAMES + ycb.NAMES)
     assert len(objects.resolve_objects(["ycb"])) == 10
     path = tmp_path / "pebble.obj"
     shapes.write_obj(path, shapes.sphere(radius=5.0, n=8))

@@ -18,7 +18,7 @@ from meshsal.points import (
     project_pixel_paper,
     saliency_maps,
 )
-from meshsal.sampling import farthest_points, field_peaks, non_maximum_suppression, random_surface_points
+from meshsal.points.sampling import farthest_points, field_peaks, non_maximum_suppression, random_surface_points
 
 import shapes
 
@@ -176,7 +176,7 @@ def test_same_input_same_output(planted):
 def test_wide_spacing_fills_from_saliency_and_never_duplicates():
     mesh, _, _ = planted_sphere()
     views, maps = saliency_maps(mesh, size=SIZE)
-    from meshsal.curvature import mesh_saliency
+    from meshsal.mesh.curvature import mesh_saliency
 
     vs = mesh_saliency(mesh)
     # A 1.2-radius spacing leaves room for only a handful of points on a 50 mm sphere.
@@ -260,7 +260,7 @@ def test_map_peaks_thresholds_relative_to_the_maximum():
 
 @pytest.mark.parametrize("projection", ["orthographic", "perspective"])
 def test_project_pixel_paper_matches_face_id_mapping(projection):
-    from meshsal.render import Camera, render, surface_points, view_rig
+    from meshsal.views.render import Camera, render, surface_points, view_rig
 
     mesh, _, _ = planted_sphere()
     cameras = [view_rig()[0][0], view_rig()[9][3], view_rig()[17][1],
@@ -281,7 +281,7 @@ def test_project_pixel_paper_matches_face_id_mapping(projection):
 
 def test_cli_writes_every_file_in_the_source_frame(tmp_path, capsys):
     from classify.cli import main
-    from meshsal.io import load_mesh, load_vertex_quality, save_ply
+    from meshsal.mesh.io import load_mesh, load_vertex_quality, save_ply
 
     mesh, _, _ = planted_sphere(radius=0.4)
     source = mesh.replace(vertices=mesh.vertices + [2.0, 1.0, -3.0])
@@ -317,7 +317,7 @@ def test_cli_writes_every_file_in_the_source_frame(tmp_path, capsys):
 
 def test_cli_baseline_and_progress(tmp_path, capsys):
     from classify.cli import main
-    from meshsal.io import save_ply
+    from meshsal.mesh.io import save_ply
 
     mesh, _, _ = planted_sphere()
     path = tmp_path / "s.ply"

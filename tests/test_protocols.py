@@ -5,8 +5,8 @@ import pytest
 
 import classify
 import tactile
-from classify import protocols
-from classify.protocols import InstanceData
+from classify.experiment import protocols
+from classify.experiment.protocols import InstanceData
 
 
 def _tagged_pool(n_objects=3, per_object=20, seed=0):

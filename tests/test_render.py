@@ -3,10 +3,10 @@
 import numpy as np
 import pytest
 
-from meshsal.embree import embree_scene
+from meshsal.mesh.embree import embree_scene
 from meshsal.mesh import Mesh
-from meshsal.render import Camera, project, render, render_views, surface_points, view_rig
-from meshsal.tracer import tracer
+from meshsal.views.render import Camera, project, render, render_views, surface_points, view_rig
+from meshsal.views.tracer import tracer
 from shapes import icosphere, plane
 
 FRONT = Camera(direction=[0, 0, -1], up=[0, 1, 0])

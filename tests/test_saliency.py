@@ -9,7 +9,7 @@ from shapes import icosphere
 from meshsal import attention
 from meshsal.attention import CHANNELS, SaliencyResult, combine_maps, curvature, erode_mask, saliency
 from meshsal.attention.combine import outline_radius
-from meshsal.render import project, render, surface_points, view_rig
+from meshsal.views.render import project, render, surface_points, view_rig
 
 SIZE = 96
 
@@ -205,7 +205,7 @@ def test_saliency_follows_the_planted_curvature(sphere, view):
 
 
 def test_saliency_computes_mesh_saliency_when_not_given(sphere, view):
-    from meshsal.curvature import mesh_saliency
+    from meshsal.mesh.curvature import mesh_saliency
 
     a = saliency(view, sphere, weights={"curvature": 1.0})
     b = saliency(view, sphere, weights={"curvature": 1.0}, vertex_saliency=mesh_saliency(sphere))

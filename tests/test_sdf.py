@@ -6,7 +6,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from meshsal import sdf
+from meshsal.objects import sdf
 from meshsal.mesh import face_areas
 
 

@@ -4,7 +4,8 @@ import numpy as np
 import pytest
 
 import classify
-from classify import fusion, stats
+from classify.recognizers import fusion
+from classify.reporting import stats
 
 
 def test_bootstrap_interval_covers_the_true_mean_about_95_percent_of_the_time():

@@ -223,7 +223,7 @@ def test_fast_path_agrees_with_exact_sections_on_shared_meshes(shared_mesh, name
 
 
 def test_prebuilt_scene_gives_the_same_imprints_and_a_foreign_scene_is_refused():
-    from meshsal.embree import embree_scene
+    from meshsal.mesh.embree import embree_scene
 
     surface = shapes.bumps()
     P = np.array([[3.0, 0.0, 2.0], [-10.0, 0.0, 5.0]])

@@ -3,11 +3,11 @@
 import numpy as np
 
 import meshsal
-from meshsal.render import render_views, view_rig
+from meshsal.views.render import render_views, view_rig
 
 
 def test_views_are_the_same_with_one_thread_and_with_two():
-    cup = meshsal.scale_to(meshsal.toys.make("cup"), 150.0)
+    cup = meshsal.scale_to(meshsal.objects.toys.make("cup"), 150.0)
     cameras = [c for s in view_rig()[:6] for c in s]
     one = render_views(cup, cameras, size=48, threads=1)
     two = render_views(cup, cameras, size=48, threads=2)
@@ -17,7 +17,7 @@ def test_views_are_the_same_with_one_thread_and_with_two():
 
 
 def test_attention_points_are_the_same_with_one_thread_and_with_two():
-    cup = meshsal.scale_to(meshsal.toys.make("cup"), 150.0)
+    cup = meshsal.scale_to(meshsal.objects.toys.make("cup"), 150.0)
     one = meshsal.interest_points(cup, n=10, size=48, threads=1)
     two = meshsal.interest_points(cup, n=10, size=48, threads=2)
     for name in ("vertex_ids", "positions", "normals", "scores", "votes"):

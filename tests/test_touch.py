@@ -5,7 +5,7 @@ import pytest
 
 from meshsal.mesh import Mesh
 from meshsal.points import METHODS, MODEL_METHODS, interest_points
-from meshsal.touch import contact_gap, default_pad_width, touchable
+from meshsal.points.touch import contact_gap, default_pad_width, touchable
 
 import shapes
 from models import one_feature_model

@@ -6,8 +6,9 @@ import igl
 import numpy as np
 import pytest
 
-from meshsal import load_mesh, toys
-from meshsal.io import MeshRepairWarning, save_ply
+from meshsal import load_mesh
+from meshsal.objects import toys
+from meshsal.mesh.io import MeshRepairWarning, save_ply
 from meshsal.mesh import face_areas
 
 

@@ -14,9 +14,9 @@ so that no ray also meets a vertex on its way out.
 import numpy as np
 import pytest
 
-from meshsal.embree import embree_scene
+from meshsal.mesh.embree import embree_scene
 from meshsal.mesh import Mesh
-from meshsal.tracer import _LOCAL_RAYS, Tracer, tracer
+from meshsal.views.tracer import _LOCAL_RAYS, Tracer, tracer
 from shapes import icosphere
 
 CENTER = np.array([0.1, 0.2, 0.3])
@@ -184,7 +184,7 @@ def test_a_mesh_without_faces_is_refused():
 
 def test_renders_of_a_scanned_bust_match_a_robust_scene(shared_mesh):
     from meshsal import load_mesh
-    from meshsal.render import render_views, view_rig
+    from meshsal.views.render import render_views, view_rig
 
     bust = load_mesh(shared_mesh("nefertiti.obj"))
     cameras = [c for s in view_rig() for c in s]

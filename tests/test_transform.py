@@ -3,9 +3,9 @@
 import numpy as np
 import pytest
 
-from meshsal.io import load_mesh, save_ply
+from meshsal.mesh.io import load_mesh, save_ply
 from meshsal.mesh import Mesh, MeshError, bounding_sphere
-from meshsal.transform import normalize, scale_to
+from meshsal.mesh.transform import normalize, scale_to
 
 
 def box_mesh(lo=(2.0, -1.0, 5.0), size=(3.0, 4.0, 12.0)):

@@ -18,12 +18,12 @@ into a view, ``saliency(view, mesh)`` combines the eight channels and
 
 # Functions are bound after their modules, so ``attention.dkl`` and
 # ``attention.symmetry`` are the channel functions, not the submodules.
-from .pyramid import center_surround_map, gaussian_pyramid, normalize_map
-from .itti import color, intensity, orientation
-from .dkl import dkl
-from .symmetry import symmetry
-from .local import contrast, entropy
-from .combine import (
+from meshsal.attention.pyramid import center_surround_map, gaussian_pyramid, normalize_map
+from meshsal.attention.itti import color, intensity, orientation
+from meshsal.attention.dkl import dkl
+from meshsal.attention.symmetry import symmetry
+from meshsal.attention.local import contrast, entropy
+from meshsal.attention.combine import (
     CHANNELS,
     IMAGE_CHANNELS,
     SaliencyResult,

@@ -10,13 +10,13 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from meshsal.registry import Registry
+from meshsal.util.registry import Registry
 
-from .dkl import dkl
-from .itti import color, intensity, orientation
-from .local import contrast, entropy
-from .pyramid import normalize_map, scale_to_max
-from .symmetry import symmetry
+from meshsal.attention.dkl import dkl
+from meshsal.attention.itti import color, intensity, orientation
+from meshsal.attention.local import contrast, entropy
+from meshsal.attention.pyramid import normalize_map, scale_to_max
+from meshsal.attention.symmetry import symmetry
 
 __all__ = [
     "CHANNELS",
@@ -304,7 +304,7 @@ def saliency(view, mesh, weights: Mapping[str, float] | None = None, vertex_sali
     Parameters
     ----------
     view : View
-        From :mod:`meshsal.render`; the image channels use ``view.rgb``, the
+        From :mod:`meshsal.views.render`; the image channels use ``view.rgb``, the
         curvature channel ``view.face_id`` and ``view.bary``.
     mesh : Mesh
         The rendered mesh.
@@ -312,7 +312,7 @@ def saliency(view, mesh, weights: Mapping[str, float] | None = None, vertex_sali
         Equal weights by default (see :func:`combine_maps`).
     vertex_saliency : (n,) float, optional
         Per-vertex mesh saliency; computed with
-        ``meshsal.curvature.mesh_saliency(mesh)`` when omitted.  Pass it when
+        ``meshsal.mesh.curvature.mesh_saliency(mesh)`` when omitted.  Pass it when
         processing many views of one mesh.
     normalize : bool
         Weight each channel by Itti's N(.) too (see :func:`combine_maps`);
@@ -327,7 +327,7 @@ def saliency(view, mesh, weights: Mapping[str, float] | None = None, vertex_sali
     """
     w = _check_weights(weights)
     if vertex_saliency is None:
-        from meshsal.curvature import mesh_saliency
+        from meshsal.mesh.curvature import mesh_saliency
 
         vertex_saliency = mesh_saliency(mesh)
     channels = image_channels(view.rgb)
@@ -367,14 +367,14 @@ def saliency_views(
     views = list(views)
     _check_weights(weights)
     if vertex_saliency is None:
-        from meshsal.curvature import mesh_saliency
+        from meshsal.mesh.curvature import mesh_saliency
 
         vertex_saliency = mesh_saliency(mesh)
 
     def one(view):
         return saliency(view, mesh, weights, vertex_saliency, normalize)
 
-    from meshsal.progress import progress
+    from meshsal.util.progress import progress
 
     workers = threads or os.cpu_count() or 1
     if workers == 1 or len(views) <= 1:

@@ -16,7 +16,7 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-from .pyramid import check_image, conspicuity_map
+from meshsal.attention.pyramid import check_image, conspicuity_map
 
 __all__ = ["RGB_TO_LMS", "srgb_to_linear", "rgb_to_lms", "dkl_axes", "dkl"]
 

@@ -10,7 +10,7 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-from .pyramid import (
+from meshsal.attention.pyramid import (
     center_surround_map,
     check_image,
     conspicuity_map,

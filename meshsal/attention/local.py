@@ -11,7 +11,7 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-from .pyramid import check_image, scale_to_max
+from meshsal.attention.pyramid import check_image, scale_to_max
 
 __all__ = ["entropy", "contrast", "local_entropy", "local_variance", "luma", "default_contrast_window"]
 

@@ -117,7 +117,7 @@ import cv2
 import numpy as np
 from numpy.lib.stride_tricks import sliding_window_view
 
-from .pyramid import center_surround_map, check_image, gaussian_pyramid, upsample
+from meshsal.attention.pyramid import center_surround_map, check_image, gaussian_pyramid, upsample
 
 __all__ = ["symmetry", "symmetries", "Symmetries", "Keypoints", "sift_keypoints", "mirror_descriptors"]
 

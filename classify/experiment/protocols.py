@@ -1,0 +1,251 @@
+"""The two evaluation protocols: the paper's cross-validation, and fresh object instances.
+
+``paper``
+    Faithful to the paper's Table 1: each object's n interest points, one
+    clean imprint each, classified by k-fold cross-validation whose folds
+    are grouped by point and stratified over objects
+    (:func:`paper_splits`), repeated with reshuffled folds.  Similarity
+    selection runs on the training folds only (:func:`select_training`).
+
+``instance``
+    The main protocol.  Each replicate draws fresh instances of every
+    object (:mod:`classify.experiment.samples`): train on several training instances,
+    each touched in its own acquisition sessions, and test on a disjoint
+    test instance, after k = 1..n touches at distinct points of it.  The
+    classifier's posteriors are calibrated on folds that hold out whole
+    training instances (:mod:`classify.recognizers.fusion`), then multiplied over the
+    touches.  Tuning inside a classifier (kNN's k, the network's early
+    stopping) gets folds grouped by (object, instance, point).
+
+Every random choice of a job is seeded by the base seed, the replicate,
+the number of touches and the object's name, never by a list position or
+by the classifier, so every point method and classifier of a replicate
+sees the same instances, devices, folds, touch sets and tie breaks.  Each
+job runs with one BLAS/OpenMP thread inside its worker, so results do not
+depend on how many workers run.
+"""
+
+from __future__ import annotations
+
+import inspect
+from dataclasses import dataclass
+
+import numpy as np
+from sklearn.model_selection import StratifiedGroupKFold
+from threadpoolctl import threadpool_limits
+
+from classify.recognizers.classifiers import make
+from classify.experiment.samples import name_seed
+from classify.recognizers.fusion import calibrate, fit_calibration, fuse, touch_sets
+from meshsal.util.registry import Registry
+from tactile.features import describe
+
+__all__ = ["PROTOCOLS", "PROTOCOL_REGISTRY", "Split", "paper_splits", "select_training", "PaperOutcome", "paper_job",
+           "InstanceData", "InstanceOutcome", "instance_job"]
+
+#: The evaluation protocols (this module's docstring describes them).
+PROTOCOL_REGISTRY = Registry("protocol")
+PROTOCOL_REGISTRY.register("paper", None, "the paper's CV, folds grouped by point")
+PROTOCOL_REGISTRY.register("instance", None, "train and test on distinct fresh instances, k-touch fusion")
+PROTOCOLS = PROTOCOL_REGISTRY.names()
+
+
+@dataclass(frozen=True)
+class Split:
+    """One train/test split of the paper protocol (indices into the imprint pool)."""
+
+    repeat: int
+    fold: int
+    train: np.ndarray
+    test: np.ndarray
+
+
+def paper_splits(labels, groups=None, folds=5, repeats=10, seed=0) -> list[Split]:
+    """``folds``-fold cross-validation grouped by ``groups``, stratified by ``labels``, ``repeats`` times.
+
+    Repeat r shuffles with seed ``seed + r``.  Within a repeat the test folds
+    partition the pool, and no group has members on both sides of a split.
+
+    Examples
+    --------
+    >>> s = paper_splits(np.repeat([0, 1], 5), folds=5, repeats=2)     # every imprint its own point
+    >>> len(s), sorted(np.concatenate([x.test for x in s[:5]]).tolist()) == list(range(10))
+    (10, True)
+    """
+    labels = np.asarray(labels)
+    groups = np.arange(len(labels)) if groups is None else np.asarray(groups)
+    per_class = [len(np.unique(groups[labels == c])) for c in np.unique(labels)]
+    if min(per_class) < folds:
+        raise ValueError(f"paper protocol: {folds}-fold cross-validation needs at least {folds} points per "
+                         f"object, the smallest object has {min(per_class)}")
+    out = []
+    for r in range(repeats):
+        kfold = StratifiedGroupKFold(folds, shuffle=True, random_state=seed + r)
+        for f, (train, test) in enumerate(kfold.split(np.zeros(len(labels)), labels, groups)):
+            out.append(Split(r, f, train, test))
+    return out
+
+
+def select_training(imprints, labels, train, threshold=0.85) -> np.ndarray:
+    """The training indices that survive similarity selection.
+
+    Only ``imprints[train]`` is handed to ``tactile.select_by_similarity``:
+    the selection never sees a test imprint.
+    """
+    import tactile
+
+    train = np.asarray(train)
+    keep = np.asarray(tactile.select_by_similarity(imprints[train], labels[train], threshold=threshold), bool)
+    return train[keep]
+
+
+def _fit(name, params, X, y, groups):
+    model = make(name, **params.get(name, {}))
+    if "groups" in inspect.signature(model.fit).parameters:
+        return model.fit(X, y, groups=groups)
+    return model.fit(X, y)
+
+
+def _proba(model, X, n_classes):
+    out = np.zeros((len(X), n_classes))
+    out[:, model.classes_] = model.predict_proba(X)
+    return out
+
+
+@dataclass(frozen=True)
+class PaperOutcome:
+    """One repeat of the paper protocol for one classifier and selection setting.
+
+    ``rates`` (n_objects,) percent of each object's imprints recognized;
+    ``confusion`` (n_objects, n_objects) counts, rows true object;
+    ``kept`` the mean fraction of training imprints selection kept.
+    """
+
+    rates: np.ndarray
+    confusion: np.ndarray
+    kept: float
+
+
+def paper_job(X, y, groups, splits, classifier, selection, params, threshold, n_classes,
+              features="raw") -> PaperOutcome:
+    """Every fold of one repeat: fit on the (selected) training fold, predict the test fold.
+
+    Selection compares raw imprints (the paper's rule); the classifier sees
+    ``tactile.features.describe(X, features)``.
+    """
+    with threadpool_limits(1):
+        F = describe(X, features)
+        pred = np.full(len(y), -1)
+        kept = []
+        for split in splits:
+            train = select_training(X, y, split.train, threshold) if selection else split.train
+            kept.append(len(train) / len(split.train))
+            if len(np.unique(y[train])) < 2:
+                pred[split.test] = y[train][0] if len(train) else -1
+                continue
+            model = _fit(classifier, params, F[train], y[train], groups[train])
+            pred[split.test] = np.argmax(_proba(model, F[split.test], n_classes), axis=1)
+    confusion = np.zeros((n_classes, n_classes), np.int64)
+    hit = pred >= 0
+    np.add.at(confusion, (y[hit], pred[hit]), 1)
+    rates = np.array([100.0 * np.mean(pred[y == c] == c) for c in range(n_classes)])
+    return PaperOutcome(rates, confusion, float(np.mean(kept)))
+
+
+@dataclass(frozen=True, eq=False)
+class InstanceData:
+    """One replicate's imprints for one point method and object set.
+
+    Attributes
+    ----------
+    train_X : (N, rows, cols) float32
+    train_y : (N,) int64, object index
+    train_instance : (N,) int64, training instance number (1..)
+    train_point : (N,) int64, point index on its instance
+    test : tuple of (k_o, rows, cols) float32, the test instance's imprints of each object
+    names : tuple of str, the objects' names (seeds of the touch sets)
+    """
+
+    train_X: np.ndarray
+    train_y: np.ndarray
+    train_instance: np.ndarray
+    train_point: np.ndarray
+    test: tuple
+    names: tuple
+
+
+@dataclass(frozen=True)
+class InstanceOutcome:
+    """One replicate of the instance protocol for one classifier and selection setting.
+
+    ``rates`` (n_touches, n_objects) percent of touch sets recognized after
+    k = 1..n_touches touches; ``sets`` (n_touches,) the fewest distinct touch
+    sets any object had at k (0 where an object had fewer than k points);
+    ``confusion`` single-touch counts, rows true object; ``kept`` the
+    fraction of training imprints selection kept.
+    """
+
+    rates: np.ndarray
+    sets: np.ndarray
+    confusion: np.ndarray
+    kept: float
+
+
+def _groups(data: InstanceData) -> np.ndarray:
+    return (data.train_y * 1000 + data.train_instance) * 100000 + data.train_point
+
+
+def _fit_selected(data, F, rows, classifier, selection, params, threshold):
+    X, y = data.train_X, data.train_y
+    if selection:
+        rows = select_training(X, y, rows, threshold)
+    return _fit(classifier, params, F[rows], y[rows], _groups(data)[rows]), rows
+
+
+def _calibration(data, F, classifier, selection, params, threshold, n_classes):
+    """Fit on all training instances but one, score the held-out one, for each; fit (eps, T)."""
+    proba, truth = [], []
+    for held in np.unique(data.train_instance):
+        rest = np.flatnonzero(data.train_instance != held)
+        out = np.flatnonzero(data.train_instance == held)
+        model, rows = _fit_selected(data, F, rest, classifier, selection, params, threshold)
+        if len(np.unique(data.train_y[rows])) < 2:
+            continue
+        proba.append(_proba(model, F[out], n_classes))
+        truth.append(data.train_y[out])
+    if not proba:
+        return fit_calibration(np.zeros((0, n_classes)), np.zeros(0, np.int64))
+    return fit_calibration(np.concatenate(proba), np.concatenate(truth))
+
+
+def instance_job(data: InstanceData, classifier, selection, params, threshold, n_touches, sets_per_k, seed,
+                 replicate, features="raw") -> InstanceOutcome:
+    """Train on the training instances, recognize the test instances after 1..``n_touches`` touches.
+
+    Selection compares raw imprints; the classifier sees
+    ``tactile.features.describe(imprints, features)``.
+    """
+    n_classes = len(data.test)
+    with threadpool_limits(1):
+        F = describe(data.train_X, features)
+        cal = _calibration(data, F, classifier, selection, params, threshold, n_classes)
+        model, rows = _fit_selected(data, F, np.arange(len(data.train_y)), classifier, selection, params,
+                                    threshold)
+        proba = [calibrate(_proba(model, describe(t, features), n_classes), cal) if len(t)
+                 else np.zeros((0, n_classes)) for t in data.test]
+    confusion = np.zeros((n_classes, n_classes), np.int64)
+    for c, p in enumerate(proba):
+        np.add.at(confusion[c], np.argmax(p, axis=1), 1)
+    rates = np.zeros((n_touches, n_classes))
+    sets = np.full(n_touches, np.iinfo(np.int64).max)
+    for k in range(1, n_touches + 1):
+        for c, p in enumerate(proba):
+            if len(p) == 0:
+                sets[k - 1] = 0
+                continue
+            stream = [int(seed), int(replicate), k, name_seed(data.names[c])]
+            chosen = touch_sets(len(p), min(k, len(p)), sets_per_k, np.random.default_rng(stream + [3]))
+            picks = fuse(p, chosen, np.random.default_rng(stream + [4]))
+            rates[k - 1, c] = 100.0 * np.mean(picks == c)
+            sets[k - 1] = min(sets[k - 1], len(chosen) if len(p) >= k else 0)
+    return InstanceOutcome(rates, sets, confusion, len(rows) / len(data.train_y))

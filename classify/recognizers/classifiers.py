@@ -1,0 +1,369 @@
+"""The five recognizers of the paper, as scikit-learn estimators.
+
+``make(name, **params)`` builds one by name (``NAMES``).  All of them take
+imprints as 256-vectors (16x16 flattened row-major, as in the paper) and
+also accept the (N, 16, 16) stack of an ``ImprintSet`` directly, flattening
+it; they all have fit / predict / predict_proba / get_params, so they can be
+cloned, grid-searched and cross-validated like any scikit-learn classifier.
+
+====================  ==========================================================
+``knn``               k-nearest neighbours, k chosen by an inner stratified
+                      cross-validation over ``ks`` on the training set, folds
+                      grouped by instance and point when ``fit`` gets ``groups``
+``naive_bayes``       Gaussian naive Bayes
+``decision_tree``     CART (gini), seeded
+``evolutionary_svm``  Mierswa's evolutionary SVM (see ``classify.recognizers.evolutionary_svm``)
+``deep``              feed-forward network, two hidden layers (128, 64), ReLU,
+                      Adam on mini-batches of 32, early stopping on a 10 %
+                      validation split, seeded
+====================  ==========================================================
+"""
+
+from __future__ import annotations
+
+import hashlib
+import numbers
+
+import numpy as np
+from sklearn.base import BaseEstimator, ClassifierMixin
+from sklearn.model_selection import StratifiedKFold
+from sklearn.naive_bayes import GaussianNB
+from sklearn.neural_network import MLPClassifier
+from sklearn.tree import DecisionTreeClassifier
+from sklearn.utils.validation import check_is_fitted
+
+from classify.recognizers.evolutionary_svm import EvolutionarySVM, as_matrix
+from meshsal.util.registry import Registry
+
+__all__ = ["CLASSIFIERS", "NAMES", "make", "as_matrix", "KNN", "NaiveBayes", "DecisionTree", "EvolutionarySVM",
+           "DeepNet"]
+
+
+class _Flatten:
+    """Mixin: flatten (N, rows, cols) inputs before the wrapped estimator sees them."""
+
+    def fit(self, X, y, **kwargs):
+        return super().fit(as_matrix(X), y, **kwargs)
+
+    def predict(self, X):
+        return super().predict(as_matrix(X))
+
+    def predict_proba(self, X):
+        return super().predict_proba(as_matrix(X))
+
+    def predict_log_proba(self, X):
+        return super().predict_log_proba(as_matrix(X))
+
+
+class NaiveBayes(_Flatten, GaussianNB):
+    """:class:`sklearn.naive_bayes.GaussianNB` taking imprints (N, d) or (N, rows, cols)."""
+
+
+class DecisionTree(_Flatten, DecisionTreeClassifier):
+    """:class:`sklearn.tree.DecisionTreeClassifier` (CART) taking imprints (N, d) or (N, rows, cols)."""
+
+
+class DeepNet(_Flatten, MLPClassifier):
+    """:class:`sklearn.neural_network.MLPClassifier` taking imprints (N, d) or (N, rows, cols).
+
+    ``make("deep")`` sets two hidden layers (128, 64), mini-batches of 32,
+    early stopping and a seed; the class itself keeps scikit-learn's
+    defaults.  A training set smaller than the batch is one batch (without
+    scikit-learn's warning about it).  ``fit`` leaves the parameters as it
+    found them.
+
+    Early stopping tunes the number of epochs on held-out data.  Given
+    ``fit(X, y, groups)``, that validation set is whole groups (about
+    ``validation_fraction`` of them, stratified, seeded): otherwise a point's
+    re-touches would sit on both sides and stop training late.  As in
+    scikit-learn, the weights of the best validation epoch are kept.
+    """
+
+    def fit(self, X, y, groups=None):
+        X = as_matrix(X)
+        # The batch is clipped to the data here, not by scikit-learn (whose warning is not thread-safe to silence).
+        batch, stopping = self.batch_size, self.early_stopping
+        if isinstance(batch, numbers.Integral) and not isinstance(batch, bool):
+            usable = len(X) - (int(np.ceil(self.validation_fraction * len(X))) if stopping else 0)
+            self.set_params(batch_size=int(min(batch, max(1, usable))))
+        try:
+            if not stopping or groups is None:
+                return super().fit(X, y)
+            return self._fit_grouped(X, np.asarray(y), np.asarray(groups))
+        finally:
+            self.set_params(batch_size=batch, early_stopping=stopping)
+
+    def _fit_grouped(self, X, y, groups):
+        from sklearn.model_selection import StratifiedGroupKFold
+
+        smallest = int(np.bincount(np.unique(y, return_inverse=True)[1]).min())
+        splits = int(min(max(2, round(1.0 / self.validation_fraction)), len(np.unique(groups)), smallest))
+        if splits < 2:
+            return super().fit(X, y)
+        train, val = next(StratifiedGroupKFold(splits, shuffle=True, random_state=self.random_state)
+                          .split(X, y, groups))
+        classes = np.unique(y)
+        self.set_params(early_stopping=False, batch_size=int(min(self.batch_size, len(train))))
+        best, best_score, stale = None, -np.inf, 0
+        for epoch in range(self.max_iter):
+            MLPClassifier.partial_fit(self, X[train], y[train], classes=classes)
+            score = float(np.mean(MLPClassifier.predict(self, X[val]) == y[val]))
+            if score > best_score + self.tol:
+                best = ([c.copy() for c in self.coefs_], [b.copy() for b in self.intercepts_], epoch + 1)
+                best_score, stale = score, 0
+            else:
+                stale += 1
+                if stale >= self.n_iter_no_change:
+                    break
+        self.coefs_, self.intercepts_, self.n_iter_ = best
+        self.best_validation_score_ = best_score
+        return self
+
+
+class KNN(ClassifierMixin, BaseEstimator):
+    """k-nearest neighbours with k chosen by inner cross-validation.
+
+    Parameters
+    ----------
+    ks : sequence of int
+        Candidate k.  Those larger than an inner training fold are skipped.
+    cv : int
+        Inner folds (reduced to what the smallest class allows; with fewer
+        than 2 groups in some class no search is possible and the smallest
+        k is used).
+    random_state : int
+        Seeds the inner fold shuffle and every tie break.
+
+    Attributes
+    ----------
+    k_ : int
+        The chosen k.  Equal inner scores are decided by a draw seeded with
+        ``random_state``, never by the order of ``ks``.
+    cv_scores_ : dict k -> mean inner accuracy
+    classes_ : labels
+    scale_ : float
+        Distance scale of the posterior: the median distance from a
+        training imprint to its nearest other training imprint.
+
+    Notes
+    -----
+    ``fit(X, y, groups)`` keeps every group (an object instance, a point)
+    on one side of each inner fold, so k is never chosen by how well a
+    point recognizes its own re-touches.
+
+    Distances are Euclidean, computed so that they do not depend on the
+    CPU or the thread count: imprints on an ADC's grid (multiples of
+    1/255, as every acquired imprint is) are compared through their integer
+    codes, where float64 sums are exact; other inputs have their squared
+    distances rounded to 1e-9.  Neighbours at equal distance are ranked by
+    a seeded hash of their content and label, and the inner folds are
+    drawn over the training set sorted by label and that hash, so neither
+    the CPU nor the order of the training set decides k or a tie.
+
+    The posterior is the neighbours' vote made soft by distance, so that it
+    carries evidence beyond the winner even at k = 1::
+
+        p_c = (v_c + s_c / 2) / (k + 1 / 2),    s = softmax_c(-d_c / scale_)
+
+    with ``v_c`` the votes of class c among the k nearest neighbours and
+    ``d_c`` the distance to the nearest training imprint of class c.  The
+    distance term sums to less than one vote, so the prediction (its
+    argmax) is the majority vote; a tied vote goes to the class with the
+    nearest imprint.
+
+    Examples
+    --------
+    >>> X = np.r_[np.zeros((6, 2)), np.ones((6, 2))]
+    >>> KNN().fit(X, np.repeat([0, 1], 6)).predict([[0.9, 0.9]])
+    array([1])
+    """
+
+    def __init__(self, ks=(1, 3, 5, 7, 9), cv=3, random_state=0):
+        self.ks = ks
+        self.cv = cv
+        self.random_state = random_state
+
+    def fit(self, X, y, groups=None):
+        """Choose k on inner folds of (X, y) grouped by ``groups`` (if given), then fit on all of it."""
+        ks = sorted({int(k) for k in self.ks})
+        if not ks or ks[0] < 1:
+            raise ValueError(f"KNN: ks must hold positive integers, got {self.ks!r}")
+        if not (isinstance(self.cv, numbers.Integral) and self.cv >= 2):
+            raise ValueError(f"KNN: cv must be an integer >= 2, got {self.cv!r}")
+        X = as_matrix(X)
+        y = np.asarray(y)
+        if y.shape != (len(X),):
+            raise ValueError(f"KNN: y must have shape ({len(X)},), got {y.shape}")
+        if groups is not None and np.shape(groups) != (len(X),):
+            raise ValueError(f"KNN: groups must have shape ({len(X)},), got {np.shape(groups)}")
+        rng = np.random.default_rng(self.random_state)
+        self.classes_, codes = np.unique(y, return_inverse=True)
+        keys = _row_keys(X, codes, self.random_state)
+        # A canonical order (label, then content hash): the inner folds, hence k, ignore the input's order.
+        canonical = np.lexsort((keys, codes))
+        X, codes, keys = X[canonical], codes[canonical], keys[canonical]
+        groups = None if groups is None else np.asarray(groups)[canonical]
+        n_classes = len(self.classes_)
+        folds = _inner_folds(codes, groups, self.cv)
+        self.cv_scores_ = {}
+        if folds >= 2 and n_classes >= 2:
+            hits = {k: 0 for k in ks}
+            for train, test in _split(codes, groups, folds, self.random_state):
+                usable = [k for k in ks if k <= len(train)]
+                if not usable:
+                    continue
+                d2 = _sq_distances(X[test], X[train])
+                order = _ranked(d2, keys[train])
+                dist = _class_distances(d2, codes[train], n_classes)
+                for k in usable:
+                    # The argmax does not depend on the scale, so the fold's own is not needed.
+                    proba = _posterior(codes[train][order[:, :k]], dist, 1.0)
+                    hits[k] += int(np.sum(np.argmax(proba, axis=1) == codes[test]))
+            self.cv_scores_ = {k: hits[k] / len(X) for k in ks}
+            best = max(self.cv_scores_.values())
+            tied = [k for k in ks if self.cv_scores_[k] == best]
+            self.k_ = int(tied[rng.integers(len(tied))])
+        else:
+            self.k_ = ks[0]
+        self.k_ = min(self.k_, len(X))
+        self.X_ = X
+        self.codes_ = codes
+        self.tiebreak_ = keys
+        self.scale_ = _distance_scale(X)
+        self.n_features_in_ = X.shape[1]
+        return self
+
+    def predict_proba(self, X):
+        """Votes of the k neighbours softened by distance (see Notes; columns follow ``classes_``)."""
+        check_is_fitted(self, "X_")
+        X = as_matrix(X)
+        if X.shape[1] != self.n_features_in_:
+            raise ValueError(f"KNN: X has {X.shape[1]} features, the model was fitted with {self.n_features_in_}")
+        d2 = _sq_distances(X, self.X_)
+        order = _ranked(d2, self.tiebreak_)[:, :self.k_]
+        return _posterior(self.codes_[order], _class_distances(d2, self.codes_, len(self.classes_)), self.scale_)
+
+    def predict(self, X):
+        return self.classes_[np.argmax(self.predict_proba(X), axis=1)]
+
+
+_SOFT = 0.5  # weight of the distance term: under one vote, so it never overturns a majority
+_LEVELS = 255.0  # an 8-bit ADC's grid
+_BLOCK = 512
+
+
+def _inner_folds(codes, groups, cv) -> int:
+    """How many inner folds the smallest class allows (counting groups when given)."""
+    if groups is None:
+        return int(min(cv, np.bincount(codes).min()))
+    pairs = np.unique(np.column_stack([codes, np.unique(groups, return_inverse=True)[1]]), axis=0)
+    return int(min(cv, np.bincount(pairs[:, 0], minlength=codes.max() + 1).min()))
+
+
+def _split(codes, groups, folds, seed):
+    from sklearn.model_selection import StratifiedGroupKFold
+
+    if groups is None:
+        return StratifiedKFold(folds, shuffle=True, random_state=seed).split(codes, codes)
+    return StratifiedGroupKFold(folds, shuffle=True, random_state=seed).split(codes, codes, groups)
+
+
+def _on_grid(X) -> bool:
+    codes = X * _LEVELS
+    return bool(np.all(np.abs(codes - np.round(codes)) < 1e-3))
+
+
+def _sq_distances(A, B) -> np.ndarray:
+    """(len(A), len(B)) squared Euclidean distances, the same on every CPU (see KNN's Notes)."""
+    exact = _on_grid(A) and _on_grid(B)
+    if exact:
+        A, B = np.round(A * _LEVELS), np.round(B * _LEVELS)
+    out = np.empty((len(A), len(B)))
+    b2 = np.einsum("ij,ij->i", B, B)
+    for start in range(0, len(A), _BLOCK):
+        a = A[start:start + _BLOCK]
+        d2 = np.einsum("ij,ij->i", a, a)[:, None] + b2[None, :] - 2.0 * (a @ B.T)
+        out[start:start + _BLOCK] = np.maximum(d2, 0.0)
+    # Integer codes: every sum is an integer below 2**53, exact in any order.
+    return out / _LEVELS**2 if exact else np.round(out, 9)
+
+
+def _row_keys(X, codes, seed) -> np.ndarray:
+    """A seeded 64-bit hash of each row's bytes and label: a tie-break that ignores the rows' order."""
+    salt = int(seed).to_bytes(8, "little", signed=True)
+    return np.array([int.from_bytes(hashlib.blake2b(row.tobytes() + int(c).to_bytes(8, "little"), digest_size=8,
+                                                    salt=salt).digest(), "little")
+                     for row, c in zip(np.ascontiguousarray(X, np.float64), codes)], dtype=np.uint64)
+
+
+def _ranked(d2, tiebreak) -> np.ndarray:
+    """Training indices by increasing distance, equal distances in ``tiebreak`` order, (n, m)."""
+    keys = np.broadcast_to(tiebreak, d2.shape)
+    return np.lexsort((keys, d2), axis=1)
+
+
+def _class_distances(d2, codes, n_classes) -> np.ndarray:
+    """(n, n_classes) distance from each row to the nearest training sample of each class."""
+    return np.sqrt(np.column_stack([d2[:, codes == c].min(axis=1) for c in range(n_classes)]))
+
+
+def _distance_scale(X) -> float:
+    """Median distance from a training sample to its nearest other one (1.0 when undefined or zero)."""
+    if len(X) < 2:
+        return 1.0
+    nearest = np.empty(len(X))
+    for start in range(0, len(X), _BLOCK):
+        d2 = _sq_distances(X[start:start + _BLOCK], X)
+        d2[np.arange(len(d2)), np.arange(start, start + len(d2))] = np.inf
+        nearest[start:start + _BLOCK] = d2.min(axis=1)
+    scale = float(np.median(np.sqrt(nearest)))
+    return scale if scale > 0 else 1.0
+
+
+def _posterior(neighbour_codes, class_dist, scale):
+    """(votes + _SOFT * softmax(-class_dist / scale)) / (k + _SOFT), rows of ``neighbour_codes`` (n, k)."""
+    n, k = neighbour_codes.shape
+    votes = np.zeros(class_dist.shape)
+    np.add.at(votes, (np.arange(n)[:, None], neighbour_codes), 1.0)
+    soft = np.exp(-(class_dist - class_dist.min(axis=1, keepdims=True)) / scale)
+    soft /= soft.sum(axis=1, keepdims=True)
+    return (votes + _SOFT * soft) / (k + _SOFT)
+
+
+#: The five recognizers of the paper: class and default parameters.
+CLASSIFIERS = Registry("classifier")
+CLASSIFIERS.register("knn", (KNN, {}), "k-nearest neighbours, k tuned on grouped inner folds")
+CLASSIFIERS.register("naive_bayes", (NaiveBayes, {}), "Gaussian naive Bayes")
+CLASSIFIERS.register("decision_tree", (DecisionTree, {"random_state": 0}), "CART")
+CLASSIFIERS.register("evolutionary_svm", (EvolutionarySVM, {}), "Mierswa's evolutionary SVM")
+CLASSIFIERS.register("deep", (DeepNet, {"hidden_layer_sizes": (128, 64), "early_stopping": True, "batch_size": 32,
+                                        "max_iter": 500, "random_state": 0}), "two-layer network")
+NAMES = CLASSIFIERS.names()
+
+
+def make(name: str, **params):
+    """A new, unfitted classifier by name.
+
+    Parameters
+    ----------
+    name : one of ``NAMES``
+    **params
+        Override the estimator's parameters (those ``get_params`` lists).
+
+    Examples
+    --------
+    >>> make("knn", ks=(1, 3)).get_params()["ks"]
+    (1, 3)
+    >>> make("svm")
+    Traceback (most recent call last):
+    ...
+    ValueError: unknown classifier 'svm'; choose from knn, naive_bayes, decision_tree, evolutionary_svm, deep
+    """
+    cls, defaults = CLASSIFIERS.get(name)
+    estimator = cls(**defaults)
+    valid = estimator.get_params()
+    unknown = sorted(set(params) - set(valid))
+    if unknown:
+        raise ValueError(f"classifier {name!r} has no parameter {', '.join(unknown)}; "
+                           f"valid: {', '.join(sorted(valid))}")
+    return estimator.set_params(**params)

@@ -1,0 +1,204 @@
+"""What an experiment measured: rate cells, paired comparisons, their tables and files.
+
+A cell is one recognition rate (method, protocol, classifier, object set,
+selection, touches) summarized over replicates and objects
+(:func:`classify.reporting.stats.summarize`).  A comparison is the paired difference
+of a method's rates and the baseline method's on the same replicates and
+objects (:func:`classify.reporting.stats.paired_difference`).  ``results.csv`` holds
+both: one row per cell, the comparison columns filled for every method but
+the baseline.  ``results.json`` adds every setting and the raw
+(replicate, object) rate matrices, so any other statistic can be computed
+from it.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from classify.reporting import report
+
+__all__ = ["Cell", "Comparison", "ConfusionMatrix", "ExperimentResult", "format_tables", "write_outputs"]
+
+
+@dataclass(frozen=True)
+class Cell:
+    """One recognition rate (percent) with its 95 % interval over replicates and objects.
+
+    ``touch_sets`` is the fewest distinct touch sets any object's test
+    instance offered at this many touches (0 for the paper protocol, which
+    has no touch fusion).
+    """
+
+    method: str
+    protocol: str
+    classifier: str
+    n_objects: int
+    selection: bool
+    touches: int
+    mean: float
+    std: float
+    ci_low: float
+    ci_high: float
+    replicates: int
+    touch_sets: int = 0
+
+
+@dataclass(frozen=True)
+class Comparison:
+    """A method's rate minus the baseline method's, paired (percentage points)."""
+
+    method: str
+    baseline: str
+    protocol: str
+    classifier: str
+    n_objects: int
+    selection: bool
+    touches: int
+    diff: float
+    ci_low: float
+    ci_high: float
+    p_value: float
+    replicates: int
+
+
+@dataclass(frozen=True)
+class ConfusionMatrix:
+    """Single-touch counts summed over all folds and replicates; rows true object, columns predicted."""
+
+    method: str
+    protocol: str
+    classifier: str
+    n_objects: int
+    selection: bool
+    object_names: tuple
+    counts: np.ndarray
+
+
+@dataclass(frozen=True)
+class ExperimentResult:
+    """Everything one experiment measured, and every setting it used.
+
+    ``rates`` maps a cell's coordinates ``(method, protocol, classifier,
+    n_objects, selection, touches)`` to its (replicates, objects) matrix of
+    rates in percent.  ``selection_kept`` maps ``"method/protocol/n_objects"``
+    to the mean fraction of training imprints similarity selection kept.
+    """
+
+    cells: tuple
+    comparisons: tuple
+    confusions: tuple
+    object_names: tuple
+    object_sets: tuple
+    classifiers: tuple
+    settings: dict = field(default_factory=dict)
+    selection_kept: dict = field(default_factory=dict)
+    timings: dict = field(default_factory=dict)
+    rates: dict = field(default_factory=dict)
+
+    def cell(self, method, protocol, classifier, n_objects, selection, touches=1) -> Cell:
+        """The cell of these coordinates (KeyError when it was not measured)."""
+        return _find(self.cells, (method, protocol, classifier, n_objects, selection, touches))
+
+    def comparison(self, method, protocol, classifier, n_objects, selection, touches=1) -> Comparison:
+        """The paired comparison of ``method`` with the baseline at these coordinates (KeyError if none)."""
+        return _find(self.comparisons, (method, protocol, classifier, n_objects, selection, touches))
+
+    def table(self, method, protocol, touches=1) -> str:
+        """The Table 1 layout as Markdown."""
+        return report.table_markdown(self.cells, method, protocol, self.classifiers, self.object_sets, touches)
+
+    def to_json(self) -> dict:
+        return {
+            "settings": self.settings,
+            "object_names": list(self.object_names),
+            "object_sets": list(self.object_sets),
+            "classifiers": list(self.classifiers),
+            "cells": [dataclasses.asdict(c) for c in self.cells],
+            "comparisons": [dataclasses.asdict(c) for c in self.comparisons],
+            "confusions": [{**dataclasses.asdict(c), "object_names": list(c.object_names),
+                            "counts": c.counts.tolist()} for c in self.confusions],
+            "rates": [{"method": k[0], "protocol": k[1], "classifier": k[2], "n_objects": k[3],
+                       "selection": k[4], "touches": k[5], "replicate_by_object": np.asarray(v).tolist()}
+                      for k, v in self.rates.items()],
+            "selection_kept": self.selection_kept,
+            "timings_s": self.timings,
+        }
+
+
+def _find(records, key):
+    for r in records:
+        if (r.method, r.protocol, r.classifier, r.n_objects, r.selection, r.touches) == key:
+            return r
+    raise KeyError(key)
+
+
+def _title(protocol):
+    return {"paper": "paper protocol (CV grouped by point)",
+            "instance": "instance protocol (train and test on distinct instances)"}.get(protocol, protocol)
+
+
+def format_tables(result: ExperimentResult, title="Table 1 layout") -> str:
+    """Every table of a result as Markdown: Table 1 per method and protocol, touches, comparisons."""
+    blocks = []
+    protocols = list(dict.fromkeys(c.protocol for c in result.cells))
+    methods = list(dict.fromkeys(c.method for c in result.cells))
+    n = result.object_sets[-1]
+    for protocol in protocols:
+        for method in methods:
+            if not any(c.method == method and c.protocol == protocol for c in result.cells):
+                continue
+            blocks.append(f"### {title}: {method} points, {_title(protocol)}, recognition rate (%), single "
+                          f"touch, mean [95 % interval]\n\n" + result.table(method, protocol))
+            if protocol == "instance":
+                for selection in (False, True):
+                    blocks.append(f"### {method} points, instance protocol, {n} objects, "
+                                  f"{'with' if selection else 'no'} selection: recognition (%) after k touches\n\n"
+                                  + report.touches_markdown(result.cells, method, protocol, result.classifiers,
+                                                            n, selection))
+    if result.comparisons:
+        baseline = result.comparisons[0].baseline
+        clf = "knn" if "knn" in result.classifiers else result.classifiers[0]
+        for protocol in protocols:
+            table = report.comparison_markdown(result.cells, result.comparisons, protocol, clf, n, False)
+            if table:
+                blocks.append(f"### Point methods against {baseline}, {_title(protocol)}, {clf}, {n} objects, "
+                              f"no selection: rate (%) and paired difference (points) [95 % interval], "
+                              f"Wilcoxon p\n\n" + table)
+    notes = [c for c in result.cells if c.protocol == "instance" and c.touches > 1
+             and 0 < c.touch_sets < result.settings.get("touch_sets_per_object", 0)]
+    if notes:
+        ks = sorted({c.touches for c in notes})
+        blocks.append(f"Touch sets: at k = {', '.join(map(str, ks))} touches an object's test instance offers "
+                      f"fewer distinct sets than the {result.settings.get('touch_sets_per_object')} asked for; "
+                      f"all of them were used (the table's touch_sets column in results.csv says how many).")
+    return "\n\n".join(blocks) + "\n"
+
+
+def write_outputs(result: ExperimentResult, out_dir) -> None:
+    """results.json, results.csv, confusion_<classifier>.png and touches.png under ``out_dir``."""
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    report.write_json(out / "results.json", result.to_json())
+    report.write_csv(out / "results.csv", result.cells, result.comparisons)
+    n = result.object_sets[-1]
+    for name in result.classifiers:
+        panels = [(f"{c.method} / {c.protocol} / {'sel' if c.selection else 'no sel'}", c.counts, c.object_names)
+                  for c in result.confusions if c.classifier == name and c.n_objects == n and not c.selection]
+        if panels:
+            report.write_confusion_png(out / f"confusion_{name}.png", panels)
+    clf = "knn" if "knn" in result.classifiers else result.classifiers[0]
+    curves = {}
+    for method in dict.fromkeys(c.method for c in result.cells):
+        cells = sorted((c for c in result.cells if c.method == method and c.classifier == clf
+                        and c.n_objects == n and not c.selection and c.protocol == "instance"),
+                       key=lambda c: c.touches)
+        if cells:
+            curves[method] = (np.array([c.touches for c in cells]), np.array([c.mean for c in cells]),
+                              np.array([c.ci_low for c in cells]), np.array([c.ci_high for c in cells]))
+    if curves:
+        report.write_touches_png(out / "touches.png", curves,
+                                 f"instance protocol, {clf}, {n} objects, no selection: recognition vs touches")

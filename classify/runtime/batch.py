@@ -1,0 +1,322 @@
+"""Points and imprints for every mesh of a folder, one task per mesh, into a resumable store.
+
+The store is a folder:
+
+``store.json``
+    ``{"format": "visuotactile.BatchStore", "version": 1, "settings": {...}}``:
+    what every entry was computed with.  A store is only ever extended with
+    the same settings.
+``meshes/<name>.npz``
+    One entry per mesh, ``<name>`` its path under the input folder without
+    the suffix.  A NumPy archive (no pickles) holding a ``meta`` JSON string
+    (``format`` "visuotactile.BatchEntry", ``version`` 1, the source file,
+    the mesh's content hash, the transform from the nominal frame back to
+    the file, per method the best view set, the spacing and the views that
+    voted for each point, and the time each stage took) and the arrays
+    ``vertex_saliency`` and, per method, ``<method>/vertex_ids``,
+    ``positions``, ``normals``, ``scores``, ``votes`` and ``imprints``
+    (k, 16, 16).  Positions and normals are in the nominal frame: the mesh
+    scaled to ``size_mm`` (principal-frame box diagonal), centroid at the
+    origin, in millimetres.
+``failures.jsonl``
+    One JSON line per mesh the last run could not process: its name, file
+    and error.
+
+:func:`load_entry` reads one entry back as ``meshsal.InterestPoints`` and
+``tactile.ImprintSet`` per method; :func:`load_store` reads them all.
+
+Each mesh is a pure function of its file's content and the settings, and is
+written atomically (temporary file, fsync, rename, fsync of the folder), so
+a run killed at any point leaves whole entries only, and a rerun skips them.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+import traceback
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+__all__ = ["FORMAT", "ENTRY_FORMAT", "VERSION", "SUFFIXES", "BatchSettings", "MeshEntry", "BatchSummary",
+           "find_meshes", "process_mesh", "run_batch", "load_entry", "load_store"]
+
+FORMAT = "visuotactile.BatchStore"
+ENTRY_FORMAT = "visuotactile.BatchEntry"
+VERSION = 1
+SUFFIXES = (".obj", ".ply", ".off", ".stl")
+STAGES = ("load", "mesh_saliency", "points", "imprints", "write")
+
+
+@dataclass(frozen=True)
+class BatchSettings:
+    """What every entry of a store is computed with."""
+
+    methods: tuple = ("attention", "uniform")
+    n_points: int = 15
+    size_mm: float = 150.0
+    view_size: int = 128
+    seed: int = 0
+
+    def __post_init__(self):
+        from meshsal.points import MODEL_METHODS, POINT_METHODS
+
+        methods = POINT_METHODS.check(self.methods)
+        needs_model = [m for m in methods if m in MODEL_METHODS]
+        if needs_model:
+            raise ValueError(f"{', '.join(needs_model)}: a learned method needs a touch model fitted on training "
+                             f"instances ('visuotactile experiment'), which a batch of single meshes has not")
+        if int(self.n_points) != self.n_points or self.n_points < 1:
+            raise ValueError(f"n_points must be a positive integer, got {self.n_points!r}")
+        if not self.size_mm > 0 or self.view_size < 16:
+            raise ValueError(f"size_mm must be positive and view_size at least 16, got {self.size_mm}, "
+                             f"{self.view_size}")
+        object.__setattr__(self, "methods", methods)
+
+    def to_json(self) -> dict:
+        return {"methods": list(self.methods), "n_points": int(self.n_points), "size_mm": float(self.size_mm),
+                "view_size": int(self.view_size), "seed": int(self.seed)}
+
+
+@dataclass(frozen=True, eq=False)
+class MeshEntry:
+    """One mesh of a store: its points and imprints per method, in the nominal frame (mm)."""
+
+    name: str
+    source: str
+    points: dict
+    imprints: dict
+    transform: object
+    timings: dict = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class BatchSummary:
+    """What a run did: meshes done now, skipped as already stored, failed; wall time; stage medians (s)."""
+
+    done: int
+    skipped: int
+    failed: int
+    wall_s: float
+    stage_median_s: dict
+
+    def markdown(self) -> str:
+        rate = self.done / self.wall_s if self.wall_s > 0 else 0.0
+        lines = ["| meshes done | skipped (already stored) | failed | wall | meshes/s |",
+                 "|---:|---:|---:|---:|---:|",
+                 f"| {self.done} | {self.skipped} | {self.failed} | {self.wall_s:.1f} s | {rate:.2f} |"]
+        if self.stage_median_s:
+            lines += ["", "| stage | median per mesh |", "|---|---:|"]
+            lines += [f"| {k} | {v * 1000:.1f} ms |" for k, v in self.stage_median_s.items()]
+        return "\n".join(lines)
+
+
+def find_meshes(directory) -> list[tuple[str, Path]]:
+    """``(name, path)`` of every mesh file under ``directory``, sorted by name.
+
+    The name is the path under ``directory`` without its suffix (``a/b`` for
+    ``a/b.obj``); two files differing only by suffix are refused.
+    """
+    root = Path(directory)
+    if not root.is_dir():
+        raise ValueError(f"{root}: not a folder of meshes")
+    found = {}
+    for path in sorted(root.rglob("*")):
+        if path.is_file() and path.suffix.lower() in SUFFIXES and not path.name.startswith("."):
+            name = path.relative_to(root).with_suffix("").as_posix()
+            if name in found:
+                raise ValueError(f"{root}: {found[name].name} and {path.name} would share the entry {name!r}")
+            found[name] = path
+    return sorted(found.items())
+
+
+def _entry_path(store: Path, name: str) -> Path:
+    return store / "meshes" / f"{name}.npz"
+
+
+def process_mesh(path, name: str, store, settings: BatchSettings) -> dict:
+    """Compute and write one mesh's entry; returns ``{"name", "status", "error", "timings"}``.
+
+    ``status`` is ``"done"`` or ``"failed"`` (``error`` then says why); a
+    failure never raises, so one broken mesh cannot stop a batch.
+    """
+    from threadpoolctl import threadpool_limits
+
+    timings = {}
+    try:
+        with threadpool_limits(1):
+            _compute(Path(path), name, Path(store), settings, timings)
+        return {"name": name, "status": "done", "error": "", "timings": timings}
+    except Exception as exc:  # noqa: BLE001 - a broken mesh is recorded, whatever broke it
+        last = traceback.extract_tb(exc.__traceback__)[-1] if exc.__traceback__ else None
+        where = f" ({Path(last.filename).name}:{last.lineno})" if last else ""
+        return {"name": name, "status": "failed", "error": f"{type(exc).__name__}: {exc}{where}",
+                "timings": timings}
+
+
+def _compute(path: Path, name: str, store: Path, settings: BatchSettings, timings: dict) -> None:
+    import meshsal
+    from meshsal.mesh.embree import embree_scene
+    import tactile
+    from classify.runtime.cache import hash_arrays
+    from meshsal.util.atomic import atomic_path
+    from meshsal.mesh.curvature import mesh_saliency
+    from meshsal.mesh.transform import scale_to_principal
+
+    t = time.perf_counter()
+    mesh = scale_to_principal(meshsal.load_mesh(path), settings.size_mm)
+    timings["load"] = time.perf_counter() - t
+    t = time.perf_counter()
+    saliency = mesh_saliency(mesh)
+    timings["mesh_saliency"] = time.perf_counter() - t
+    arrays = {"vertex_saliency": saliency}
+    methods = {}
+    timings["imprints"] = 0.0
+    scene = embree_scene(mesh)
+    sensor = tactile.Sensor()
+    t = time.perf_counter()
+    # One rendering serves every attention method.
+    picked = meshsal.points_by_method(mesh, settings.methods, n=settings.n_points, seed=settings.seed,
+                                      size=settings.view_size, vertex_saliency=saliency, threads=1,
+                                      pad_width=sensor.width_mm)
+    timings["points"] = time.perf_counter() - t
+    for method in settings.methods:
+        pts = picked[method]
+        t = time.perf_counter()
+        images = tactile.imprints(mesh, pts.positions, pts.normals, sensor, workers=1, scene=scene)
+        timings["imprints"] += time.perf_counter() - t
+        for key in ("vertex_ids", "positions", "normals", "scores", "votes"):
+            arrays[f"{method}/{key}"] = np.asarray(getattr(pts, key))
+        arrays[f"{method}/imprints"] = np.asarray(images, np.float32)
+        methods[method] = {"best_set": int(pts.best_set), "min_spacing": float(pts.min_spacing),
+                           "combination": pts.combination, "untouchable": int(pts.untouchable),
+                           "views": [list(v) for v in pts.views]}
+    t = time.perf_counter()
+    frame = mesh.transform
+    meta = {"format": ENTRY_FORMAT, "version": VERSION, "name": name, "source": str(path),
+            "mesh_sha256": hash_arrays(mesh.vertices, mesh.faces), "settings": settings.to_json(),
+            "to_source": {"scale": frame.scale, "offset": frame.offset.tolist(), "rotation": frame.rotation.tolist(),
+                          "meaning": "nominal = scale * rotation @ source + offset"},
+            "methods": methods, "timings_s": timings}
+    target = _entry_path(store, name)
+    with atomic_path(target) as tmp:
+        with open(tmp, "wb") as fh:
+            np.savez_compressed(fh, meta=np.array(json.dumps(meta)), **arrays)
+    timings["write"] = time.perf_counter() - t
+
+
+def _task(args):
+    return process_mesh(*args)
+
+
+def _open_store(store: Path, settings: BatchSettings) -> None:
+    from meshsal.util.atomic import write_text
+
+    header = store / "store.json"
+    wanted = {"format": FORMAT, "version": VERSION, "settings": settings.to_json()}
+    if header.exists():
+        from meshsal.util.jsonfile import read_json
+
+        have = read_json(header, "batch store header")
+        if not isinstance(have, dict):
+            raise ValueError(f"{header}: not a batch store header (not a JSON object)")
+        if have.get("format") != FORMAT or have.get("settings") != wanted["settings"]:
+            raise ValueError(f"{store}: this store holds other settings ({have.get('settings')}); "
+                             f"write to another --out or use the same settings")
+        return
+    write_text(header, json.dumps(wanted, indent=2) + "\n")
+
+
+def run_batch(directory, store, settings: BatchSettings | None = None, executor=None,
+              quiet: bool = False) -> BatchSummary:
+    """Write the entry of every mesh under ``directory`` that ``store`` does not hold yet.
+
+    Parameters
+    ----------
+    directory : folder searched recursively for .obj, .ply, .off, .stl
+    store : folder of the store (created if needed)
+    settings : BatchSettings
+    executor : optional
+        Anything with an ordered ``map`` (``classify.runtime.cluster.open_executor``);
+        None runs in this process.
+    quiet : no progress bar on stderr
+
+    Returns
+    -------
+    BatchSummary
+    """
+    from classify.runtime.cluster import Inline
+    from meshsal.util.atomic import write_text
+    from meshsal.util.progress import progress
+
+    settings = BatchSettings() if settings is None else settings
+    store = Path(store)
+    meshes = find_meshes(directory)
+    _open_store(store, settings)
+    todo = [(path, name) for name, path in meshes if not _entry_path(store, name).exists()]
+    started = time.perf_counter()
+    executor = Inline() if executor is None else executor
+    tasks = [(str(path), name, str(store), settings) for path, name in todo]
+    results = list(progress(executor.map(_task, tasks), total=len(tasks), desc="batch", quiet=quiet,
+                            unit="meshes"))
+    wall = time.perf_counter() - started
+    failed = [r for r in results if r["status"] == "failed"]
+    sources = dict((name, str(path)) for path, name in todo)
+    write_text(store / "failures.jsonl", "".join(json.dumps({"name": r["name"], "source": sources[r["name"]],
+                                                             "error": r["error"]}) + "\n" for r in failed))
+    for stale in (store / "meshes").rglob(".*.npz"):
+        stale.unlink(missing_ok=True)    # left by a worker killed while writing; its mesh was redone
+    done = [r for r in results if r["status"] == "done"]
+    medians = {k: float(np.median([r["timings"][k] for r in done])) for k in STAGES
+               if done and all(k in r["timings"] for r in done)}
+    return BatchSummary(len(done), len(meshes) - len(todo), len(failed), wall, medians)
+
+
+def load_entry(store, name: str) -> MeshEntry:
+    """One mesh's points and imprints per method, from a store written by :func:`run_batch`."""
+    import tactile
+    from meshsal.mesh import Similarity
+    from meshsal.points import InterestPoints
+
+    path = _entry_path(Path(store), name)
+    try:
+        with np.load(path, allow_pickle=False) as archive:
+            meta = json.loads(str(archive["meta"]))
+            arrays = {k: archive[k] for k in archive.files if k != "meta"}
+    except FileNotFoundError:
+        raise FileNotFoundError(f"{path}: no such entry in the store") from None
+    except (ValueError, KeyError, OSError) as exc:
+        raise ValueError(f"{path}: not a batch entry ({exc})") from None
+    if meta.get("format") != ENTRY_FORMAT or meta.get("version") != VERSION:
+        raise ValueError(f"{path}: not a version {VERSION} batch entry (format {meta.get('format')!r}, "
+                         f"version {meta.get('version')!r})")
+    frame = meta["to_source"]
+    transform = Similarity(frame["scale"], frame["offset"], frame["rotation"])
+    points, imprints = {}, {}
+    for method, info in meta["methods"].items():
+        def a(key, method=method):
+            return arrays[f"{method}/{key}"]
+        points[method] = InterestPoints(vertex_ids=a("vertex_ids"), positions=a("positions"), normals=a("normals"),
+                                        scores=a("scores"), votes=a("votes"), vertex_saliency=arrays["vertex_saliency"],
+                                        views=tuple(tuple(v) for v in info["views"]), method=method,
+                                        best_set=info["best_set"], min_spacing=info["min_spacing"],
+                                        combination=info.get("combination", ""),
+                                        untouchable=info.get("untouchable", -1))
+        k = len(a("positions"))
+        imprints[method] = tactile.ImprintSet(imprints=a("imprints"), labels=np.zeros(k, np.int64),
+                                              object_names=(name,), point_ids=np.arange(k), positions=a("positions"),
+                                              normals=a("normals"), sensor=tactile.Sensor(),
+                                              source=f"{meta['source']} ({method} points)")
+    return MeshEntry(name, meta["source"], points, imprints, transform, meta.get("timings_s", {}))
+
+
+def load_store(store) -> dict:
+    """Every entry of a store, ``{name: MeshEntry}``, sorted by name."""
+    root = Path(store) / "meshes"
+    if not (Path(store) / "store.json").exists():
+        raise ValueError(f"{store}: not a batch store (no store.json)")
+    names = sorted(p.relative_to(root).with_suffix("").as_posix() for p in root.rglob("*.npz")
+                   if not p.name.startswith("."))
+    return {name: load_entry(store, name) for name in names}

@@ -1,0 +1,7 @@
+"""Objects to recognize: the six procedural toys (``toys``, built from signed distance fields in
+``sdf``), the ten embedded YCB scans (``ycb``), objects by name (``names``) and fresh instances of
+any object, turned, resized and repainted (``instances``)."""
+
+from meshsal.objects.names import OBJECT_SETS, ObjectRef, load_ref, resolve_objects
+
+__all__ = ["OBJECT_SETS", "ObjectRef", "resolve_objects", "load_ref"]

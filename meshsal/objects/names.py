@@ -1,0 +1,102 @@
+"""Objects by name: the embedded sets (the toys, the YCB scans), single objects, mesh files.
+
+The command line and the experiment take objects as a list of strings, each
+a set name (``toys``, ``ycb``), an object's name (``cow``, ``power_drill``)
+or a mesh file, possibly comma-separated (``toys,ycb``).
+:func:`resolve_objects` turns such a list into :class:`ObjectRef` records
+without loading anything; :func:`load_ref` loads one.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+from meshsal.objects import toys, ycb
+from meshsal.mesh import Mesh
+
+__all__ = ["OBJECT_SETS", "ObjectRef", "resolve_objects", "load_ref"]
+
+OBJECT_SETS = {"toys": toys.NAMES, "ycb": ycb.NAMES}
+
+
+@dataclass(frozen=True)
+class ObjectRef:
+    """One object to load.
+
+    Attributes
+    ----------
+    name : str
+        Unique name: the toy's or YCB object's name, or the file's stem.
+    kind : str
+        ``"toy"``, ``"ycb"`` or ``"file"``.
+    path : str or None
+        The file for ``"ycb"`` (embedded) and ``"file"``; None for toys.
+    """
+
+    name: str
+    kind: str
+    path: str | None = None
+
+
+def _ref(item: str) -> ObjectRef:
+    if Path(item).is_file():
+        return ObjectRef(Path(item).stem, "file", str(item))
+    if item in toys.NAMES:
+        return ObjectRef(item, "toy")
+    if item in ycb.NAMES:
+        return ObjectRef(item, "ycb", str(ycb.path(item)))
+    raise ValueError(f"object {item!r} is neither a set ({', '.join(OBJECT_SETS)}), a known object "
+                     f"({', '.join(toys.NAMES + ycb.NAMES)}) nor an existing mesh file")
+
+
+def resolve_objects(specs) -> tuple[ObjectRef, ...]:
+    """Object references for a list of set names, object names and mesh files.
+
+    Parameters
+    ----------
+    specs : iterable of str
+        Each may hold several items separated by commas.  An existing file
+        wins over a name.
+
+    Returns
+    -------
+    tuple of ObjectRef, in the order given (sets expanded in their order)
+
+    Raises
+    ------
+    ValueError
+        An unknown item, an empty list, or two objects with one name.
+
+    Examples
+    --------
+    >>> [r.name for r in resolve_objects(["cow,cup", "power_drill"])]
+    ['cow', 'cup', 'power_drill']
+    >>> len(resolve_objects(["toys,ycb"]))
+    16
+    """
+    refs = []
+    for spec in specs:
+        for item in (s.strip() for s in str(spec).split(",")):
+            if not item:
+                continue
+            if item in OBJECT_SETS and not Path(item).is_file():
+                refs.extend(_ref(name) for name in OBJECT_SETS[item])
+            else:
+                refs.append(_ref(item))
+    if not refs:
+        raise ValueError("no objects given")
+    names = [r.name for r in refs]
+    twice = sorted({n for n in names if names.count(n) > 1})
+    if twice:
+        raise ValueError(f"objects must have distinct names; given more than once: {', '.join(twice)}")
+    return tuple(refs)
+
+
+def load_ref(ref: ObjectRef, seed: int = 0) -> Mesh:
+    """Load one object; ``seed`` is a toy's paint seed.  The mesh is named ``ref.name``."""
+    from meshsal.mesh.io import load_mesh
+
+    if ref.kind == "toy":
+        return toys.make(ref.name, seed=seed)
+    return load_mesh(ref.path).replace(name=ref.name)

@@ -1,0 +1,249 @@
+"""A learned touch saliency: per-point visual features, and a model of how distinctive a touch there is.
+
+The paper ranks points by visual attention alone.  Whether a touch at a
+point helps recognition is measurable, though: on training objects, touch
+candidate points and see how well their imprints tell the object apart
+(``classify.experiment.survey.distinctiveness``).  This module holds the vision side:
+
+* :func:`candidate_pool`: the points a learned method may choose from,
+  farthest-point samples spread over the whole surface, the same on every
+  instance of an object;
+* :func:`point_features`: what vision knows about each candidate, the
+  ``FEATURES``: the eight channel values averaged over the views that see
+  it, how many views see it, its attention votes, its mesh saliency and
+  its absolute mean curvature;
+* :class:`TouchModel` and :func:`fit_touch_model`: a ridge regression from
+  standardized features to distinctiveness, plus the channel weights of the
+  paper's combination that best predict it (non-negative least squares,
+  mean 1, so equal weights are all ones).
+
+Nothing here sees an imprint or a label: the target comes from the caller,
+which decides what the model is trained on (``TouchModel.trained_on``).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from meshsal.attention import CHANNELS
+from meshsal.mesh import Mesh
+
+__all__ = ["FEATURES", "POOL_FACTOR", "candidate_pool", "point_features", "TouchModel", "fit_touch_model"]
+
+#: The per-point visual features, in column order.
+FEATURES = tuple(f"{c}_mean" for c in CHANNELS) + ("views", "votes", "mesh_saliency", "curvature")
+#: Candidates per requested point in a pool.
+POOL_FACTOR = 20
+MODEL_FORMAT = "visuotactile.touch_model"
+MODEL_VERSION = 1
+
+
+def candidate_pool(mesh: Mesh, n: int = 15) -> np.ndarray:
+    """``POOL_FACTOR * n`` vertices spread over the surface, in farthest-point order.
+
+    The first is the vertex farthest from the vertices' mean, so the pool
+    depends on the shape alone: a turned, resized or repainted instance of an
+    object offers the same candidates, and whatever a model picks among them
+    can be found again on the next instance.
+
+    Returns
+    -------
+    (k,) int64 vertex ids (k <= POOL_FACTOR * n: all used vertices on a small mesh)
+
+    Examples
+    --------
+    >>> import meshsal
+    >>> candidate_pool(meshsal.objects.toys.make("cup"), n=2).shape
+    (40,)
+    """
+    from meshsal.points.sampling import farthest_points
+
+    used = np.unique(mesh.faces)
+    points = mesh.vertices[used]
+    start = int(np.argmax(np.linalg.norm(points - points.mean(axis=0), axis=1)))
+    return used[farthest_points(points, min(POOL_FACTOR * int(n), used.size), start=start)]
+
+
+def _channel_means(mesh: Mesh, views, results) -> tuple[np.ndarray, np.ndarray]:
+    """Per vertex: each channel's mean over the pixels of its faces in the views that see it; view count."""
+    n = mesh.n_vertices
+    sums = np.zeros((len(CHANNELS), n))
+    pixels = np.zeros(n)
+    seen = np.zeros(n)
+    for view, result in zip(views, results):
+        hit = view.mask
+        corners = mesh.faces[view.face_id[hit]].ravel()
+        counts = np.bincount(corners, minlength=n)
+        pixels += counts
+        seen += counts > 0
+        for c, name in enumerate(CHANNELS):
+            sums[c] += np.bincount(corners, weights=np.repeat(result.channels[name][hit].astype(np.float64), 3),
+                                   minlength=n)
+    return sums / np.maximum(pixels, 1.0), seen
+
+
+def point_features(mesh: Mesh, views, results, maps: np.ndarray, vertex_saliency: np.ndarray,
+                   vertex_ids: np.ndarray, spacing: float, threshold: float = 0.5) -> np.ndarray:
+    """The ``FEATURES`` of some vertices, from the 72 views and their channels.
+
+    Parameters
+    ----------
+    mesh : Mesh
+    views : list of View
+    results : list of meshsal.attention.SaliencyResult, one per view (their ``channels`` are used)
+    maps : (len(views), H, W) float32
+        Combined saliency maps, for the votes (as in :func:`meshsal.points.attention_points`).
+    vertex_saliency : (n_vertices,) float64
+    vertex_ids : (k,) int
+    spacing : float
+        Vote radius along mesh edges, mesh units.
+    threshold : float
+        Salient pixels exceed ``threshold`` times their map's maximum.
+
+    Returns
+    -------
+    (k, len(FEATURES)) float64
+    """
+    from meshsal.points.pipeline import _abs_mean_curvature, _edge_graph, _salient_vertices, _votes
+
+    ids = np.asarray(vertex_ids, dtype=np.int64)
+    means, seen = _channel_means(mesh, views, results)
+    votes, _ = _votes(_edge_graph(mesh), _salient_vertices(mesh, views, maps, threshold), ids, spacing)
+    curvature = _abs_mean_curvature(mesh, vertex_saliency)[ids]
+    columns = [means[:, ids].T, seen[ids, None], votes[:, None].astype(np.float64),
+               np.asarray(vertex_saliency, np.float64)[ids, None], curvature[:, None]]
+    return np.concatenate(columns, axis=1)
+
+
+@dataclass(frozen=True, eq=False)
+class TouchModel:
+    """Predicted touch distinctiveness from ``FEATURES``, and learned channel weights.
+
+    Attributes
+    ----------
+    mean, scale : (len(FEATURES),) float64
+        Standardization of the features (training mean and standard deviation).
+    coef : (len(FEATURES),) float64
+        Ridge coefficients on standardized features.
+    intercept : float
+    channel_weights : dict channel name -> float
+        Non-negative weights of the eight channels for
+        ``meshsal.attention.combine_maps`` (mean 1).
+    trained_on : tuple of str
+        What the training rows came from, as the caller labelled them.
+    """
+
+    mean: np.ndarray
+    scale: np.ndarray
+    coef: np.ndarray
+    intercept: float
+    channel_weights: dict
+    trained_on: tuple = ()
+
+    def predict(self, features: np.ndarray) -> np.ndarray:
+        """(k,) predicted distinctiveness of (k, len(FEATURES)) features."""
+        X = np.asarray(features, dtype=np.float64)
+        if X.ndim != 2 or X.shape[1] != len(FEATURES):
+            raise ValueError(f"features must have shape (k, {len(FEATURES)}), got {X.shape}")
+        return (X - self.mean) / self.scale @ self.coef + self.intercept
+
+    def save(self, path) -> None:
+        """Write the model as a versioned JSON file, atomically.
+
+        Examples
+        --------
+        >>> import pathlib, tempfile
+        >>> rng = np.random.default_rng(0)
+        >>> model = fit_touch_model(rng.random((50, len(FEATURES))), rng.random(50))
+        >>> path = pathlib.Path(tempfile.mkdtemp()) / "touch_model.json"
+        >>> model.save(path)
+        >>> again = TouchModel.load(path)
+        >>> bool(np.allclose(again.predict(np.ones((1, len(FEATURES)))), model.predict(np.ones((1, len(FEATURES))))))
+        True
+        """
+        import json
+
+        from meshsal.util.atomic import write_text
+
+        document = {"format": MODEL_FORMAT, "version": MODEL_VERSION, "features": list(FEATURES),
+                    "mean": self.mean.tolist(), "scale": self.scale.tolist(), "coef": self.coef.tolist(),
+                    "intercept": self.intercept, "channel_weights": self.channel_weights,
+                    "trained_on": list(self.trained_on)}
+        write_text(path, json.dumps(document, indent=1) + "\n")
+
+    @staticmethod
+    def load(path) -> "TouchModel":
+        """Read a model written by :meth:`save`; a clear error names the file and what is wrong."""
+        from meshsal.util.jsonfile import read_json
+
+        document = read_json(path, "touch model file")
+        if not isinstance(document, dict) or document.get("format") != MODEL_FORMAT:
+            raise ValueError(f"{path}: not a touch model file (format {MODEL_FORMAT!r} expected)")
+        if document.get("version") != MODEL_VERSION or document.get("features") != list(FEATURES):
+            raise ValueError(f"{path}: a touch model of version {document.get('version')!r} with features "
+                             f"{document.get('features')}; this reads version {MODEL_VERSION} with {list(FEATURES)}")
+        try:
+            arrays = [np.asarray(document[k], dtype=np.float64) for k in ("mean", "scale", "coef")]
+            weights = {str(k): float(v) for k, v in document["channel_weights"].items()}
+            intercept = float(document["intercept"])
+        except (KeyError, TypeError, ValueError, AttributeError) as error:
+            raise ValueError(f"{path}: incomplete or malformed touch model ({error})") from None
+        if any(a.shape != (len(FEATURES),) or not np.isfinite(a).all() for a in arrays) or \
+                not (arrays[1] > 0).all() or sorted(weights) != sorted(CHANNELS):
+            raise ValueError(f"{path}: malformed touch model (mean, scale, coef must be {len(FEATURES)} finite "
+                             f"numbers, scale positive; channel_weights one per channel)")
+        return TouchModel(*arrays, intercept, weights, tuple(str(t) for t in document.get("trained_on", ())))
+
+
+def fit_touch_model(features: np.ndarray, target: np.ndarray, alpha: float = 1.0,
+                    trained_on: tuple = ()) -> TouchModel:
+    """Ridge regression of ``target`` on standardized ``features``; NNLS channel weights.
+
+    Parameters
+    ----------
+    features : (m, len(FEATURES)) float
+    target : (m,) float, e.g. a leave-instance-out kNN margin
+    alpha : float >= 0
+        Ridge penalty (per row: the penalty is ``alpha * m``).
+    trained_on : tuple of str
+        Recorded in the model.
+
+    Returns
+    -------
+    TouchModel
+
+    Examples
+    --------
+    >>> rng = np.random.default_rng(0)
+    >>> X = rng.random((200, len(FEATURES)))
+    >>> model = fit_touch_model(X, 3.0 * X[:, 2])            # distinctiveness follows the third channel
+    >>> max(model.channel_weights, key=model.channel_weights.get) == CHANNELS[2]
+    True
+    """
+    from scipy.optimize import nnls
+
+    X = np.asarray(features, dtype=np.float64)
+    y = np.asarray(target, dtype=np.float64)
+    if X.ndim != 2 or X.shape[1] != len(FEATURES):
+        raise ValueError(f"features must have shape (m, {len(FEATURES)}), got {X.shape}")
+    if y.shape != (X.shape[0],):
+        raise ValueError(f"target must have shape ({X.shape[0]},), got {y.shape}")
+    if X.shape[0] < 2:
+        raise ValueError(f"a touch model needs at least 2 training points, got {X.shape[0]}")
+    if not (np.isfinite(X).all() and np.isfinite(y).all()):
+        raise ValueError("features and target must be finite")
+    if not alpha >= 0:
+        raise ValueError(f"alpha must be >= 0, got {alpha}")
+    mean = X.mean(axis=0)
+    scale = X.std(axis=0)
+    scale = np.where(scale > 1e-12, scale, 1.0)
+    Z = (X - mean) / scale
+    yc = y - y.mean()
+    coef = np.linalg.solve(Z.T @ Z + alpha * len(y) * np.eye(Z.shape[1]), Z.T @ yc)
+    # The combination sums channels scaled to [0, 1]: their raw values, centred, with non-negative weights.
+    C = X[:, :len(CHANNELS)] - X[:, :len(CHANNELS)].mean(axis=0)
+    w, _ = nnls(C, yc)
+    w = np.ones(len(CHANNELS)) if not w.sum() > 0 else w * len(CHANNELS) / w.sum()
+    return TouchModel(mean, scale, coef, float(y.mean()), dict(zip(CHANNELS, w.tolist())), tuple(trained_on))

@@ -1,0 +1,189 @@
+"""Points on a mesh: random and farthest-point samples, field peaks, non-maximum suppression.
+
+The building blocks of the interest-point baselines in :mod:`meshsal.points`.
+Spacing is Euclidean: two points closer than ``min_spacing`` in 3-D would
+share a tactile sensor's footprint whatever the path between them on the
+surface.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from meshsal.mesh import face_areas
+
+__all__ = [
+    "random_surface_points",
+    "farthest_points",
+    "field_peaks",
+    "non_maximum_suppression",
+]
+
+
+def random_surface_points(vertices: np.ndarray, faces: np.ndarray, n: int, seed=0):
+    """Uniform random points on the surface (faces drawn by area).
+
+    Parameters
+    ----------
+    vertices : (n_v, 3) float64
+    faces : (m, 3) int
+    n : int
+    seed : int or numpy Generator
+
+    Returns
+    -------
+    face_ids : (n,) int64
+    bary : (n, 3) float64
+        Barycentric weights of each face's vertices; the point is
+        ``bary @ vertices[faces[face_id]]``.
+
+    Examples
+    --------
+    >>> V = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0.]]); F = np.array([[0, 1, 2]])
+    >>> f, b = random_surface_points(V, F, 4, seed=1)
+    >>> f.tolist(), bool(np.allclose(b.sum(axis=1), 1))
+    ([0, 0, 0, 0], True)
+    """
+    rng = np.random.default_rng(seed)
+    area = face_areas(vertices, faces)
+    if not area.sum() > 0:
+        raise ValueError("cannot sample a surface of zero area")
+    face_ids = rng.choice(area.size, size=int(n), p=area / area.sum())
+    r1, r2 = rng.random(int(n)), rng.random(int(n))
+    # Folding the unit square onto the triangle keeps the density uniform.
+    s = np.sqrt(r1)
+    bary = np.stack([1.0 - s, s * (1.0 - r2), s * r2], axis=1)
+    return face_ids.astype(np.int64), bary
+
+
+def farthest_points(points: np.ndarray, n: int, start: int = 0) -> np.ndarray:
+    """Greedy farthest-point sampling: each new point is the farthest from those chosen.
+
+    Parameters
+    ----------
+    points : (k, 3) float64
+    n : int
+        How many to choose (at most ``k``).
+    start : int
+        Index of the first point.
+
+    Returns
+    -------
+    (min(n, k),) int64 indices into ``points``, in the order chosen.
+
+    Examples
+    --------
+    >>> P = np.array([[0, 0, 0], [1, 0, 0], [0.1, 0, 0], [0.5, 0, 0.]])
+    >>> farthest_points(P, 3).tolist()
+    [0, 1, 3]
+    """
+    P = np.asarray(points, dtype=np.float64)
+    n = min(int(n), P.shape[0])
+    chosen = np.empty(n, dtype=np.int64)
+    if n == 0:
+        return chosen
+    chosen[0] = start
+    dist = np.linalg.norm(P - P[start], axis=1)
+    for i in range(1, n):
+        chosen[i] = int(np.argmax(dist))
+        dist = np.minimum(dist, np.linalg.norm(P - P[chosen[i]], axis=1))
+    return chosen
+
+
+def field_peaks(field: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """Vertices where a per-vertex field beats every neighbour of its 1-ring.
+
+    Parameters
+    ----------
+    field : (n,) float
+    faces : (m, 3) int
+
+    Returns
+    -------
+    (k,) int64 vertex ids, strongest first (ties by index); isolated vertices are left out.
+
+    Examples
+    --------
+    >>> F = np.array([[0, 1, 2], [1, 3, 2]])
+    >>> field_peaks(np.array([0.0, 5.0, 1.0, 2.0]), F).tolist()
+    [1]
+    """
+    f = np.asarray(field, dtype=np.float64)
+    F = np.asarray(faces, dtype=np.int64)
+    a, b = F.ravel(), F[:, [1, 2, 0]].ravel()
+    src, dst = np.concatenate([a, b]), np.concatenate([b, a])
+    ring_max = np.full(f.shape, np.inf)
+    has_ring = np.zeros(f.shape, dtype=bool)
+    has_ring[src] = True
+    ring_max[has_ring] = -np.inf
+    np.maximum.at(ring_max, src, f[dst])
+    peaks = np.flatnonzero(has_ring & (f > ring_max))
+    return peaks[np.lexsort((peaks, -f[peaks]))]
+
+
+def non_maximum_suppression(points: np.ndarray, min_spacing: float, n: int | None = None,
+                            ids: np.ndarray | None = None, taken_points: np.ndarray | None = None,
+                            taken_ids: np.ndarray | None = None) -> np.ndarray:
+    """Greedy selection in the given order, skipping points too close to one already chosen.
+
+    Candidates must come sorted by priority (best first).  A candidate is
+    skipped if it lies closer than ``min_spacing`` to a chosen or already
+    ``taken`` point, or shares an id (e.g. its nearest vertex) with one.
+
+    Parameters
+    ----------
+    points : (k, 3) float64, best first
+    min_spacing : float >= 0
+    n : int, optional
+        Stop after this many (default: as many as fit).
+    ids : (k,) int, optional
+        Labels that must stay distinct (e.g. vertex ids).
+    taken_points : (t, 3) float64, optional
+        Points already chosen by an earlier pass.
+    taken_ids : (t,) int, optional
+
+    Returns
+    -------
+    (j,) int64 indices into ``points``, in the order chosen; no two closer than ``min_spacing``.
+
+    Examples
+    --------
+    >>> P = np.array([[0, 0, 0], [0.05, 0, 0], [1, 0, 0], [0.5, 0, 0.]])
+    >>> non_maximum_suppression(P, 0.4).tolist()
+    [0, 2, 3]
+    """
+    from scipy.spatial import cKDTree
+
+    P = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    if not min_spacing >= 0:
+        raise ValueError(f"min_spacing must be >= 0, got {min_spacing}")
+    limit = P.shape[0] if n is None else int(n)
+    ids = None if ids is None else np.asarray(ids)
+    alive = np.ones(P.shape[0], dtype=bool)
+    if P.shape[0] == 0 or limit <= 0:
+        return np.empty(0, dtype=np.int64)
+    tree = cKDTree(P)
+    # Spacing is "no two closer than": points exactly min_spacing apart may both stay.
+    radius = np.nextafter(min_spacing, 0.0) if min_spacing > 0 else 0.0
+
+    def block(point, label):
+        alive[tree.query_ball_point(point, radius)] = False
+        if ids is not None and label is not None:
+            alive[ids == label] = False
+
+    if taken_points is not None:
+        taken_points = np.asarray(taken_points, dtype=np.float64).reshape(-1, 3)
+        labels = [None] * len(taken_points) if taken_ids is None else list(taken_ids)
+        for point, label in zip(taken_points, labels):
+            block(point, label)
+    chosen = []
+    i = 0
+    while len(chosen) < limit:
+        rest = np.flatnonzero(alive[i:])
+        if rest.size == 0:
+            break
+        i += int(rest[0])
+        chosen.append(i)
+        block(P[i], None if ids is None else ids[i])
+        alive[i] = False
+    return np.asarray(chosen, dtype=np.int64)
