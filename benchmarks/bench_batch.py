@@ -25,7 +25,7 @@ from pathlib import Path
 
 import numpy as np
 
-from classify.runtime.batch import STAGES, BatchSettings, find_meshes, process_mesh, run_batch
+from classify.batch import STAGES, BatchSettings, find_meshes, process_mesh, run_batch
 from classify.runtime.cluster import open_executor
 
 SHARED = Path(__file__).resolve().parents[2] / "shared" / "corpus" / "random-objects"
@@ -51,7 +51,7 @@ def _run(folder: Path, workers: int, settings: BatchSettings, scratch: Path) -> 
         wall = time.perf_counter() - started
         peak = max(client.run(_peak_rss_mb).values()) if client is not None else float("nan")
     busy = 0.0
-    from classify.runtime.batch import load_store
+    from classify.batch import load_store
 
     for entry in load_store(store).values():
         busy += sum(entry.timings.values())

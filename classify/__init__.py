@@ -3,9 +3,9 @@
 The sub-packages: ``recognizers`` (the five classifiers of the paper and
 touch fusion), ``experiment`` (the recognition experiment behind the
 paper's Tables 1 and 2 as typed stages: objects -> instance samples ->
-protocols -> cells), ``reporting`` (statistics, tables, files) and
-``runtime`` (where work runs, the cache, corpus batches).  Public names are
-loaded on first use, so that the ``visuotactile`` command (``classify.cli``)
+protocols -> cells), ``reporting`` (statistics, tables, files), ``runtime``
+(where work runs, the cache) and ``batch`` (points and imprints for a folder
+of meshes on a cluster).  Public names are loaded on first use, so that the ``visuotactile`` command (``classify.cli``)
 starts without importing scikit-learn; modules of the flat layout before 0.2
 (``classify.dataset``, ``classify.stats``...) still import, as the modules
 that replaced them.
@@ -24,8 +24,8 @@ _EXPORTS = {
     "EvolutionarySVM": "recognizers.classifiers",
     "DeepNet": "recognizers.classifiers",
     "METHODS": "experiment",
-    "run_batch": "runtime.batch",
-    "load_store": "runtime.batch",
+    "run_batch": "batch",
+    "load_store": "batch",
     "PROTOCOLS": "experiment.protocols",
     "Settings": "experiment",
     "Cell": "reporting.results",
@@ -37,13 +37,13 @@ _EXPORTS = {
     "format_tables": "reporting.results",
     "write_outputs": "reporting.results",
 }
-_SUBMODULES = {"recognizers", "experiment", "reporting", "runtime", "cli"}
+_SUBMODULES = {"recognizers", "experiment", "reporting", "runtime", "batch", "cli"}
 #: Where each module of the flat layout went.
 _MOVED = {
     "classifiers": "recognizers.classifiers", "evolutionary_svm": "recognizers.evolutionary_svm",
     "fusion": "recognizers.fusion", "dataset": "experiment.samples", "learned": "experiment.survey",
     "protocols": "experiment.protocols", "results": "reporting.results", "report": "reporting.report",
-    "stats": "reporting.stats", "cluster": "runtime.cluster", "cache": "runtime.cache", "batch": "runtime.batch",
+    "stats": "reporting.stats", "cluster": "runtime.cluster", "cache": "runtime.cache",
 }
 
 __getattr__, __dir__, __all__ = attach(__name__, _EXPORTS, _SUBMODULES, _MOVED)

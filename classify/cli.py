@@ -84,7 +84,7 @@ def register(subparsers) -> None:
                      "--workers processes (default: one per core), or an existing cluster at --scheduler. Each "
                      "mesh's entry is written atomically to STORE/meshes/<name>.npz; a rerun skips the meshes "
                      "already there; a broken mesh goes to STORE/failures.jsonl and does not stop the batch. "
-                     "Load the store with classify.runtime.batch.load_store(STORE)."),
+                     "Load the store with classify.batch.load_store(STORE)."),
     )
     b.add_argument("directory", metavar="DIR", help="folder of meshes (searched recursively)")
     b.add_argument("--out", required=True, metavar="STORE", help="the store folder (created or resumed)")
@@ -112,7 +112,7 @@ def _add_cluster_options(p, default_workers):
 def _batch(args) -> int:
     import os
 
-    from classify.runtime.batch import BatchSettings, run_batch
+    from classify.batch import BatchSettings, run_batch
     from classify.runtime.cluster import open_executor
 
     settings = BatchSettings(methods=args.methods, n_points=args.n_points, size_mm=args.size_mm,

@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 import shapes
 
-from classify.runtime import batch
+from classify import batch
 from classify.cli import main
 from classify.runtime.cluster import open_executor
 

@@ -216,7 +216,7 @@ def test_every_instance_of_an_object_offers_the_same_candidates():
 
 
 def test_a_batch_of_single_meshes_refuses_the_learned_methods():
-    from classify.runtime.batch import BatchSettings
+    from classify.batch import BatchSettings
 
     with pytest.raises(ValueError, match="learned.*touch model"):
         BatchSettings(methods=("uniform", "learned"))
