@@ -38,7 +38,7 @@ _EXPORTS = {
     "points_by_method": "points",
     "TouchModel": "points.learned",
     "fit_touch_model": "points.learned",
-    "project_pixel_paper": "points",
+    "project_pixel_paper": "views.paper_projection",
 }
 _SUBMODULES = {"util", "mesh", "objects", "views", "attention", "points", "cli"}
 #: Where each module of the flat layout went.

@@ -13,7 +13,9 @@ contrast channels.  Each image channel is a plain function
 
 ``curvature(view, vertex_saliency)`` renders per-vertex mesh saliency
 into a view, ``saliency(view, mesh)`` combines the eight channels and
-``saliency_views(views, mesh)`` does so for many views in a thread pool.
+``saliency_views(views, mesh)`` does so for many views in a thread pool;
+``view_channels(mesh)`` renders a mesh's 72 views and computes their channels
+once, ``attention_maps`` combines them as a method needs (``rig``).
 """
 
 # Functions are bound after their modules, so ``attention.dkl`` and
@@ -35,6 +37,7 @@ from meshsal.attention.combine import (
     saliency,
     saliency_views,
 )
+from meshsal.attention.rig import ViewChannels, attention_maps, saliency_maps, view_channels
 
 __all__ = [
     "CHANNELS",
@@ -57,4 +60,8 @@ __all__ = [
     "saliency",
     "saliency_views",
     "symmetry",
+    "ViewChannels",
+    "view_channels",
+    "attention_maps",
+    "saliency_maps",
 ]

@@ -28,9 +28,16 @@ from dataclasses import dataclass
 import numpy as np
 
 from meshsal.attention import CHANNELS
-from meshsal.mesh import Mesh
+from meshsal.mesh import Mesh, vertex_normals
+from meshsal.mesh.curvature import mean_curvature
+from meshsal.points.attend import check_field, edge_graph, salient_vertices, view_votes
+from meshsal.points.record import InterestPoints
+from meshsal.points.rules import PointOptions, Rules
+from meshsal.points.sampling import farthest_points
+from meshsal.points.select import choose_without_views, vertex_candidates
 
-__all__ = ["FEATURES", "POOL_FACTOR", "candidate_pool", "point_features", "TouchModel", "fit_touch_model"]
+__all__ = ["FEATURES", "POOL_FACTOR", "candidate_pool", "point_features", "TouchModel", "fit_touch_model",
+           "learned_points"]
 
 #: The per-point visual features, in column order.
 FEATURES = tuple(f"{c}_mean" for c in CHANNELS) + ("views", "votes", "mesh_saliency", "curvature")
@@ -58,8 +65,6 @@ def candidate_pool(mesh: Mesh, n: int = 15) -> np.ndarray:
     >>> candidate_pool(meshsal.objects.toys.make("cup"), n=2).shape
     (40,)
     """
-    from meshsal.points.sampling import farthest_points
-
     used = np.unique(mesh.faces)
     points = mesh.vertices[used]
     start = int(np.argmax(np.linalg.norm(points - points.mean(axis=0), axis=1)))
@@ -94,7 +99,7 @@ def point_features(mesh: Mesh, views, results, maps: np.ndarray, vertex_saliency
     views : list of View
     results : list of meshsal.attention.SaliencyResult, one per view (their ``channels`` are used)
     maps : (len(views), H, W) float32
-        Combined saliency maps, for the votes (as in :func:`meshsal.points.attention_points`).
+        Combined saliency maps, for the votes (as in :func:`meshsal.points.attend.attention_points`).
     vertex_saliency : (n_vertices,) float64
     vertex_ids : (k,) int
     spacing : float
@@ -106,12 +111,10 @@ def point_features(mesh: Mesh, views, results, maps: np.ndarray, vertex_saliency
     -------
     (k, len(FEATURES)) float64
     """
-    from meshsal.points.pipeline import _abs_mean_curvature, _edge_graph, _salient_vertices, _votes
-
     ids = np.asarray(vertex_ids, dtype=np.int64)
     means, seen = _channel_means(mesh, views, results)
-    votes, _ = _votes(_edge_graph(mesh), _salient_vertices(mesh, views, maps, threshold), ids, spacing)
-    curvature = _abs_mean_curvature(mesh, vertex_saliency)[ids]
+    votes, _ = view_votes(edge_graph(mesh), salient_vertices(mesh, views, maps, threshold), ids, spacing)
+    curvature = np.abs(mean_curvature(mesh.vertices, mesh.faces))[ids]
     columns = [means[:, ids].T, seen[ids, None], votes[:, None].astype(np.float64),
                np.asarray(vertex_saliency, np.float64)[ids, None], curvature[:, None]]
     return np.concatenate(columns, axis=1)
@@ -247,3 +250,39 @@ def fit_touch_model(features: np.ndarray, target: np.ndarray, alpha: float = 1.0
     w, _ = nnls(C, yc)
     w = np.ones(len(CHANNELS)) if not w.sum() > 0 else w * len(CHANNELS) / w.sum()
     return TouchModel(mean, scale, coef, float(y.mean()), dict(zip(CHANNELS, w.tolist())), tuple(trained_on))
+
+
+def learned_points(mesh: Mesh, pool: np.ndarray, features: np.ndarray, model: TouchModel,
+                   vertex_saliency: np.ndarray, rules: Rules | None = None, **changes) -> InterestPoints:
+    """The "learned" method on a candidate pool whose features are known.
+
+    Candidates are ranked by ``model.predict(features)`` (ties by pool
+    order), then chosen under the same spacing and touch rules as every
+    method, with the same mesh-saliency fill.
+
+    Parameters
+    ----------
+    mesh : Mesh
+    pool : (k,) int vertex ids (:func:`candidate_pool`)
+    features : (k, len(FEATURES)) float (:func:`point_features`)
+    model : TouchModel
+    vertex_saliency : (n_vertices,) float64
+    rules : Rules, optional
+        Default ``PointOptions(**changes).rules(mesh)`` (``n``, ``min_spacing``, ``pad_width``, ``touch``,
+        ``touch_tolerance``).
+
+    Returns
+    -------
+    InterestPoints (``scores`` the predicted distinctiveness; filled points score below every pool point)
+    """
+    rules = PointOptions(**changes).rules(mesh) if rules is None else rules
+    vertex_saliency = check_field(mesh, vertex_saliency)
+    pool = np.asarray(pool, dtype=np.int64)
+    predicted = np.asarray(model.predict(features), dtype=np.float64)
+    if predicted.shape != pool.shape:
+        raise ValueError(f"{pool.size} pool vertices but {predicted.size} rows of features")
+    order = np.lexsort((np.arange(pool.size), -predicted))
+    vn = vertex_normals(mesh.vertices, mesh.faces)
+    floor = float(predicted.min()) - 1.0 if predicted.size else 0.0
+    first = vertex_candidates(mesh, vn, pool[order], predicted[order])
+    return choose_without_views(mesh, vn, vertex_saliency, first, lambda i: np.full(i.size, floor), rules, "learned")

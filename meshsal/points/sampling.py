@@ -1,12 +1,15 @@
 """Points on a mesh: random and farthest-point samples, field peaks, non-maximum suppression.
 
-The building blocks of the interest-point baselines in :mod:`meshsal.points`.
+The building blocks of every interest-point method in :mod:`meshsal.points`.
 Spacing is Euclidean: two points closer than ``min_spacing`` in 3-D would
 share a tactile sensor's footprint whatever the path between them on the
 surface.
 """
 
 from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -16,6 +19,8 @@ __all__ = [
     "random_surface_points",
     "farthest_points",
     "field_peaks",
+    "Suppression",
+    "suppress",
     "non_maximum_suppression",
 ]
 
@@ -121,14 +126,26 @@ def field_peaks(field: np.ndarray, faces: np.ndarray) -> np.ndarray:
     return peaks[np.lexsort((peaks, -f[peaks]))]
 
 
-def non_maximum_suppression(points: np.ndarray, min_spacing: float, n: int | None = None,
-                            ids: np.ndarray | None = None, taken_points: np.ndarray | None = None,
-                            taken_ids: np.ndarray | None = None) -> np.ndarray:
+@dataclass(frozen=True)
+class Suppression:
+    """What :func:`suppress` kept: indices in the order chosen, and how many candidates ``accept`` refused."""
+
+    chosen: np.ndarray
+    refused: int = 0
+
+
+def suppress(points: np.ndarray, min_spacing: float, n: int | None = None, ids: np.ndarray | None = None,
+             taken_points: np.ndarray | None = None, taken_ids: np.ndarray | None = None,
+             accept: Callable[[np.ndarray], np.ndarray] | None = None) -> Suppression:
     """Greedy selection in the given order, skipping points too close to one already chosen.
 
     Candidates must come sorted by priority (best first).  A candidate is
     skipped if it lies closer than ``min_spacing`` to a chosen or already
     ``taken`` point, or shares an id (e.g. its nearest vertex) with one.
+    ``accept``, when given, is asked about the candidates next in line, in
+    batches of at most as many as are still wanted, each candidate once: a
+    refused candidate blocks nothing, so the next in line takes its place
+    exactly as if it had never been proposed.
 
     Parameters
     ----------
@@ -141,16 +158,22 @@ def non_maximum_suppression(points: np.ndarray, min_spacing: float, n: int | Non
     taken_points : (t, 3) float64, optional
         Points already chosen by an earlier pass.
     taken_ids : (t,) int, optional
+    accept : callable, optional
+        ``accept(indices) -> (len(indices),) bool`` for indices into ``points``.
 
     Returns
     -------
-    (j,) int64 indices into ``points``, in the order chosen; no two closer than ``min_spacing``.
+    Suppression
+        ``chosen`` (j,) int64 indices into ``points``, no two closer than
+        ``min_spacing``; ``refused`` the candidates reached in line that
+        ``accept`` refused.
 
     Examples
     --------
     >>> P = np.array([[0, 0, 0], [0.05, 0, 0], [1, 0, 0], [0.5, 0, 0.]])
-    >>> non_maximum_suppression(P, 0.4).tolist()
-    [0, 2, 3]
+    >>> s = suppress(P, 0.4, accept=lambda i: i != 0)
+    >>> s.chosen.tolist(), s.refused
+    ([1, 2, 3], 1)
     """
     from scipy.spatial import cKDTree
 
@@ -159,9 +182,9 @@ def non_maximum_suppression(points: np.ndarray, min_spacing: float, n: int | Non
         raise ValueError(f"min_spacing must be >= 0, got {min_spacing}")
     limit = P.shape[0] if n is None else int(n)
     ids = None if ids is None else np.asarray(ids)
-    alive = np.ones(P.shape[0], dtype=bool)
     if P.shape[0] == 0 or limit <= 0:
-        return np.empty(0, dtype=np.int64)
+        return Suppression(np.empty(0, dtype=np.int64))
+    alive = np.ones(P.shape[0], dtype=bool)
     tree = cKDTree(P)
     # Spacing is "no two closer than": points exactly min_spacing apart may both stay.
     radius = np.nextafter(min_spacing, 0.0) if min_spacing > 0 else 0.0
@@ -176,14 +199,39 @@ def non_maximum_suppression(points: np.ndarray, min_spacing: float, n: int | Non
         labels = [None] * len(taken_points) if taken_ids is None else list(taken_ids)
         for point, label in zip(taken_points, labels):
             block(point, label)
-    chosen = []
+    verdict = np.zeros(P.shape[0], np.int8)      # 0 not asked, 1 accepted, -1 refused
+    chosen, refused = [], 0
     i = 0
     while len(chosen) < limit:
         rest = np.flatnonzero(alive[i:])
         if rest.size == 0:
             break
         i += int(rest[0])
+        if accept is not None and verdict[i] == 0:
+            batch = i + np.flatnonzero(alive[i:] & (verdict[i:] == 0))[:limit - len(chosen)]
+            verdict[batch] = np.where(np.asarray(accept(batch), bool), 1, -1)
+        alive[i] = False
+        if verdict[i] < 0:
+            refused += 1
+            continue
         chosen.append(i)
         block(P[i], None if ids is None else ids[i])
-        alive[i] = False
-    return np.asarray(chosen, dtype=np.int64)
+    return Suppression(np.asarray(chosen, dtype=np.int64), refused)
+
+
+def non_maximum_suppression(points: np.ndarray, min_spacing: float, n: int | None = None,
+                            ids: np.ndarray | None = None, taken_points: np.ndarray | None = None,
+                            taken_ids: np.ndarray | None = None) -> np.ndarray:
+    """The indices :func:`suppress` keeps, with no ``accept`` test.
+
+    Returns
+    -------
+    (j,) int64 indices into ``points``, in the order chosen; no two closer than ``min_spacing``.
+
+    Examples
+    --------
+    >>> P = np.array([[0, 0, 0], [0.05, 0, 0], [1, 0, 0], [0.5, 0, 0.]])
+    >>> non_maximum_suppression(P, 0.4).tolist()
+    [0, 2, 3]
+    """
+    return suppress(points, min_spacing, n, ids, taken_points, taken_ids).chosen

@@ -1,0 +1,224 @@
+"""The point methods by name, and the one dispatcher that runs any of them on a mesh.
+
+A method is a :class:`PointMethod`: a function of one mesh's
+:class:`MeshContext` (the mesh, its normals and mesh saliency, the rules,
+its views' channels and combined maps when the method looks, the touch
+model when it learns), and what it needs.  :func:`points_by_method` builds
+the context once (one rendering, one set of channel maps per combination)
+for any number of methods; :func:`interest_points` runs one.  Adding a
+method is one ``POINT_METHODS.register`` call: the command line, the
+experiment and the batch take it from the registry.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+
+from meshsal.attention.rig import ViewChannels, attention_maps, view_channels
+from meshsal.mesh import Mesh, vertex_normals
+from meshsal.points import baselines
+from meshsal.points.attend import attention_points, check_field
+from meshsal.points.learned import candidate_pool, learned_points, point_features
+from meshsal.points.record import InterestPoints
+from meshsal.points.rules import PointOptions, Rules
+from meshsal.points.select import choose_without_views
+from meshsal.util.registry import Registry
+
+__all__ = ["PointMethod", "MeshContext", "POINT_METHODS", "METHODS", "ATTENTION_METHODS", "MODEL_METHODS",
+           "attention_combination", "points_by_method", "interest_points"]
+
+#: The attention methods and the combination each uses ("attention" takes the one asked for).
+ATTENTION_METHODS = {"attention": "equal", "attention_itti": "itti", "attention_learned": "learned"}
+
+
+@dataclass(frozen=True, eq=False)
+class MeshContext:
+    """What a method may use on one mesh, computed once for every method of a call.
+
+    ``maps`` holds the combined saliency maps of each combination some
+    method of the call asked for, keyed by :func:`_maps_key`.
+    """
+
+    mesh: Mesh
+    vertex_normals: np.ndarray
+    vertex_saliency: np.ndarray
+    rules: Rules
+    options: PointOptions
+    model: object = None
+    seen: ViewChannels | None = None
+    maps: dict | None = None
+
+    def maps_of(self, combination: str, weights=None) -> np.ndarray:
+        return self.maps[_maps_key(combination, weights)]
+
+
+@dataclass(frozen=True)
+class PointMethod:
+    """One way to choose points.
+
+    Attributes
+    ----------
+    choose : callable
+        ``choose(name, context) -> InterestPoints``.
+    combination : callable, optional
+        ``combination(name, options, model) -> (combination, weights)``: the
+        saliency maps the method reads (the views are rendered when set).
+    needs_model : bool
+        It reads a fitted ``meshsal.points.learned.TouchModel``.
+    """
+
+    choose: Callable
+    combination: Callable | None = None
+    needs_model: bool = False
+
+
+def _maps_key(combination: str, weights) -> tuple:
+    return combination, None if weights is None else tuple(sorted(weights.items()))
+
+
+def attention_combination(method: str, combination: str = "equal") -> str:
+    """The channel combination an attention method uses: its own, or ``combination`` for "attention" and others."""
+    return ATTENTION_METHODS[method] if method in ATTENTION_METHODS and method != "attention" else combination
+
+
+def _attention_maps_of(name, options, model):
+    mode = attention_combination(name, options.combination)
+    return mode, model.channel_weights if name == "attention_learned" else options.weights
+
+
+def _attention(name, ctx: MeshContext) -> InterestPoints:
+    mode, weights = _attention_maps_of(name, ctx.options, ctx.model)
+    return attention_points(ctx.mesh, ctx.seen.views, ctx.maps_of(mode, weights), ctx.vertex_saliency, ctx.rules,
+                            combination=mode, method=name)
+
+
+def _learned(name, ctx: MeshContext) -> InterestPoints:
+    pool = candidate_pool(ctx.mesh, ctx.rules.n)
+    features = point_features(ctx.mesh, ctx.seen.views, ctx.seen.results, ctx.maps_of("equal"), ctx.vertex_saliency,
+                              pool, ctx.rules.min_spacing, ctx.rules.threshold)
+    return learned_points(ctx.mesh, pool, features, ctx.model, ctx.vertex_saliency, ctx.rules)
+
+
+def _baseline(candidates):
+    def choose(name, ctx: MeshContext) -> InterestPoints:
+        first, field = candidates(ctx.mesh, ctx.vertex_normals, ctx.rules.n, np.random.default_rng(ctx.options.seed),
+                                  ctx.vertex_saliency)
+        return choose_without_views(ctx.mesh, ctx.vertex_normals, ctx.vertex_saliency, first, lambda i: field[i],
+                                    ctx.rules, name)
+
+    return choose
+
+
+#: The interest-point methods, each a :class:`PointMethod`.
+POINT_METHODS = Registry("interest-point method")
+POINT_METHODS.register("attention", PointMethod(_attention, _attention_maps_of),
+                       "the paper's visual attention (equal channel weights)")
+POINT_METHODS.register("attention_itti", PointMethod(_attention, _attention_maps_of),
+                       "the paper's visual attention, each channel weighted by Itti's N(.)")
+POINT_METHODS.register("attention_learned", PointMethod(_attention, _attention_maps_of, needs_model=True),
+                       "the paper's visual attention, channel weights learned from touches")
+POINT_METHODS.register("learned", PointMethod(_learned, lambda name, options, model: ("equal", None),
+                                              needs_model=True),
+                       "points by touch distinctiveness predicted from vision (meshsal.points.learned)")
+POINT_METHODS.register("random", PointMethod(_baseline(baselines.random_candidates)),
+                       "area-weighted random surface points")
+POINT_METHODS.register("uniform", PointMethod(_baseline(baselines.uniform_candidates)), "farthest-point sampling")
+POINT_METHODS.register("mesh_saliency", PointMethod(_baseline(baselines.mesh_saliency_candidates)),
+                       "peaks of Lee et al.'s mesh saliency")
+POINT_METHODS.register("curvature", PointMethod(_baseline(baselines.curvature_candidates)),
+                       "peaks of absolute mean curvature")
+METHODS = POINT_METHODS.names()
+#: Methods that need a fitted ``meshsal.points.learned.TouchModel`` (``model=``).
+MODEL_METHODS = tuple(e.name for e in POINT_METHODS if e.value.needs_model)
+
+
+def points_by_method(mesh: Mesh, methods, options: PointOptions | None = None, *, model=None, vertex_saliency=None,
+                     seen: ViewChannels | None = None, **changes) -> dict:
+    """:func:`interest_points` of several methods on one mesh, rendering and computing channels once.
+
+    Parameters
+    ----------
+    mesh : Mesh
+    methods : iterable of str, names in ``POINT_METHODS``
+    options : PointOptions, optional
+        Changed by any ``**changes`` (``n=``, ``seed=``, ``size=``... as its fields).
+    model : meshsal.points.learned.TouchModel, optional
+        Needed by "learned" and "attention_learned" (its channel weights).
+    vertex_saliency : (n_vertices,) float64, optional
+        Precomputed mesh saliency.
+    seen : ViewChannels, optional
+        The mesh's :func:`meshsal.attention.rig.view_channels` if already
+        computed (else rendered here when a method looks).
+
+    Returns
+    -------
+    dict method -> InterestPoints, for each of ``methods`` (the same as one
+    :func:`interest_points` call each)
+    """
+    from meshsal.mesh.curvature import mesh_saliency
+
+    options = (options or PointOptions()).replace(**changes)
+    methods = list(dict.fromkeys(methods))
+    chosen = {m: POINT_METHODS.get(m) for m in methods}
+    rules = options.rules(mesh)
+    for m, method in chosen.items():
+        if method.needs_model and model is None:
+            raise ValueError(f"method {m!r} needs a fitted touch model (model=, a meshsal.points.learned.TouchModel)")
+        if m == "attention" and options.combination == "learned" and options.weights is None:
+            raise ValueError("combination 'learned' needs channel weights (weights=, e.g. a TouchModel's "
+                             "channel_weights)")
+    vertex_saliency = check_field(mesh, mesh_saliency(mesh) if vertex_saliency is None else vertex_saliency)
+    wanted = {_maps_key(*method.combination(m, options, model)): method.combination(m, options, model)
+              for m, method in chosen.items() if method.combination is not None}
+    if seen is None and wanted:
+        seen = view_channels(mesh, size=options.size, vertex_saliency=vertex_saliency, threads=options.threads,
+                             quiet=options.quiet)
+    maps = {key: attention_maps(seen, mode, weights) for key, (mode, weights) in wanted.items()}
+    ctx = MeshContext(mesh, vertex_normals(mesh.vertices, mesh.faces), vertex_saliency, rules, options, model, seen,
+                      maps)
+    return {m: method.choose(m, ctx) for m, method in chosen.items()}
+
+
+def interest_points(mesh: Mesh, n: int | None = None, method: str = "attention", options: PointOptions | None = None,
+                    *, model=None, vertex_saliency=None, **changes) -> InterestPoints:
+    """Choose ``n`` interest points on a mesh (:mod:`meshsal.points` for the pipeline).
+
+    Parameters
+    ----------
+    mesh : Mesh
+    n : int, optional
+        How many points (default ``options.n``, 15); fewer only if the mesh cannot hold ``n`` at ``min_spacing``.
+    method : str
+        A name in ``POINT_METHODS``: "attention" (the paper's pipeline),
+        "attention_itti" (the same with ``combination="itti"``),
+        "attention_learned" (with a model's learned channel weights),
+        "learned" (the candidates of :func:`meshsal.points.learned.candidate_pool`
+        ranked by a model's predicted touch distinctiveness), or a baseline:
+        "random", "uniform", "mesh_saliency", "curvature"
+        (:mod:`meshsal.points.baselines`).  All keep the same rules.
+    options : PointOptions, optional
+        Everything else (spacing, pad, touch check, views, seed), changed by
+        any ``**changes`` named as its fields (``size=64``, ``seed=3``...).
+    model : meshsal.points.learned.TouchModel, optional
+        Needed by "learned" and "attention_learned".
+    vertex_saliency : (n_vertices,) float64, optional
+        Precomputed mesh saliency.
+
+    Returns
+    -------
+    InterestPoints
+
+    Examples
+    --------
+    >>> import meshsal
+    >>> pts = meshsal.interest_points(meshsal.objects.toys.make("cup"), n=15, size=64)
+    >>> pts.positions.shape, pts.normals.shape, len(pts.views)
+    ((15, 3), (15, 3), 15)
+    """
+    if n is not None:
+        changes["n"] = n
+    return points_by_method(mesh, [method], options, model=model, vertex_saliency=vertex_saliency,
+                            **changes)[method]

@@ -1,0 +1,135 @@
+"""The options of every point method, and the rules they resolve to on one mesh.
+
+:class:`PointOptions` gathers everything a caller may choose (how many
+points, the pad, the spacing, the touch check, how views are rendered and
+attended, the seed); :meth:`PointOptions.rules` resolves the lengths that
+default to the mesh's size and checks everything once, giving the
+:class:`Rules` every method obeys.
+
+``pad_width`` is the tactile pad's width in mesh units (default 32/150 of
+the bounding-box diagonal: the 32 mm of a 16 x 16 pad at 2 mm pitch on an
+object of 150 mm diagonal), and ``min_spacing`` defaults to half of it, so
+that neighbouring touches do not share most of their contact.  Every length
+is relative to the mesh's size, so translating or uniformly scaling a mesh
+leaves the chosen vertices unchanged.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+
+import numpy as np
+
+from meshsal.mesh import Mesh
+from meshsal.points.touch import default_pad_width
+
+__all__ = ["COMBINATIONS", "PointOptions", "Rules", "default_min_spacing"]
+
+#: How the attention channels are combined: the paper's equal weights, Itti's N(.) on each, or
+#: weights learned from touches (``meshsal.points.learned``; given as ``weights``).
+COMBINATIONS = ("equal", "itti", "learned")
+
+
+def default_min_spacing(mesh: Mesh, pad_width: float | None = None) -> float:
+    """Half the pad's width (default :func:`meshsal.points.touch.default_pad_width`), in mesh units."""
+    return 0.5 * (default_pad_width(mesh) if pad_width is None else float(pad_width))
+
+
+@dataclass(frozen=True)
+class Rules:
+    """What every method obeys on one mesh, lengths in its units (:meth:`PointOptions.rules`).
+
+    ``n`` points at most, no two closer than ``min_spacing``; salient pixels
+    and peaks above ``threshold`` times their map's maximum; with ``touch``,
+    only points a pad of ``pad_width`` pressed along the normal meets first,
+    within ``touch_tolerance`` (None: ``pad_width / 32``).
+    """
+
+    n: int
+    min_spacing: float
+    pad_width: float
+    threshold: float = 0.5
+    touch: bool = True
+    touch_tolerance: float | None = None
+
+
+@dataclass(frozen=True)
+class PointOptions:
+    """How points are chosen, for :func:`meshsal.points.interest_points` and its relatives.
+
+    Attributes
+    ----------
+    n : int
+        How many points (fewer only if the mesh cannot hold ``n`` at ``min_spacing``).
+    seed : int or numpy Generator
+        Seeds the random baselines (the attention pipeline is deterministic).
+    min_spacing : float, optional
+        No two points closer than this (mesh units); default half of ``pad_width``.
+    pad_width : float, optional
+        The tactile pad's width, mesh units (default :func:`meshsal.points.touch.default_pad_width`).
+    threshold : float in [0, 1)
+        Peak and salient-pixel threshold relative to each map's maximum.
+    touch : bool
+        Skip candidates the pad, pressed along their normal, would not meet
+        first (:func:`meshsal.points.touch.touchable`); a result's
+        ``untouchable`` counts them.
+    touch_tolerance : float, optional
+        How far above the point the first contact may lie (default ``pad_width / 32``: 1 mm of a 32 mm pad).
+    size : int
+        Rendered view size in pixels (the methods that look).
+    threads : int, optional
+        Rendering and attention threads (default: the CPU count).  The points do not depend on it.
+    quiet : bool
+        No progress bar on stderr.
+    combination : {"equal", "itti", "learned"}
+        "attention": the paper's equal-weight sum of the channels, each
+        channel weighted by Itti's N(.) as well, or ``weights`` learned from touches.
+    weights : dict, optional
+        Channel weights of the attention model (the "learned" combination).
+    """
+
+    n: int = 15
+    seed: object = 0
+    min_spacing: float | None = None
+    pad_width: float | None = None
+    threshold: float = 0.5
+    touch: bool = True
+    touch_tolerance: float | None = None
+    size: int = 128
+    threads: int | None = None
+    quiet: bool = True
+    combination: str = "equal"
+    weights: dict | None = None
+
+    def replace(self, **changes) -> PointOptions:
+        """A copy with some fields changed; an unknown field is a TypeError naming it."""
+        return dataclasses.replace(self, **changes)
+
+    def rules(self, mesh: Mesh) -> Rules:
+        """The rules on ``mesh``: lengths resolved against its size, every option checked.
+
+        Examples
+        --------
+        >>> from meshsal.mesh import Mesh
+        >>> square = Mesh(vertices=[[0, 0, 0], [150, 0, 0], [0, 150, 0]], faces=[[0, 1, 2]])
+        >>> r = PointOptions(pad_width=32.0).rules(square)
+        >>> r.n, r.min_spacing, r.pad_width
+        (15, 16.0, 32.0)
+        """
+        n = self.n
+        if int(n) != n or n < 1:
+            raise ValueError(f"n must be a positive integer, got {n!r}")
+        if mesh.n_faces == 0:
+            raise ValueError(f"mesh {mesh.name!r} has no faces: no surface to put points on")
+        if not 0.0 <= self.threshold < 1.0:
+            raise ValueError(f"threshold must lie in [0, 1), got {self.threshold}")
+        if self.combination not in COMBINATIONS:
+            raise ValueError(f"unknown combination {self.combination!r}; expected one of {COMBINATIONS}")
+        pad = default_pad_width(mesh) if self.pad_width is None else float(self.pad_width)
+        if not (np.isfinite(pad) and pad > 0):
+            raise ValueError(f"pad_width must be a positive length, got {self.pad_width}")
+        spacing = default_min_spacing(mesh, pad) if self.min_spacing is None else float(self.min_spacing)
+        if not (np.isfinite(spacing) and spacing >= 0):
+            raise ValueError(f"min_spacing must be a finite length >= 0, got {self.min_spacing}")
+        return Rules(int(n), spacing, pad, float(self.threshold), bool(self.touch), self.touch_tolerance)
