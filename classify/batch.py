@@ -157,16 +157,18 @@ def process_mesh(path, name: str, store, settings: BatchSettings) -> dict:
 
 
 def _compute(path: Path, name: str, store: Path, settings: BatchSettings, timings: dict) -> None:
-    import meshsal
-    from meshsal.mesh.embree import embree_scene
     import tactile
+    from classify.experiment.samples import method_points
     from classify.runtime.cache import hash_arrays
-    from meshsal.util.atomic import atomic_path
     from meshsal.mesh.curvature import mesh_saliency
+    from meshsal.mesh.embree import embree_scene
+    from meshsal.mesh.io import load_mesh
     from meshsal.mesh.transform import scale_to_principal
+    from meshsal.points import PointOptions
+    from meshsal.util.atomic import atomic_path
 
     t = time.perf_counter()
-    mesh = scale_to_principal(meshsal.load_mesh(path), settings.size_mm)
+    mesh = scale_to_principal(load_mesh(path), settings.size_mm)
     timings["load"] = time.perf_counter() - t
     t = time.perf_counter()
     saliency = mesh_saliency(mesh)
@@ -177,22 +179,18 @@ def _compute(path: Path, name: str, store: Path, settings: BatchSettings, timing
     scene = embree_scene(mesh)
     sensor = tactile.Sensor()
     t = time.perf_counter()
-    # One rendering serves every attention method.
-    picked = meshsal.points_by_method(mesh, settings.methods, n=settings.n_points, seed=settings.seed,
-                                      size=settings.view_size, vertex_saliency=saliency, threads=1,
-                                      pad_width=sensor.width_mm)
+    options = PointOptions(n=settings.n_points, seed=settings.seed, size=settings.view_size, threads=1,
+                           pad_width=sensor.width_mm)
+    picked = method_points(mesh, settings.methods, options, vertex_saliency=saliency)
     timings["points"] = time.perf_counter() - t
     for method in settings.methods:
         pts = picked[method]
         t = time.perf_counter()
         images = tactile.imprints(mesh, pts.positions, pts.normals, sensor, workers=1, scene=scene)
         timings["imprints"] += time.perf_counter() - t
-        for key in ("vertex_ids", "positions", "normals", "scores", "votes"):
-            arrays[f"{method}/{key}"] = np.asarray(getattr(pts, key))
+        point_arrays, methods[method] = pts.to_arrays()
+        arrays.update({f"{method}/{key}": value for key, value in point_arrays.items()})
         arrays[f"{method}/imprints"] = np.asarray(images, np.float32)
-        methods[method] = {"best_set": int(pts.best_set), "min_spacing": float(pts.min_spacing),
-                           "combination": pts.combination, "untouchable": int(pts.untouchable),
-                           "views": [list(v) for v in pts.views]}
     t = time.perf_counter()
     frame = mesh.transform
     meta = {"format": ENTRY_FORMAT, "version": VERSION, "name": name, "source": str(path),
@@ -296,19 +294,13 @@ def load_entry(store, name: str) -> MeshEntry:
     transform = Similarity(frame["scale"], frame["offset"], frame["rotation"])
     points, imprints = {}, {}
     for method, info in meta["methods"].items():
-        def a(key, method=method):
-            return arrays[f"{method}/{key}"]
-        points[method] = InterestPoints(vertex_ids=a("vertex_ids"), positions=a("positions"), normals=a("normals"),
-                                        scores=a("scores"), votes=a("votes"), vertex_saliency=arrays["vertex_saliency"],
-                                        views=tuple(tuple(v) for v in info["views"]), method=method,
-                                        best_set=info["best_set"], min_spacing=info["min_spacing"],
-                                        combination=info.get("combination", ""),
-                                        untouchable=info.get("untouchable", -1))
-        k = len(a("positions"))
-        imprints[method] = tactile.ImprintSet(imprints=a("imprints"), labels=np.zeros(k, np.int64),
-                                              object_names=(name,), point_ids=np.arange(k), positions=a("positions"),
-                                              normals=a("normals"), sensor=tactile.Sensor(),
-                                              source=f"{meta['source']} ({method} points)")
+        mine = {key.split("/", 1)[1]: value for key, value in arrays.items() if key.startswith(f"{method}/")}
+        points[method] = InterestPoints.from_arrays(mine, info, arrays["vertex_saliency"], method)
+        k = len(mine["positions"])
+        imprints[method] = tactile.ImprintSet(imprints=mine["imprints"], labels=np.zeros(k, np.int64),
+                                              object_names=(name,), point_ids=np.arange(k),
+                                              positions=mine["positions"], normals=mine["normals"],
+                                              sensor=tactile.Sensor(), source=f"{meta['source']} ({method} points)")
     return MeshEntry(name, meta["source"], points, imprints, transform, meta.get("timings_s", {}))
 
 

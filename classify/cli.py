@@ -137,35 +137,30 @@ def _csv_list(text: str) -> tuple:
 
 
 def _experiment(args) -> int:
+    import tactile
+    from classify.experiment import (DEFAULT_REPLICATES, FULL_REPLICATES, ExperimentConfig, Settings, format_tables,
+                                     run_experiment, run_real)
     from classify.recognizers.classifiers import NAMES
-    from classify.experiment.samples import Settings
-    from classify.experiment import DEFAULT_REPLICATES, FULL_REPLICATES, format_tables, run_experiment, run_real
+    from classify.runtime.cluster import open_executor
 
-    classifiers = args.classifiers or NAMES
-    if args.real:
-        result = run_real(args.real, folds=args.folds, repeats=args.repeats, seed=args.seed,
-                          classifiers=classifiers, features=args.features, out_dir=args.out, quiet=args.quiet,
-                          n_jobs=args.jobs)
-        print(format_tables(result, title="Table 2 layout (real imprints)"))
-        return 0
     if args.full and args.replicates is not None:
         raise ValueError("give --full or --replicates, not both")
-    replicates = FULL_REPLICATES if args.full else (args.replicates or DEFAULT_REPLICATES)
-    cache_dir = "default" if args.cache_dir is None else (None if args.cache_dir.lower() == "none"
-                                                          else args.cache_dir)
-    import tactile
-
     sensor = tactile.Sensor() if args.mode is None else tactile.Sensor(mode=args.mode)
     settings = Settings(n_points=args.n_points, size_mm=args.size_mm, view_size=args.view_size, sensor=sensor,
                         train_instances=args.train_instances, train_sessions=args.train_sessions, seed=args.seed)
-    from classify.runtime.cluster import open_executor
-
+    config = ExperimentConfig(methods=args.methods, protocols=args.protocols, classifiers=args.classifiers or NAMES,
+                              settings=settings, folds=args.folds, repeats=args.repeats, features=args.features,
+                              baseline=args.baseline,
+                              replicates=FULL_REPLICATES if args.full else (args.replicates or DEFAULT_REPLICATES))
+    if args.real:
+        result = run_real(args.real, config, out_dir=args.out, quiet=args.quiet, n_jobs=args.jobs)
+        print(format_tables(result, title="Table 2 layout (real imprints)"))
+        return 0
+    cache_dir = "default" if args.cache_dir is None else (None if args.cache_dir.lower() == "none"
+                                                          else args.cache_dir)
     with open_executor(workers=args.workers, scheduler=args.scheduler, n_jobs=args.jobs) as executor:
-        result = run_experiment(objects=args.objects, methods=args.methods, protocols=args.protocols,
-                                classifiers=classifiers, settings=settings, replicates=replicates,
-                                folds=args.folds, repeats=args.repeats, features=args.features,
-                                baseline=args.baseline, executor=executor, cache_dir=cache_dir,
-                                out_dir=args.out, quiet=args.quiet)
+        result = run_experiment(args.objects, config, executor=executor, cache_dir=cache_dir, out_dir=args.out,
+                                quiet=args.quiet)
     print(format_tables(result))
     if not args.quiet:
         print(f"results written to {args.out}/ ({result.timings['total']:.0f} s)", file=sys.stderr)

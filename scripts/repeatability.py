@@ -27,19 +27,19 @@ import sys
 import numpy as np
 from scipy.spatial import cKDTree
 
-from classify.experiment import samples as dataset
+from classify.experiment import samples
+from classify.experiment.stages import Runtime, SampleKey, instance_stage, load_objects
 from classify.runtime.cluster import Inline
-from classify.experiment import instance_stage, load_objects
-from meshsal.objects import toys, ycb
 from meshsal.mesh import Similarity
+from meshsal.objects import toys, ycb
 from meshsal.points import POINT_METHODS
 
 METHODS = ("attention", "attention_itti", "attention_learned", "learned", "random", "uniform", "mesh_saliency")
 
 
-def nominal_positions(settings: dataset.Settings, name: str, replicate: int, index: int, positions) -> np.ndarray:
+def nominal_positions(settings: samples.Settings, name: str, replicate: int, index: int, positions) -> np.ndarray:
     """(k, 3) float64: an instance's points in its object's nominal frame (mm)."""
-    spec = dataset.instance_spec(settings, name, replicate, index)
+    spec = samples.instance_spec(settings, name, replicate, index)
     return Similarity(spec.scale, np.zeros(3), spec.rotation).inverse().apply(positions)
 
 
@@ -61,17 +61,17 @@ def main() -> int:
     parser.add_argument("--cache-dir", default=None)
     args = parser.parse_args()
     methods = POINT_METHODS.check(args.methods.split(","))
-    settings = dataset.Settings()
-    names, nominal = load_objects([args.objects], settings)
-    samples, _ = instance_stage(nominal, names, methods, settings, args.replicates, Inline(), args.cache_dir,
-                                threads=None, quiet=False)
+    settings = samples.Settings()
+    objects = load_objects([args.objects], settings)
+    names = objects.names
+    stage = instance_stage(objects, methods, settings, args.replicates, Runtime(Inline(), args.cache_dir, quiet=False))
     groups = [_group(n) for n in names]
     sets = list(dict.fromkeys(groups))
     distances = {(s, m): [] for s in sets for m in methods}
     for r in range(args.replicates):
         for i, name in enumerate(names):
             for m in methods:
-                test, *training = (nominal_positions(settings, name, r, j, samples[r, m, i, j]["positions"])
+                test, *training = (nominal_positions(settings, name, r, j, stage.samples[SampleKey(r, m, i, j)].positions)
                                    for j in range(settings.train_instances + 1))
                 distances[groups[i], m].append(nearest_training_distances(test, training))
     print("| method | " + " | ".join(f"{s}: median distance (mm) | {s}: within {args.near:g} mm" for s in sets) + " |")

@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 from classify.experiment import samples as dataset
-from classify.experiment import instance_stage
-from classify.experiment.survey import distinctiveness, fit_replicate_model
+from classify.experiment.stages import ObjectSet, Runtime, SampleKey, instance_stage
+from classify.experiment.survey import Survey, distinctiveness, fit_replicate_model
 from meshsal.objects import toys, ycb
 from meshsal.attention import CHANNELS
 from meshsal.mesh.curvature import mesh_saliency
@@ -176,12 +176,12 @@ def test_replicate_model_ignores_whatever_the_test_instance_holds():
     rng = np.random.default_rng(4)
 
     def survey(label):
-        return {"features": rng.random((30, len(FEATURES))), "descriptors": rng.random((30, 5)) + label}
+        return Survey(np.arange(30), rng.random((30, len(FEATURES))), rng.random((30, 5)) + label)
 
     surveys = {(name, j): survey(k) for k, name in enumerate(["cow", "cup"]) for j in (1, 2)}
     clean = fit_replicate_model(surveys)
     poisoned = dict(surveys)
-    poisoned["cow", 0] = {"features": np.full((30, len(FEATURES)), np.nan), "descriptors": np.zeros((30, 5))}
+    poisoned["cow", 0] = Survey(np.arange(30), np.full((30, len(FEATURES)), np.nan), np.zeros((30, 5)))
     model = fit_replicate_model(poisoned)
     assert np.array_equal(model.coef, clean.coef) and model.intercept == clean.intercept
     assert set(model.trained_on) == {"cow/1", "cow/2", "cup/1", "cup/2"}
@@ -191,7 +191,8 @@ def test_the_instance_stage_trains_each_model_on_training_instances_only():
     settings = dataset.Settings(n_points=3, view_size=48, train_instances=2, train_sessions=1)
     names = ("cow", "cup")
     nominal = tuple(dataset.nominal_mesh(toys.make(n), settings) for n in names)
-    samples, models = instance_stage(nominal, names, ["uniform", "learned"], settings, 2, Inline(), None, 1, True)
+    stage = instance_stage(ObjectSet(names, nominal), ["uniform", "learned"], settings, 2, Runtime(Inline(), None, 1))
+    samples, models = stage.samples, stage.models
     assert len(models) == 2
     for model in models:
         assert sorted(model.trained_on) == ["cow/1", "cow/2", "cup/1", "cup/2"]
@@ -199,17 +200,17 @@ def test_the_instance_stage_trains_each_model_on_training_instances_only():
     for r in range(2):
         for i in range(2):
             for j in range(3):
-                imprints = samples[r, "learned", i, j]["imprints"]
+                imprints = samples[SampleKey(r, "learned", i, j)].imprints
                 assert imprints.shape[:2] == (1, 3)
     # The test instance's survey is never touched: it has no descriptors to train on.
-    test_survey = dataset.instance_samples(nominal[0], "cow", [], settings, 0, 0, survey=True)["survey"]
-    assert "descriptors" not in test_survey and test_survey["features"].shape[1] == len(FEATURES)
+    test_survey = dataset.instance_samples(dataset.SampleTask(nominal[0], "cow", (), settings, 0, 0, survey=True)).survey
+    assert test_survey.descriptors is None and test_survey.features.shape[1] == len(FEATURES)
 
 
 def test_every_instance_of_an_object_offers_the_same_candidates():
     settings = dataset.Settings(n_points=3, view_size=32)
     nominal = dataset.nominal_mesh(ycb.load("banana"), settings)
-    pools = [dataset.instance_samples(nominal, "banana", [], settings, r, j, survey=True)["survey"]["pool"]
+    pools = [dataset.instance_samples(dataset.SampleTask(nominal, "banana", (), settings, r, j, survey=True)).survey.pool
              for r, j in [(0, 0), (0, 1), (1, 2)]]
     assert pools[0].size == 3 * POOL_FACTOR
     assert pools[0].tolist() == pools[1].tolist() == pools[2].tolist()

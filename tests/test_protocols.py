@@ -6,7 +6,7 @@ import pytest
 import classify
 import tactile
 from classify.experiment import protocols
-from classify.experiment.protocols import InstanceData
+from classify.experiment.protocols import InstanceData, InstanceJob, PaperJob, Recognizer
 
 
 def _tagged_pool(n_objects=3, per_object=20, seed=0):
@@ -61,7 +61,7 @@ def test_paper_job_never_trains_or_selects_on_a_test_imprint(monkeypatch):
     monkeypatch.setattr(tactile, "select_by_similarity", spy_select, raising=False)
     monkeypatch.setattr(protocols, "_fit", spy_fit)
     splits = protocols.paper_splits(y, groups, 5, 1, 3)
-    out = protocols.paper_job(X, y, groups, splits, "naive_bayes", True, {}, 0.85, 3)
+    out = protocols.paper_job(PaperJob(X, y, groups, splits, Recognizer("naive_bayes", True, {}, 0.85), 3))
     assert len(selected) == len(fits) == 5
     for rows, trained, split in zip(selected, fits, splits):
         assert sorted(rows.tolist()) == sorted(split.train.tolist())  # selection saw the training fold only
@@ -117,7 +117,7 @@ def test_instance_job_calibrates_on_held_out_instances_and_never_trains_on_the_t
 
     monkeypatch.setattr(protocols, "_fit", spy_fit)
     monkeypatch.setattr(protocols, "_proba", spy_proba)
-    out = protocols.instance_job(data, "knn", False, {}, 0.85, 5, 50, 0, 0)
+    out = protocols.instance_job(InstanceJob(data, Recognizer("knn", False, {}, 0.85), 5, 50, 0, 0))
     assert len(fits) == 4                                           # 3 held-out instances, then all of them
     for trained, held in zip(fits[:3], scored[:3]):
         trained_instances = set(data.train_instance[trained].tolist())
@@ -132,8 +132,8 @@ def test_instance_job_calibrates_on_held_out_instances_and_never_trains_on_the_t
 
 def test_instance_job_is_paired_and_deterministic():
     data = _instance_data(seed=3)
-    a = protocols.instance_job(data, "naive_bayes", True, {}, 0.85, 5, 7, 11, 2)
-    b = protocols.instance_job(data, "naive_bayes", True, {}, 0.85, 5, 7, 11, 2)
+    a = protocols.instance_job(InstanceJob(data, Recognizer("naive_bayes", True, {}, 0.85), 5, 7, 11, 2))
+    b = protocols.instance_job(InstanceJob(data, Recognizer("naive_bayes", True, {}, 0.85), 5, 7, 11, 2))
     assert np.array_equal(a.rates, b.rates) and np.array_equal(a.confusion, b.confusion)
 
 
@@ -157,5 +157,5 @@ def test_fused_rate_after_all_touches_is_not_below_a_single_touch_for_every_clas
     data = InstanceData(np.concatenate(X).astype(np.float32), np.array(y), np.array(inst), np.array(point),
                         tuple(test), ("a", "b", "c"))
     for name in classify.NAMES:
-        out = protocols.instance_job(data, name, False, {}, 0.85, k, 20, 0, 0)
+        out = protocols.instance_job(InstanceJob(data, Recognizer(name, False, {}, 0.85), k, 20, 0, 0))
         assert out.rates[-1].mean() >= out.rates[0].mean(), name

@@ -17,12 +17,14 @@
     touches.  Tuning inside a classifier (kNN's k, the network's early
     stopping) gets folds grouped by (object, instance, point).
 
-Every random choice of a job is seeded by the base seed, the replicate,
-the number of touches and the object's name, never by a list position or
-by the classifier, so every point method and classifier of a replicate
-sees the same instances, devices, folds, touch sets and tie breaks.  Each
-job runs with one BLAS/OpenMP thread inside its worker, so results do not
-depend on how many workers run.
+A job is one frozen record (:class:`PaperJob`, :class:`InstanceJob`) run
+by a pure function in a worker.  Every random choice of a job is seeded by
+the base seed, the replicate, the number of touches and the object's name
+(:mod:`classify.experiment.streams`), never by a list position or by the
+classifier, so every point method and classifier of a replicate sees the
+same instances, devices, folds, touch sets and tie breaks.  Each job runs
+with one BLAS/OpenMP thread inside its worker, so results do not depend on
+how many workers run.
 """
 
 from __future__ import annotations
@@ -31,17 +33,19 @@ import inspect
 from dataclasses import dataclass
 
 import numpy as np
+from sklearn.metrics import confusion_matrix
 from sklearn.model_selection import StratifiedGroupKFold
 from threadpoolctl import threadpool_limits
 
+from classify.experiment.streams import Stream, recognition_rng
 from classify.recognizers.classifiers import make
-from classify.experiment.samples import name_seed
 from classify.recognizers.fusion import calibrate, fit_calibration, fuse, touch_sets
 from meshsal.util.registry import Registry
 from tactile.features import describe
 
-__all__ = ["PROTOCOLS", "PROTOCOL_REGISTRY", "Split", "paper_splits", "select_training", "PaperOutcome", "paper_job",
-           "InstanceData", "InstanceOutcome", "instance_job"]
+__all__ = ["PROTOCOLS", "PROTOCOL_REGISTRY", "Split", "point_groups", "paper_splits", "select_training",
+           "Recognizer", "PaperJob", "PaperOutcome", "paper_job", "InstanceData", "InstanceJob", "InstanceOutcome",
+           "instance_job"]
 
 #: The evaluation protocols (this module's docstring describes them).
 PROTOCOL_REGISTRY = Registry("protocol")
@@ -58,6 +62,20 @@ class Split:
     fold: int
     train: np.ndarray
     test: np.ndarray
+
+
+def point_groups(labels, points, instances=None) -> np.ndarray:
+    """One group id per imprint: its (object, point), or its (object, instance, point).
+
+    Examples
+    --------
+    >>> point_groups(np.array([0, 0, 1]), np.array([3, 3, 3])).tolist()
+    [3, 3, 100003]
+    """
+    labels, points = np.asarray(labels, np.int64), np.asarray(points, np.int64)
+    if instances is None:
+        return labels * 100000 + points
+    return (labels * 1000 + np.asarray(instances, np.int64)) * 100000 + points
 
 
 def paper_splits(labels, groups=None, folds=5, repeats=10, seed=0) -> list[Split]:
@@ -106,10 +124,51 @@ def _fit(name, params, X, y, groups):
     return model.fit(X, y)
 
 
+def _confusion(truth, guess, n_classes) -> np.ndarray:
+    """(n_classes, n_classes) int64 counts, rows true class (zeros when nothing was recognized)."""
+    if len(truth) == 0:
+        return np.zeros((n_classes, n_classes), np.int64)
+    return confusion_matrix(truth, guess, labels=np.arange(n_classes)).astype(np.int64)
+
+
 def _proba(model, X, n_classes):
     out = np.zeros((len(X), n_classes))
     out[:, model.classes_] = model.predict_proba(X)
     return out
+
+
+@dataclass(frozen=True)
+class Recognizer:
+    """How a job recognizes: the classifier and its parameters, selection and its threshold, the features.
+
+    Selection compares raw imprints (the paper's rule); the classifier sees
+    ``tactile.features.describe(imprints, features)``.
+    """
+
+    classifier: str
+    selection: bool = False
+    params: dict = None
+    threshold: float = 0.85
+    features: str = "raw"
+
+    def fit(self, X, y, groups):
+        return _fit(self.classifier, self.params or {}, X, y, groups)
+
+
+@dataclass(frozen=True, eq=False)
+class PaperJob:
+    """One repeat of the paper protocol: the pool of imprints, its folds, how to recognize.
+
+    ``X`` (N, rows, cols) imprints, ``y`` (N,) object labels, ``groups`` (N,)
+    (:func:`point_groups`), ``splits`` the repeat's folds, ``n_classes``.
+    """
+
+    X: np.ndarray
+    y: np.ndarray
+    groups: np.ndarray
+    splits: tuple
+    recognizer: Recognizer
+    n_classes: int
 
 
 @dataclass(frozen=True)
@@ -126,29 +185,24 @@ class PaperOutcome:
     kept: float
 
 
-def paper_job(X, y, groups, splits, classifier, selection, params, threshold, n_classes,
-              features="raw") -> PaperOutcome:
-    """Every fold of one repeat: fit on the (selected) training fold, predict the test fold.
-
-    Selection compares raw imprints (the paper's rule); the classifier sees
-    ``tactile.features.describe(X, features)``.
-    """
+def paper_job(job: PaperJob) -> PaperOutcome:
+    """Every fold of one repeat: fit on the (selected) training fold, predict the test fold."""
+    X, y, rec = job.X, job.y, job.recognizer
     with threadpool_limits(1):
-        F = describe(X, features)
+        F = describe(X, rec.features)
         pred = np.full(len(y), -1)
         kept = []
-        for split in splits:
-            train = select_training(X, y, split.train, threshold) if selection else split.train
+        for split in job.splits:
+            train = select_training(X, y, split.train, rec.threshold) if rec.selection else split.train
             kept.append(len(train) / len(split.train))
             if len(np.unique(y[train])) < 2:
                 pred[split.test] = y[train][0] if len(train) else -1
                 continue
-            model = _fit(classifier, params, F[train], y[train], groups[train])
-            pred[split.test] = np.argmax(_proba(model, F[split.test], n_classes), axis=1)
-    confusion = np.zeros((n_classes, n_classes), np.int64)
+            model = rec.fit(F[train], y[train], job.groups[train])
+            pred[split.test] = np.argmax(_proba(model, F[split.test], job.n_classes), axis=1)
     hit = pred >= 0
-    np.add.at(confusion, (y[hit], pred[hit]), 1)
-    rates = np.array([100.0 * np.mean(pred[y == c] == c) for c in range(n_classes)])
+    confusion = _confusion(y[hit], pred[hit], job.n_classes)
+    rates = np.array([100.0 * np.mean(pred[y == c] == c) for c in range(job.n_classes)])
     return PaperOutcome(rates, confusion, float(np.mean(kept)))
 
 
@@ -174,6 +228,23 @@ class InstanceData:
     names: tuple
 
 
+@dataclass(frozen=True, eq=False)
+class InstanceJob:
+    """One replicate of the instance protocol for one point method and object set.
+
+    ``data`` the replicate's imprints; recognition after 1..``n_touches``
+    touches of ``sets_per_k`` touch sets per object (all when fewer exist),
+    drawn from the streams of ``seed`` and ``replicate``.
+    """
+
+    data: InstanceData
+    recognizer: Recognizer
+    n_touches: int
+    sets_per_k: int
+    seed: int
+    replicate: int
+
+
 @dataclass(frozen=True)
 class InstanceOutcome:
     """One replicate of the instance protocol for one classifier and selection setting.
@@ -191,24 +262,21 @@ class InstanceOutcome:
     kept: float
 
 
-def _groups(data: InstanceData) -> np.ndarray:
-    return (data.train_y * 1000 + data.train_instance) * 100000 + data.train_point
-
-
-def _fit_selected(data, F, rows, classifier, selection, params, threshold):
+def _fit_selected(data: InstanceData, F, rows, rec: Recognizer):
     X, y = data.train_X, data.train_y
-    if selection:
-        rows = select_training(X, y, rows, threshold)
-    return _fit(classifier, params, F[rows], y[rows], _groups(data)[rows]), rows
+    if rec.selection:
+        rows = select_training(X, y, rows, rec.threshold)
+    groups = point_groups(data.train_y, data.train_point, data.train_instance)
+    return rec.fit(F[rows], y[rows], groups[rows]), rows
 
 
-def _calibration(data, F, classifier, selection, params, threshold, n_classes):
+def _calibration(data: InstanceData, F, rec: Recognizer, n_classes: int):
     """Fit on all training instances but one, score the held-out one, for each; fit (eps, T)."""
     proba, truth = [], []
     for held in np.unique(data.train_instance):
         rest = np.flatnonzero(data.train_instance != held)
         out = np.flatnonzero(data.train_instance == held)
-        model, rows = _fit_selected(data, F, rest, classifier, selection, params, threshold)
+        model, rows = _fit_selected(data, F, rest, rec)
         if len(np.unique(data.train_y[rows])) < 2:
             continue
         proba.append(_proba(model, F[out], n_classes))
@@ -218,34 +286,29 @@ def _calibration(data, F, classifier, selection, params, threshold, n_classes):
     return fit_calibration(np.concatenate(proba), np.concatenate(truth))
 
 
-def instance_job(data: InstanceData, classifier, selection, params, threshold, n_touches, sets_per_k, seed,
-                 replicate, features="raw") -> InstanceOutcome:
-    """Train on the training instances, recognize the test instances after 1..``n_touches`` touches.
-
-    Selection compares raw imprints; the classifier sees
-    ``tactile.features.describe(imprints, features)``.
-    """
+def instance_job(job: InstanceJob) -> InstanceOutcome:
+    """Train on the training instances, recognize the test instances after 1..``n_touches`` touches."""
+    data, rec = job.data, job.recognizer
     n_classes = len(data.test)
     with threadpool_limits(1):
-        F = describe(data.train_X, features)
-        cal = _calibration(data, F, classifier, selection, params, threshold, n_classes)
-        model, rows = _fit_selected(data, F, np.arange(len(data.train_y)), classifier, selection, params,
-                                    threshold)
-        proba = [calibrate(_proba(model, describe(t, features), n_classes), cal) if len(t)
+        F = describe(data.train_X, rec.features)
+        cal = _calibration(data, F, rec, n_classes)
+        model, rows = _fit_selected(data, F, np.arange(len(data.train_y)), rec)
+        proba = [calibrate(_proba(model, describe(t, rec.features), n_classes), cal) if len(t)
                  else np.zeros((0, n_classes)) for t in data.test]
-    confusion = np.zeros((n_classes, n_classes), np.int64)
-    for c, p in enumerate(proba):
-        np.add.at(confusion[c], np.argmax(p, axis=1), 1)
-    rates = np.zeros((n_touches, n_classes))
-    sets = np.full(n_touches, np.iinfo(np.int64).max)
-    for k in range(1, n_touches + 1):
+    truth = np.concatenate([np.full(len(p), c) for c, p in enumerate(proba)]).astype(np.int64)
+    guess = np.concatenate([np.argmax(p, axis=1) for p in proba]).astype(np.int64)
+    confusion = _confusion(truth, guess, n_classes)
+    rates = np.zeros((job.n_touches, n_classes))
+    sets = np.full(job.n_touches, np.iinfo(np.int64).max)
+    for k in range(1, job.n_touches + 1):
         for c, p in enumerate(proba):
             if len(p) == 0:
                 sets[k - 1] = 0
                 continue
-            stream = [int(seed), int(replicate), k, name_seed(data.names[c])]
-            chosen = touch_sets(len(p), min(k, len(p)), sets_per_k, np.random.default_rng(stream + [3]))
-            picks = fuse(p, chosen, np.random.default_rng(stream + [4]))
+            chosen = touch_sets(len(p), min(k, len(p)), job.sets_per_k,
+                                recognition_rng(job.seed, job.replicate, k, data.names[c], Stream.TOUCH_SETS))
+            picks = fuse(p, chosen, recognition_rng(job.seed, job.replicate, k, data.names[c], Stream.TIES))
             rates[k - 1, c] = 100.0 * np.mean(picks == c)
             sets[k - 1] = min(sets[k - 1], len(chosen) if len(p) >= k else 0)
     return InstanceOutcome(rates, sets, confusion, len(rows) / len(data.train_y))

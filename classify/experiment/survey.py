@@ -1,7 +1,7 @@
-"""Learning where to touch: how distinctive each surveyed touch is, and the model fitted on it.
+"""Learning where to touch: each instance's touch survey, how distinctive each surveyed touch is, the model.
 
 In each replicate of the instance protocol, every training instance's
-candidate pool is touched once (``classify.experiment.samples.touch_survey``).  A
+candidate pool is touched once (:func:`touch_survey`).  A
 touch is distinctive when its imprint lies nearer the same object's touches
 than any other object's, on the *other* training instances:
 :func:`distinctiveness` is that leave-the-instance-out nearest-neighbour
@@ -12,9 +12,70 @@ their surveys carry no touches, and the fit takes training instances only.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
-__all__ = ["distinctiveness", "fit_replicate_model"]
+__all__ = ["Survey", "touch_survey", "distinctiveness", "fit_replicate_model"]
+
+
+@dataclass(frozen=True, eq=False)
+class Survey:
+    """What the learned methods know of one instance.
+
+    ``pool`` (P,) int64 candidate vertex ids (``meshsal.points.learned.candidate_pool``);
+    ``features`` (P, len(meshsal.points.learned.FEATURES)) float64, what vision
+    sees at each; ``descriptors`` (P, d) float32, the roll-invariant polar
+    descriptors of one touch of each, on a training instance only (None on
+    the test instance, which is never touched here).
+    """
+
+    pool: np.ndarray
+    features: np.ndarray
+    descriptors: np.ndarray | None = None
+
+    def to_arrays(self) -> dict:
+        arrays = {"pool": self.pool, "features": self.features}
+        if self.descriptors is not None:
+            arrays["descriptors"] = self.descriptors
+        return arrays
+
+    @staticmethod
+    def from_arrays(arrays: dict) -> Survey:
+        return Survey(arrays["pool"], arrays["features"], arrays.get("descriptors"))
+
+
+def touch_survey(mesh, seen, vertex_saliency, settings, scene, rng: np.random.Generator | None = None) -> Survey:
+    """One instance's candidate pool and their visual features; with ``rng``, one touch of each.
+
+    Parameters
+    ----------
+    mesh : meshsal.Mesh, the instance
+    seen : meshsal.attention.rig.ViewChannels of the instance
+    vertex_saliency : (n_vertices,) float64
+    settings : classify.experiment.config.Settings
+    scene : Embree scene of ``mesh``
+    rng : numpy Generator, optional
+        The survey stream of a *training* instance: the pool is touched once
+        (its own device and rolls) and the imprints' roll-invariant polar
+        descriptors kept, on which the distinctiveness of each candidate is
+        measured.  None for the test instance, which is never touched here.
+    """
+    import tactile
+    from meshsal.mesh import vertex_normals
+    from meshsal.points import attention_maps
+    from meshsal.points.learned import candidate_pool, point_features
+    from tactile.features import describe
+
+    pool = candidate_pool(mesh, settings.n_points)
+    features = point_features(mesh, seen.views, seen.results, attention_maps(seen, "equal"), vertex_saliency, pool,
+                              0.5 * settings.sensor.width_mm)
+    if rng is None:
+        return Survey(pool.astype(np.int64), features)
+    vn = vertex_normals(mesh.vertices, mesh.faces)
+    images = tactile.acquire(mesh, mesh.vertices[pool], vn[pool], settings.sensor, settings.perturbation, rng,
+                             scene=scene)
+    return Survey(pool.astype(np.int64), features, describe(np.asarray(images, np.float32), "polar").astype(np.float32))
 
 
 def distinctiveness(descriptors: np.ndarray, labels: np.ndarray, instances: np.ndarray,
@@ -70,9 +131,9 @@ def fit_replicate_model(surveys: dict, alpha: float = 1.0):
 
     Parameters
     ----------
-    surveys : dict (object name, instance index) -> survey dict
-        As made by ``classify.experiment.samples.touch_survey``.  Instance 0 (the test
-        instance) is ignored whatever it holds.
+    surveys : dict (object name, instance index) -> Survey
+        As made by :func:`touch_survey`.  Instance 0 (the test instance) is
+        ignored whatever it holds.
     alpha : ridge penalty (``meshsal.points.learned.fit_touch_model``)
 
     Returns
@@ -88,10 +149,10 @@ def fit_replicate_model(surveys: dict, alpha: float = 1.0):
     features, descriptors, labels, instances = [], [], [], []
     for name, j in used:
         survey = surveys[name, j]
-        features.append(survey["features"])
-        descriptors.append(survey["descriptors"])
-        labels.append(np.full(len(survey["features"]), names.index(name)))
-        instances.append(np.full(len(survey["features"]), j))
+        features.append(survey.features)
+        descriptors.append(survey.descriptors)
+        labels.append(np.full(len(survey.features), names.index(name)))
+        instances.append(np.full(len(survey.features), j))
     margin = distinctiveness(np.concatenate(descriptors), np.concatenate(labels), np.concatenate(instances))
     return fit_touch_model(np.concatenate(features), margin, alpha,
                            trained_on=tuple(f"{name}/{j}" for name, j in used))

@@ -16,12 +16,24 @@ from __future__ import annotations
 import dataclasses
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 
 from classify.reporting import report
 
-__all__ = ["Cell", "Comparison", "ConfusionMatrix", "ExperimentResult", "format_tables", "write_outputs"]
+__all__ = ["CellKey", "Cell", "Comparison", "ConfusionMatrix", "ExperimentResult", "format_tables", "write_outputs"]
+
+
+class CellKey(NamedTuple):
+    """Where a rate belongs: the coordinates of a cell (equal to the plain tuple of its fields)."""
+
+    method: str
+    protocol: str
+    classifier: str
+    n_objects: int
+    selection: bool
+    touches: int
 
 
 @dataclass(frozen=True)
@@ -82,8 +94,8 @@ class ConfusionMatrix:
 class ExperimentResult:
     """Everything one experiment measured, and every setting it used.
 
-    ``rates`` maps a cell's coordinates ``(method, protocol, classifier,
-    n_objects, selection, touches)`` to its (replicates, objects) matrix of
+    ``rates`` maps a cell's coordinates (a :class:`CellKey`: ``(method, protocol,
+    classifier, n_objects, selection, touches)``) to its (replicates, objects) matrix of
     rates in percent.  ``selection_kept`` maps ``"method/protocol/n_objects"``
     to the mean fraction of training imprints similarity selection kept.
     """

@@ -1,0 +1,198 @@
+"""What an experiment runs with: the per-object :class:`Settings` and the whole :class:`ExperimentConfig`.
+
+A new option of the experiment is a field here: the stages read it from the
+config they are handed, the command line sets it, and
+:meth:`ExperimentConfig.to_json` records it in ``results.json``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass, field
+
+__all__ = ["DEFAULT_REPLICATES", "FULL_REPLICATES", "Settings", "ExperimentConfig"]
+
+#: Replicates of the instance protocol in a quick run (the default) and in a full run.
+DEFAULT_REPLICATES = 5
+FULL_REPLICATES = 20
+
+
+def _typical():
+    import tactile
+
+    return tactile.Perturbation.typical()
+
+
+def _sensor():
+    import tactile
+
+    return tactile.Sensor()
+
+
+@dataclass(frozen=True)
+class Settings:
+    """Everything the per-object stage depends on besides the mesh, its name and the draw.
+
+    Attributes
+    ----------
+    n_points : int
+        Interest points per instance.
+    size_mm : float
+        Nominal principal-frame box diagonal.
+    view_size : int or None
+        Rendered view size for the attention method (None: its default).
+    sensor : tactile.Sensor
+    perturbation : tactile.Perturbation
+        Of every acquisition session (default ``Perturbation.typical()``).
+    train_instances : int
+        Training instances per object and replicate.
+    train_sessions : int
+        Acquisition sessions per training instance (the test instance has one).
+    scale_spread, hue_deg, brightness_spread : float
+        Instance variation (``meshsal.objects.instances.draw_instance``).
+    seed : int
+        Base seed of every draw.
+    """
+
+    n_points: int = 15
+    size_mm: float = 150.0
+    view_size: int | None = None
+    sensor: object = field(default_factory=_sensor)
+    perturbation: object = field(default_factory=_typical)
+    train_instances: int = 3
+    train_sessions: int = 2
+    scale_spread: float = 0.05
+    hue_deg: float = 30.0
+    brightness_spread: float = 0.15
+    seed: int = 0
+
+    def __post_init__(self):
+        if int(self.n_points) != self.n_points or self.n_points < 1:
+            raise ValueError(f"n_points must be a positive integer, got {self.n_points!r}")
+        if self.train_instances < 2:
+            raise ValueError(f"train_instances must be at least 2 (calibration holds one out), "
+                             f"got {self.train_instances}")
+        if self.train_sessions < 1:
+            raise ValueError(f"train_sessions must be at least 1, got {self.train_sessions}")
+        if not self.size_mm > 0:
+            raise ValueError(f"size_mm must be positive, got {self.size_mm}")
+
+    def key(self) -> str:
+        """A canonical text of every field, for cache keys."""
+        return repr([self.n_points, float(self.size_mm), self.view_size, self.sensor, self.perturbation,
+                     self.train_instances, self.train_sessions, float(self.scale_spread), float(self.hue_deg),
+                     float(self.brightness_spread), int(self.seed)])
+
+    def to_json(self) -> dict:
+        """The fields as ``results.json`` records them."""
+        return {"n_points": self.n_points, "size_mm": self.size_mm, "view_size": self.view_size,
+                "sensor": repr(self.sensor), "perturbation": repr(self.perturbation),
+                "train_instances": self.train_instances, "train_sessions": self.train_sessions,
+                "scale_spread": self.scale_spread, "hue_deg": self.hue_deg,
+                "brightness_spread": self.brightness_spread, "seed": self.seed}
+
+
+def _all_protocols():
+    from classify.experiment.protocols import PROTOCOLS
+
+    return PROTOCOLS
+
+
+def _all_classifiers():
+    from classify.recognizers.classifiers import NAMES
+
+    return NAMES
+
+
+@dataclass(frozen=True)
+class ExperimentConfig:
+    """Everything an experiment measures and how.
+
+    Attributes
+    ----------
+    methods : tuple of str
+        Interest-point methods (``meshsal.points.METHODS``).  The model
+        methods ("learned", "attention_learned") fit a touch model per
+        replicate on its training instances (:mod:`classify.experiment.survey`)
+        and run in the instance protocol only.
+    protocols : tuple of str
+        Subset of ``classify.experiment.protocols.PROTOCOLS``.
+    classifiers : tuple of str
+        Subset of ``classify.NAMES``.
+    settings : Settings
+        Points, sensor, perturbation, instances and seed.
+    replicates : int
+        Instance-protocol replicates, each with fresh instances
+        (``DEFAULT_REPLICATES`` quick, ``FULL_REPLICATES`` for a full run).
+    folds, repeats : int
+        Paper-protocol cross-validation folds and reshuffled repeats.
+    threshold : float
+        NCC threshold of similarity selection.
+    touch_sets_per_object : int
+        Distinct touch sets per test instance and k (all of them when fewer exist).
+    params : dict
+        Classifier name -> parameters for ``classify.make``.
+    features : {"raw", "polar"}
+        What the classifiers see: raw taxels (the paper's) or roll-invariant
+        polar descriptors (``tactile.features``).
+    baseline : str or None
+        The method others are compared with (default ``uniform`` when
+        measured, else the first method); no comparison with one method.
+    """
+
+    methods: tuple = ("attention",)
+    protocols: tuple = field(default_factory=_all_protocols)
+    classifiers: tuple = field(default_factory=_all_classifiers)
+    settings: Settings = field(default_factory=Settings)
+    replicates: int = DEFAULT_REPLICATES
+    folds: int = 5
+    repeats: int = 10
+    threshold: float = 0.85
+    touch_sets_per_object: int = 50
+    params: dict = field(default_factory=dict)
+    features: str = "raw"
+    baseline: str | None = None
+
+    def replace(self, **changes) -> ExperimentConfig:
+        """A copy with some fields changed; an unknown field is a TypeError naming it."""
+        return dataclasses.replace(self, **changes)
+
+    def checked(self) -> ExperimentConfig:
+        """The config with names checked against their registries, tuples for lists and the baseline resolved.
+
+        Raises
+        ------
+        ValueError
+            An unknown method, protocol, classifier or feature set, counts out
+            of range, or a baseline that is not among the methods.
+        """
+        from classify.experiment.protocols import PROTOCOL_REGISTRY
+        from classify.recognizers.classifiers import CLASSIFIERS
+        from meshsal.points import POINT_METHODS
+        from tactile.features import FEATURES
+
+        methods, protocols = POINT_METHODS.check(self.methods), PROTOCOL_REGISTRY.check(self.protocols)
+        classifiers = CLASSIFIERS.check(self.classifiers)
+        if self.folds < 2 or self.repeats < 1 or self.replicates < 1 or self.touch_sets_per_object < 1:
+            raise ValueError("folds must be >= 2 and repeats, replicates, touch_sets_per_object >= 1")
+        baseline = self.baseline
+        if baseline is None:
+            baseline = "uniform" if "uniform" in methods else methods[0]
+        if baseline not in methods:
+            raise ValueError(f"baseline {baseline!r} is not among the methods {list(methods)}")
+        if self.features not in FEATURES:
+            raise ValueError(f"unknown features {self.features!r}; choose from {', '.join(FEATURES)}")
+        return self.replace(methods=methods, protocols=protocols, classifiers=classifiers, baseline=baseline,
+                            params=dict(self.params))
+
+    def to_json(self) -> dict:
+        """Every setting as ``results.json`` records it (with the classifiers' full parameters)."""
+        from classify.recognizers.classifiers import make
+
+        return {"methods": list(self.methods), "protocols": list(self.protocols),
+                "classifiers": list(self.classifiers), "baseline": self.baseline if len(self.methods) > 1 else None,
+                "replicates": self.replicates, "folds": self.folds, "repeats": self.repeats,
+                "threshold": self.threshold, "touch_sets_per_object": self.touch_sets_per_object,
+                "features": self.features, **self.settings.to_json(),
+                "classifier_params": {c: {k: repr(v) for k, v in make(c, **self.params.get(c, {})).get_params().items()}
+                                      for c in self.classifiers}}

@@ -1,0 +1,288 @@
+"""The stages of the experiment, each a function from frozen records to frozen records.
+
+objects (:class:`ObjectSet`, :func:`load_objects`) -> samples per method and
+instance (:func:`paper_stage`, :func:`instance_stage`, with each replicate's
+touch model) -> recognition (:func:`paper_recognition`,
+:func:`instance_recognition`) -> :class:`Measurement` records, which
+:mod:`classify.experiment.run` turns into cells, comparisons and files.
+Work runs through :class:`Runtime`'s pool (local processes or a Dask
+cluster); every stage reads and writes the content-keyed cache.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+from typing import NamedTuple
+
+import numpy as np
+from threadpoolctl import threadpool_limits
+
+from classify.experiment.config import ExperimentConfig, Settings
+from classify.experiment.protocols import (InstanceData, InstanceJob, InstanceOutcome, PaperJob, PaperOutcome,
+                                           Recognizer, instance_job, paper_job, paper_splits, point_groups)
+from classify.experiment.samples import (PaperSampleTask, SampleTask, TouchSample, instance_samples, nominal_mesh,
+                                         paper_sample)
+from classify.experiment.survey import fit_replicate_model
+from classify.reporting.results import ConfusionMatrix
+from classify.runtime import cache as cache_mod
+from meshsal.points import MODEL_METHODS
+from meshsal.util.progress import progress
+
+__all__ = ["ObjectSet", "load_objects", "Runtime", "SampleKey", "InstanceStage", "paper_stage", "instance_stage",
+           "Measurement", "paper_recognition", "instance_recognition"]
+
+
+@dataclass(frozen=True, eq=False)
+class ObjectSet:
+    """The objects of an experiment: distinct ``names`` and their ``nominal`` meshes, in the order given."""
+
+    names: tuple
+    nominal: tuple
+
+    def __len__(self) -> int:
+        return len(self.names)
+
+    def by_name(self, n: int | None = None) -> np.ndarray:
+        """Positions of the first ``n`` objects sorted by name: recognition sees every object set in one order."""
+        names = self.names[:n]
+        return np.array(sorted(range(len(names)), key=lambda i: names[i]), dtype=np.int64)
+
+
+def load_objects(objects, settings: Settings) -> ObjectSet:
+    """The objects' names and nominal meshes, all loaded before any work (a bad file stops here).
+
+    ``objects``: None (the toys), strings for ``meshsal.objects.resolve_objects``
+    (set names, object names, mesh files, comma-separated or not) or
+    ``meshsal.Mesh`` objects with distinct names.
+    """
+    import meshsal
+    from meshsal import objects as objects_mod
+
+    items = ["toys"] if objects is None else list(objects)
+    meshes = [m for m in items if isinstance(m, meshsal.Mesh)]
+    if meshes and len(meshes) != len(items):
+        raise ValueError("objects must be all meshes or all names and paths, not a mix")
+    if not meshes:
+        meshes = [objects_mod.load_ref(ref) for ref in objects_mod.resolve_objects(items)]
+    names = tuple(m.name for m in meshes)
+    if any(not n for n in names) or len(set(names)) != len(names):
+        raise ValueError(f"objects must have distinct, non-empty names, got {list(names)}")
+    if len(meshes) < 2:
+        raise ValueError(f"recognition needs at least two objects, got {len(meshes)}")
+    return ObjectSet(names, tuple(nominal_mesh(m, settings) for m in meshes))
+
+
+@dataclass(frozen=True)
+class Runtime:
+    """Where a stage's work runs and what it keeps.
+
+    ``pool`` anything with an ordered ``map`` (``classify.runtime.cluster``);
+    ``cache_dir`` the cache (None: none); ``threads`` rendering and attention
+    threads per task (None: the CPU count; changes nothing); ``quiet`` no
+    progress bars.
+    """
+
+    pool: object
+    cache_dir: object = None
+    threads: int | None = None
+    quiet: bool = True
+
+    def map(self, fn, tasks: list, desc: str):
+        return list(progress(self.pool.map(fn, tasks), total=len(tasks), desc=desc, quiet=self.quiet))
+
+
+class SampleKey(NamedTuple):
+    """Where a :class:`~classify.experiment.samples.TouchSample` belongs: replicate, method, object, instance."""
+
+    replicate: int
+    method: str
+    obj: int
+    instance: int
+
+
+@dataclass(frozen=True, eq=False)
+class InstanceStage:
+    """Every instance's sample for every method (by :class:`SampleKey`), and each replicate's touch model."""
+
+    samples: dict
+    models: tuple = ()
+
+
+def _paper_sample(task: PaperSampleTask) -> TouchSample:
+    with threadpool_limits(1):
+        return paper_sample(task)
+
+
+def _instance_samples(task: SampleTask):
+    with threadpool_limits(1):
+        return instance_samples(task)
+
+
+def _fit_model(surveys: dict):
+    with threadpool_limits(1):
+        return fit_replicate_model(surveys)
+
+
+def paper_stage(objects: ObjectSet, methods, settings: Settings, runtime: Runtime) -> dict:
+    """Each object's paper-protocol sample per method: ``{(method, object index): TouchSample}``."""
+    pairs = [(m, i) for m in methods for i in range(len(objects))]
+    tasks = [PaperSampleTask(objects.nominal[i], objects.names[i], m, settings, runtime.cache_dir, runtime.threads)
+             for m, i in pairs]
+    return dict(zip(pairs, runtime.map(_paper_sample, tasks, "paper: points+imprints")))
+
+
+def instance_stage(objects: ObjectSet, methods, settings: Settings, replicates: int, runtime: Runtime) -> InstanceStage:
+    """Every instance's points and imprints for every method, and each replicate's touch model.
+
+    One task per instance computes all methods that need no model, sharing
+    its rendering, plus its touch survey when a model method is asked for;
+    then each replicate's model is fitted on its training instances'
+    surveys; then the model methods run on every instance.
+    """
+    plain = tuple(m for m in methods if m not in MODEL_METHODS)
+    learned = tuple(m for m in methods if m in MODEL_METHODS)
+    where = [(r, i, j) for r in range(replicates) for i in range(len(objects))
+             for j in range(settings.train_instances + 1)]
+
+    def task(r, i, j, methods, **more):
+        return SampleTask(objects.nominal[i], objects.names[i], methods, settings, r, j, cache_dir=runtime.cache_dir,
+                          threads=runtime.threads, **more)
+
+    done = runtime.map(_instance_samples, [task(r, i, j, plain, survey=bool(learned)) for r, i, j in where],
+                       "instances: points+imprints")
+    samples = {SampleKey(r, m, i, j): out.by_method[m] for (r, i, j), out in zip(where, done) for m in plain}
+    if not learned:
+        return InstanceStage(samples)
+    surveys = {(r, i, j): out.survey for (r, i, j), out in zip(where, done)}
+    models = runtime.map(_fit_model, [{(objects.names[i], j): surveys[r, i, j] for q, i, j in where if q == r}
+                                      for r in range(replicates)], "instances: touch models")
+    done = runtime.map(_instance_samples, [task(r, i, j, learned, model=models[r], surveyed=surveys[r, i, j])
+                                           for r, i, j in where], "instances: learned points+imprints")
+    samples.update({SampleKey(r, m, i, j): out.by_method[m] for (r, i, j), out in zip(where, done) for m in learned})
+    return InstanceStage(samples, tuple(models))
+
+
+@dataclass(frozen=True, eq=False)
+class Measurement:
+    """One method, protocol, object set, classifier and selection setting, measured.
+
+    ``rates`` maps a number of touches to its (replicates or repeats,
+    objects) rate matrix in percent, objects in the order given;
+    ``touch_sets`` the fewest distinct touch sets any object offered at that
+    many touches (0 for the paper protocol); ``confusion`` the single-touch
+    counts; ``kept`` the mean fraction of training imprints selection kept
+    (with selection only).
+    """
+
+    method: str
+    protocol: str
+    classifier: str
+    n_objects: int
+    selection: bool
+    rates: dict
+    touch_sets: dict
+    confusion: ConfusionMatrix
+    kept: float | None = None
+
+
+def _outcome_arrays(outcomes) -> dict:
+    return {f"{i}/{f.name}": np.asarray(getattr(o, f.name)) for i, o in enumerate(outcomes)
+            for f in dataclasses.fields(o)}
+
+
+def _outcomes_from(arrays, cls, count):
+    names = [f.name for f in dataclasses.fields(cls)]
+    return [cls(**{n: (float(arrays[f"{i}/{n}"]) if n == "kept" else arrays[f"{i}/{n}"]) for n in names})
+            for i in range(count)]
+
+
+def _run_jobs(runtime: Runtime, key: str, cls, run, jobs: list, desc: str) -> list:
+    """``run(job)`` for every job, in order, through the cache (one entry for all of them)."""
+    found = cache_mod.cached(runtime.cache_dir, key, lambda: _outcome_arrays(runtime.map(run, jobs, desc)))
+    return _outcomes_from(found, cls, len(jobs))
+
+
+def _recognition_key(kind, arrays, parts):
+    code = cache_mod.code_fingerprint("classify", "tactile")
+    return cache_mod.cache_key(kind, cache_mod.hash_arrays(*arrays), parts, code, cache_mod.library_versions())
+
+
+def _recognizers(config: ExperimentConfig):
+    """Every (classifier, selection) of the config, in the order the tables list them."""
+    return [(c, s) for c in config.classifiers for s in (False, True)]
+
+
+def paper_recognition(method: str, X, y, points, names, config: ExperimentConfig, runtime: Runtime,
+                      order=None) -> list[Measurement]:
+    """The paper protocol on one pool of imprints: one :class:`Measurement` per classifier and selection.
+
+    Label c of the pool is object ``order[c]`` of ``names`` (default: the
+    given order); the measurements follow the order of ``names``.
+    """
+    n = len(names)
+    order = np.arange(n) if order is None else np.asarray(order)
+    back = np.argsort(order)
+    groups = point_groups(y, points)
+    seed = config.settings.seed
+    splits = paper_splits(y, groups, config.folds, config.repeats, seed)
+    jobs = [(c, s, r) for c, s in _recognizers(config) for r in range(config.repeats)]
+    work = [PaperJob(X, y, groups, tuple(x for x in splits if x.repeat == r),
+                     Recognizer(c, s, config.params, config.threshold, config.features), n) for c, s, r in jobs]
+    key = _recognition_key("paper", (X, y, groups), [config.folds, config.repeats, seed, config.threshold,
+                                                     config.params, jobs, config.features])
+    outcomes = _run_jobs(runtime, key, PaperOutcome, paper_job, work, f"paper: {method}, {n} objects")
+    out = []
+    for c, s in _recognizers(config):
+        mine = [o for (cj, sj, _), o in zip(jobs, outcomes) if (cj, sj) == (c, s)]
+        confusion = ConfusionMatrix(method, "paper", c, n, s, tuple(names),
+                                    sum(o.confusion for o in mine)[np.ix_(back, back)])
+        out.append(Measurement(method, "paper", c, n, s, {1: np.stack([o.rates for o in mine])[:, back]}, {1: 0},
+                               confusion, float(np.mean([o.kept for o in mine])) if s else None))
+    return out
+
+
+def instance_data(stage: InstanceStage, replicate: int, method: str, objects: ObjectSet, order,
+                  settings: Settings) -> InstanceData:
+    """Replicate ``replicate``'s imprints of the objects ``order`` (label c is object ``order[c]``)."""
+    X, y, inst, point = [], [], [], []
+    for c, i in enumerate(order):
+        for j in range(1, settings.train_instances + 1):
+            imprints = stage.samples[SampleKey(replicate, method, i, j)].imprints    # (sessions, k, rows, cols)
+            sessions, k = imprints.shape[:2]
+            X.append(imprints.reshape(-1, *imprints.shape[2:]))
+            y.append(np.full(sessions * k, c))
+            inst.append(np.full(sessions * k, j))
+            point.append(np.tile(np.arange(k), sessions))
+    test = tuple(stage.samples[SampleKey(replicate, method, i, 0)].imprints[0] for i in order)
+    return InstanceData(np.concatenate(X), np.concatenate(y).astype(np.int64), np.concatenate(inst).astype(np.int64),
+                        np.concatenate(point).astype(np.int64), test, tuple(objects.names[i] for i in order))
+
+
+def instance_recognition(method: str, n: int, stage: InstanceStage, objects: ObjectSet, config: ExperimentConfig,
+                         runtime: Runtime) -> list[Measurement]:
+    """The instance protocol for one method on the first ``n`` objects: one :class:`Measurement` per
+    classifier and selection."""
+    settings = config.settings
+    names = objects.names[:n]
+    order = objects.by_name(n)
+    back = np.argsort(order)
+    data = [instance_data(stage, r, method, objects, order, settings) for r in range(config.replicates)]
+    jobs = [(r, c, s) for r in range(config.replicates) for c, s in _recognizers(config)]
+    work = [InstanceJob(data[r], Recognizer(c, s, config.params, config.threshold, config.features),
+                        settings.n_points, config.touch_sets_per_object, settings.seed, r) for r, c, s in jobs]
+    arrays = [a for d in data for a in (d.train_X, d.train_y, d.train_instance, d.train_point, *d.test)]
+    key = _recognition_key("instance", arrays, [settings.key(), config.threshold, config.params, jobs,
+                                                config.touch_sets_per_object, sorted(names), config.features])
+    outcomes = _run_jobs(runtime, key, InstanceOutcome, instance_job, work, f"instances: {method}, {n} objects")
+    out = []
+    for c, s in _recognizers(config):
+        mine = [o for (_, cj, sj), o in zip(jobs, outcomes) if (cj, sj) == (c, s)]
+        stack = np.stack([o.rates for o in mine])[:, :, back]                  # (replicates, k, objects)
+        rates = {k: stack[:, k - 1, :] for k in range(1, settings.n_points + 1)}
+        sets = {k: int(min(o.sets[k - 1] for o in mine)) for k in range(1, settings.n_points + 1)}
+        confusion = ConfusionMatrix(method, "instance", c, n, s, names,
+                                    sum(o.confusion for o in mine)[np.ix_(back, back)])
+        out.append(Measurement(method, "instance", c, n, s, rates, sets, confusion,
+                               float(np.mean([o.kept for o in mine])) if s else None))
+    return out
