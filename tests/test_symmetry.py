@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from meshsal.attention import symmetry
-from meshsal.attention.symmetry import mirror_descriptors, symmetries
+from meshsal.attention.constellations import mirror_descriptors, symmetries
 
 SIZE = 224
 
