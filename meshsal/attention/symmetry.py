@@ -73,12 +73,6 @@ _POWER = 4
 _LUMA = np.array([0.299, 0.587, 0.114], np.float32)
 
 
-def _gaussian_kernel(sigma: float) -> np.ndarray:
-    radius = max(1, int(np.ceil(2.5 * sigma)))
-    k = np.exp(-0.5 * (np.arange(-radius, radius + 1) / sigma) ** 2)
-    return (k / k.sum()).astype(np.float32)
-
-
 def _mirror_correlation(b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Correlation of each window of ``b`` with its mirror image about a vertical line.
 
@@ -111,7 +105,7 @@ def _mirror_correlation(b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     c = np.arange(w)
     present_on = np.concatenate([[0.0], np.cumsum(k_on)])[np.clip(np.minimum(c, w - 1 - c), 0, r)]
     present_between = np.concatenate([[0.0], np.cumsum(k_between)])[np.clip(np.minimum(c + 1, w - 1 - c), 0, r)]
-    along = _gaussian_kernel(_ALONG)
+    along = cv2.getGaussianKernel(2 * max(1, int(np.ceil(2.5 * _ALONG))) + 1, _ALONG, cv2.CV_32F)
     one = np.ones(1, np.float32)
     present_along = cv2.sepFilter2D(np.ones((h, 1), np.float32), -1, one, along, borderType=cv2.BORDER_CONSTANT)
     out = []
