@@ -2,9 +2,9 @@
 sizing (``transform``), curvature and mesh saliency (``curvature``) and the Embree scene that every
 ray caster shares (``embree``)."""
 
-from meshsal.mesh.geometry import (bounding_sphere, closed_orientation, face_areas, face_normals, vertex_adjacency,
-                                   vertex_normals)
+from meshsal.mesh.geometry import (bounding_sphere, closed_orientation, face_areas, face_normals, half_edges,
+                                   ring_max, vertex_adjacency, vertex_normals)
 from meshsal.mesh.record import Mesh, MeshError, Similarity
 
 __all__ = ["Mesh", "MeshError", "Similarity", "face_normals", "face_areas", "vertex_normals", "bounding_sphere",
-           "closed_orientation", "vertex_adjacency"]
+           "closed_orientation", "half_edges", "vertex_adjacency", "ring_max"]

@@ -22,7 +22,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from meshsal.mesh import Mesh, vertex_normals
+from meshsal.mesh.geometry import ring_max, vertex_adjacency, vertex_normals
+from meshsal.mesh.record import Mesh
 
 __all__ = ["mean_curvature", "vertex_areas", "gaussian_average", "mesh_saliency"]
 
@@ -183,27 +184,7 @@ def gaussian_average(vertices: np.ndarray, values: np.ndarray, weights: np.ndarr
     return np.divide(num, den, out=np.zeros_like(num), where=den > 1e-300)
 
 
-def _ring_max(faces: np.ndarray, n: int):
-    """A function ``s -> max of s over each vertex's 1-ring`` (-inf without neighbours)."""
-    from scipy import sparse
-
-    a = faces.ravel()
-    b = faces[:, [1, 2, 0]].ravel()
-    ones = np.ones(2 * a.size, dtype=np.int32)
-    A = sparse.coo_matrix((ones, (np.concatenate([a, b]), np.concatenate([b, a]))), shape=(n, n)).tocsr()
-    heads = np.flatnonzero(np.diff(A.indptr))
-    starts = A.indptr[heads]
-    dst = A.indices
-
-    def ring_max(s):
-        out = np.full(n, -np.inf)
-        out[heads] = np.maximum.reduceat(s[dst], starts)
-        return out
-
-    return ring_max
-
-
-def _suppress(s: np.ndarray, ring_max) -> np.ndarray:
+def _suppress(s: np.ndarray, adjacency) -> np.ndarray:
     """Lee et al.'s non-linear normalization of one scale's saliency.
 
     Rescale to [0, 1], then multiply by ``(1 - m)^2`` where ``m`` is the mean
@@ -214,7 +195,7 @@ def _suppress(s: np.ndarray, ring_max) -> np.ndarray:
     if hi - lo <= 0:
         return np.zeros_like(s)
     s = (s - lo) / (hi - lo)
-    peaks = s[(s > ring_max(s)) & (s < 1.0)]
+    peaks = s[(s > ring_max(adjacency, s)) & (s < 1.0)]
     m = peaks.mean() if peaks.size else 0.0
     return s * (1.0 - m) ** 2
 
@@ -263,7 +244,7 @@ def mesh_saliency(mesh: Mesh, scales=SCALES, max_cells: int | None = None) -> np
     if eps <= 0:
         raise ValueError(f"mesh {mesh.name!r}: all vertices coincide, saliency is undefined")
     H, area = _curvature_and_area(V, F)
-    ring_max = _ring_max(F, n)
+    adjacency = vertex_adjacency(F, n)
     cache: dict[float, np.ndarray] = {}
 
     def G(scale):
@@ -273,5 +254,5 @@ def mesh_saliency(mesh: Mesh, scales=SCALES, max_cells: int | None = None) -> np
 
     total = np.zeros(n)
     for scale in scales:
-        total += _suppress(np.abs(G(scale) - G(2.0 * scale)), ring_max)
+        total += _suppress(np.abs(G(scale) - G(2.0 * scale)), adjacency)
     return total

@@ -7,8 +7,8 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["face_normals", "face_areas", "vertex_normals", "bounding_sphere", "closed_orientation",
-           "vertex_adjacency"]
+__all__ = ["face_normals", "face_areas", "vertex_normals", "bounding_sphere", "closed_orientation", "half_edges",
+           "vertex_adjacency", "ring_max"]
 
 
 def face_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
@@ -61,7 +61,7 @@ def closed_orientation(vertices: np.ndarray, faces: np.ndarray) -> int:
     F = np.asarray(faces, dtype=np.int64).reshape(-1, 3)
     if len(F) < 4:
         return 0
-    start, end = F.reshape(-1), F[:, [1, 2, 0]].reshape(-1)
+    start, end = half_edges(F)
     if np.any(start == end):
         return 0
     # One sort pairs each edge's two uses: its key, and which way the use runs along it.
@@ -95,13 +95,44 @@ def bounding_sphere(vertices: np.ndarray) -> tuple[np.ndarray, float]:
     return center, float(np.sqrt(np.einsum("ij,ij->i", offset, offset).max()))
 
 
+def half_edges(faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Each face corner's directed edge to the next corner: (3m,) int64 start and end vertex ids.
+
+    Examples
+    --------
+    >>> [a.tolist() for a in half_edges([[0, 1, 2]])]
+    [[0, 1, 2], [1, 2, 0]]
+    """
+    F = np.asarray(faces, dtype=np.int64).reshape(-1, 3)
+    return F.ravel(), F[:, [1, 2, 0]].ravel()
+
+
 def vertex_adjacency(faces: np.ndarray, n_vertices: int):
     """Symmetric vertex adjacency of the mesh edges as a scipy CSR matrix of ones, (n, n)."""
     from scipy import sparse
 
-    F = np.asarray(faces)
-    i = np.concatenate([F[:, 0], F[:, 1], F[:, 2]])
-    j = np.concatenate([F[:, 1], F[:, 2], F[:, 0]])
+    i, j = half_edges(faces)
     A = sparse.coo_matrix((np.ones(i.size), (i, j)), shape=(n_vertices, n_vertices)).tocsr()
     A = ((A + A.T) > 0).astype(np.float64)
     return A.tocsr()
+
+
+def ring_max(adjacency, values: np.ndarray) -> np.ndarray:
+    """The largest of ``values`` over each vertex's 1-ring, (n,) float64; -inf for a vertex without neighbours.
+
+    Parameters
+    ----------
+    adjacency : (n, n) scipy CSR, e.g. :func:`vertex_adjacency`
+    values : (n,) float
+
+    Examples
+    --------
+    >>> A = vertex_adjacency([[0, 1, 2]], 4)
+    >>> ring_max(A, np.array([1.0, 2.0, 3.0, 9.0])).tolist()
+    [3.0, 3.0, 2.0, -inf]
+    """
+    values = np.asarray(values, dtype=np.float64)
+    heads = np.flatnonzero(np.diff(adjacency.indptr))
+    out = np.full(adjacency.shape[0], -np.inf)
+    out[heads] = np.maximum.reduceat(values[adjacency.indices], adjacency.indptr[heads])
+    return out

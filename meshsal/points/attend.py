@@ -25,6 +25,7 @@ from __future__ import annotations
 import numpy as np
 
 from meshsal.mesh import Mesh, vertex_normals
+from meshsal.mesh.geometry import half_edges
 from meshsal.points.record import InterestPoints
 from meshsal.points.rules import PointOptions, Rules
 from meshsal.points.select import TouchFilter, saliency_fill, select, surface_candidates
@@ -119,8 +120,7 @@ def edge_graph(mesh: Mesh):
     """(n, n) sparse CSR graph of the mesh edges, each weighted by its length once per face corner using it."""
     from scipy import sparse
 
-    F = mesh.faces
-    a, b = F.ravel(), F[:, [1, 2, 0]].ravel()
+    a, b = half_edges(mesh.faces)
     length = np.linalg.norm(mesh.vertices[a] - mesh.vertices[b], axis=1)
     # Zero-length edges would vanish from a sparse graph; keep them as tiny steps.
     length = np.maximum(length, 1e-12 * max(float(length.max()), 1e-300))

@@ -13,7 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from meshsal.mesh import face_areas
+from meshsal.mesh.geometry import face_areas, ring_max, vertex_adjacency
 
 __all__ = [
     "random_surface_points",
@@ -114,15 +114,9 @@ def field_peaks(field: np.ndarray, faces: np.ndarray) -> np.ndarray:
     [1]
     """
     f = np.asarray(field, dtype=np.float64)
-    F = np.asarray(faces, dtype=np.int64)
-    a, b = F.ravel(), F[:, [1, 2, 0]].ravel()
-    src, dst = np.concatenate([a, b]), np.concatenate([b, a])
-    ring_max = np.full(f.shape, np.inf)
-    has_ring = np.zeros(f.shape, dtype=bool)
-    has_ring[src] = True
-    ring_max[has_ring] = -np.inf
-    np.maximum.at(ring_max, src, f[dst])
-    peaks = np.flatnonzero(has_ring & (f > ring_max))
+    adjacency = vertex_adjacency(faces, f.size)
+    has_ring = np.diff(adjacency.indptr) > 0
+    peaks = np.flatnonzero(has_ring & (f > ring_max(adjacency, f)))
     return peaks[np.lexsort((peaks, -f[peaks]))]
 
 
