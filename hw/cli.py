@@ -39,7 +39,7 @@ def register(subparsers) -> None:
                     "mesh file's frame and units, plus the sensor's dimensions; JSON and a CSV beside it.")
     p.add_argument("mesh", help="mesh file, or a toy name (cow, glasses, cup, hand, plane, dromedary)")
     p.add_argument("--out", required=True, help="plan to write (.json; the .csv goes beside it)")
-    p.add_argument("--size-mm", type=float, default=150.0, help="object diagonal for planning (default 150)")
+    p.add_argument("--size-mm", type=float, default=150.0, help="principal-frame box diagonal of the object for planning, mm (default 150)")
     p.add_argument("--n", type=int, default=15, help="number of points (default 15)")
     p.add_argument("--method", default="attention", choices=POINT_METHODS.names(),
                    help=f"interest point method (default attention): {POINT_METHODS.help_text()}")
@@ -60,7 +60,7 @@ def _cmd_export(args) -> int:
 
 
 def _cmd_plan(args) -> int:
-    from meshsal.objects.toys import load_object
+    from meshsal.objects import load_object
 
     from hw.plan import make_plan, save_plan
 

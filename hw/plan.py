@@ -144,8 +144,8 @@ def make_plan(mesh, n: int = 15, method: str = "attention", size_mm: float = 150
     n, method, seed :
         Passed to ``meshsal.interest_points``.
     size_mm : float
-        The mesh is scaled to this bounding-box diagonal for planning
-        (``meshsal.scale_to``), as the imprints are simulated.
+        The mesh is scaled to this principal-frame box diagonal for planning
+        (``meshsal.mesh.transform.scale_to_principal``), as the points are chosen and the imprints simulated.
     sensor : tactile.Sensor, optional
         Default ``tactile.Sensor()``.
     source : str
@@ -158,9 +158,10 @@ def make_plan(mesh, n: int = 15, method: str = "attention", size_mm: float = 150
     """
     import meshsal
     import tactile
+    from meshsal.mesh.transform import scale_to_principal
 
     sensor = tactile.Sensor() if sensor is None else sensor
-    scaled = meshsal.scale_to(mesh, size_mm)
+    scaled = scale_to_principal(mesh, size_mm)
     pts = meshsal.interest_points(scaled, n=n, method=method, seed=seed, quiet=quiet, pad_width=sensor.width_mm)
     # The pad settles on the plane tactile fits over its footprint, with tactile's angle-0 image axes.
     poses = tactile.sensor_poses(scaled, pts.positions, pts.normals, sensor)

@@ -267,7 +267,7 @@ def _parser() -> argparse.ArgumentParser:
 
     p = argparse.ArgumentParser(prog="python -m hw.simdevice", description=__doc__.split("\n\n")[0])
     p.add_argument("--object", required=True, help="a toy name (meshsal.objects.toys.NAMES) or a mesh file")
-    p.add_argument("--size-mm", type=float, default=150.0, help="object diagonal in mm (default 150)")
+    p.add_argument("--size-mm", type=float, default=150.0, help="principal-frame box diagonal of the object in mm (default 150)")
     p.add_argument("--points", metavar="PLAN_JSON", help="press the points of this probe plan")
     p.add_argument("--n", type=int, default=15, help="interest points without a plan (default 15)")
     p.add_argument("--method", default="random", choices=POINT_METHODS.names(),
@@ -302,14 +302,14 @@ def main(argv: list[str] | None = None) -> int:
         print(f"simdevice: {text}", file=sys.stderr, flush=True)
 
     try:
-        import meshsal
         import tactile
-        from meshsal.objects.toys import load_object
+        from meshsal.mesh.transform import scale_to_principal
+        from meshsal.objects import load_object
 
         from hw.plan import load_plan
 
         plan = load_plan(args.points) if args.points else None
-        mesh = meshsal.scale_to(load_object(args.object), plan.size_mm if plan is not None else args.size_mm)
+        mesh = scale_to_principal(load_object(args.object), plan.size_mm if plan is not None else args.size_mm)
         ids, positions, normals = press_targets(mesh, plan, n=args.n, method=args.method, seed=args.seed)
         sensor = tactile.Sensor(rows=args.rows, cols=args.cols, mode=args.mode)
         imprints = tactile.imprints(mesh, positions, normals, sensor)

@@ -27,6 +27,7 @@ _EXPORTS = {
     "MeshRepairWarning": "mesh.io",
     "scale_to": "mesh.transform",
     "normalize": "mesh.transform",
+    "scale_to_principal": "mesh.transform",
     "mean_curvature": "mesh.curvature",
     "mesh_saliency": "mesh.curvature",
     "Camera": "views.render",

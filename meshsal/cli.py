@@ -59,7 +59,7 @@ def _cmd_render(args) -> int:
     from meshsal.views.overlay import tile
     from meshsal.util.progress import progress
     from meshsal.views.render import render_views, view_rig
-    from meshsal.objects.toys import load_object
+    from meshsal.objects import load_object
 
     if args.size < 16:
         raise ValueError(f"--size must be at least 16 pixels, got {args.size}")
@@ -92,7 +92,7 @@ def _add_points(subparsers) -> None:
 
     p = subparsers.add_parser(
         "points", help="choose interest points on a mesh by visual attention (or a baseline)",
-        description="Scale MESH to --size-mm, render the 72 views, compute their saliency and choose --n "
+        description="Scale MESH to --size-mm (principal-frame box diagonal), render the 72 views, compute their saliency and choose --n "
                     "interest points (the paper's pipeline, or a baseline with --method). Writes "
                     "saliency.ply (mesh saliency as vertex quality and colours), points.json and points.csv "
                     "(ids from 1, in the mesh file's own units and frame), views.png (the best set's four "
@@ -103,7 +103,8 @@ def _add_points(subparsers) -> None:
     p.add_argument("--method", choices=POINT_METHODS.names(), default="attention",
                    help=f"how to choose them (default attention): {POINT_METHODS.help_text()}")
     p.add_argument("--size-mm", type=float, default=150.0,
-                   help="scale the mesh to this bounding-box diagonal in mm first (default 150)")
+                   help="scale the mesh to this principal-frame box diagonal in mm first, as the experiment does "
+                        "(default 150)")
     p.add_argument("--pad-mm", type=float, default=32.0,
                    help="width of the tactile pad in mm (default 32: 16 x 16 taxels at 2 mm)")
     p.add_argument("--min-spacing-mm", type=float, default=None,
@@ -127,7 +128,7 @@ def _add_points(subparsers) -> None:
 
 def _cmd_points(args) -> int:
     from meshsal.views import overlay
-    from meshsal.util.atomic import write_png, write_text
+    from meshsal.util.atomic import write_png
     from meshsal.mesh.curvature import mesh_saliency
     from meshsal.mesh.io import save_ply
     from meshsal.mesh import Similarity
@@ -135,8 +136,8 @@ def _cmd_points(args) -> int:
     from meshsal.points.learned import TouchModel
     from meshsal.points import (MODEL_METHODS, attention_combination, attention_maps, best_view_set, points_by_method,
                          view_channels)
-    from meshsal.objects.toys import load_object
-    from meshsal.mesh.transform import scale_to
+    from meshsal.mesh.transform import scale_to_principal
+    from meshsal.objects import load_object
 
     if args.size < 16:
         raise ValueError(f"--size must be at least 16 pixels, got {args.size}")
@@ -145,7 +146,7 @@ def _cmd_points(args) -> int:
         raise ValueError(f"--method {args.method} --combination {args.combination} needs --model FILE, a touch "
                          f"model written by 'visuotactile experiment' (its touch_models/ folder)")
     model = None if args.model is None else TouchModel.load(args.model)
-    mesh = scale_to(load_object(args.mesh), args.size_mm)
+    mesh = scale_to_principal(load_object(args.mesh), args.size_mm)
     vertex_saliency = mesh_saliency(mesh)
     seen = view_channels(mesh, size=args.size, vertex_saliency=vertex_saliency, quiet=args.quiet)
     weights = model.channel_weights if combination == "learned" else None
@@ -167,16 +168,7 @@ def _cmd_points(args) -> int:
                 "pad_mm": args.pad_mm, "touch_check": args.touch,
                 "model": None if args.model is None else str(args.model), "channel_weights": weights}
     pts.save(args.out / "points.json", frame=mesh.transform, source=str(args.mesh), settings=settings)
-    positions = to_source(pts.positions)
-    normals = mesh.transform.direction_to_source(pts.normals)
-    records = [{"id": k + 1, "vertex": int(pts.vertex_ids[k]), "position": positions[k].tolist(),
-                "normal": normals[k].tolist(), "score": float(pts.scores[k]), "votes": int(pts.votes[k])}
-               for k in range(len(pts))]
-    lines = ["id,vertex,x,y,z,nx,ny,nz,score,votes"]
-    for r in records:
-        lines.append(",".join([str(r["id"]), str(r["vertex"])] + [repr(float(v)) for v in r["position"]]
-                              + [repr(float(v)) for v in r["normal"]] + [repr(r["score"]), str(r["votes"])]))
-    write_text(args.out / "points.csv", "\n".join(lines) + "\n")
+    pts.save_csv(args.out / "points.csv", frame=mesh.transform)
 
     best = pts.best_set if pts.best_set >= 0 else best_view_set(maps)
     write_png(args.out / "views.png", overlay.views_picture(views, maps, range(4 * best, 4 * best + 4),

@@ -21,7 +21,8 @@ def register(subparsers) -> None:
                    help="points.json from 'visuotactile points'")
     p.add_argument("--out", type=Path, required=True, metavar="SET.npz", help="imprint set to write")
     p.add_argument("--size-mm", type=float, default=150.0,
-                   help="bounding-box diagonal the mesh is scaled to, in mm (default 150)")
+                   help="principal-frame box diagonal the mesh is scaled to, in mm, as 'visuotactile points' and the "
+                        "experiment do (default 150)")
     p.add_argument("--mode", choices=SENSOR_MODES.names(), default=default.mode,
                    help=f"contour (the paper's image) or pressure (default {default.mode})")
     p.add_argument("--plane", choices=PLANES, default=default.plane,
@@ -47,8 +48,8 @@ def read_points(path) -> tuple:
 
 
 def _cmd_imprints(args) -> int:
-    from meshsal import scale_to
-    from meshsal.objects.toys import load_object
+    from meshsal.mesh.transform import scale_to_principal
+    from meshsal.objects import load_object
     from meshsal.util.atomic import write_png
     from tactile.imprint_set import ImprintSet
     from tactile.picture import imprint_grid
@@ -60,7 +61,7 @@ def _cmd_imprints(args) -> int:
     sensor = Sensor(pitch_mm=args.pitch_mm, depth_mm=args.depth_mm, mode=args.mode,
                     supersample=args.supersample, plane=args.plane)
     source_positions, normals, ids = read_points(args.points)
-    mesh = scale_to(load_object(args.mesh), args.size_mm)
+    mesh = scale_to_principal(load_object(args.mesh), args.size_mm)
     positions = mesh.transform.apply(source_positions)
     normals = mesh.transform.apply_direction(normals)
     images = imprints(mesh, positions, normals, sensor)

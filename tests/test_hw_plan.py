@@ -6,6 +6,7 @@ import json
 import numpy as np
 import pytest
 
+from meshsal.mesh.transform import principal_diagonal
 from hw.plan import load_plan, make_plan, matrix_from_quaternion, quaternion_from_matrix, save_plan
 from meshsal.mesh import Similarity
 from shapes import icosphere
@@ -29,7 +30,7 @@ def test_plan_on_a_sphere_in_metres(tmp_path):
     mesh = icosphere(radius=0.05, center=center)
     plan = make_plan(mesh, n=6, method="uniform", size_mm=150.0, source="ball.obj")
     assert len(plan.points) == 6 and plan.mesh == "ball.obj"
-    diagonal_m = np.linalg.norm(mesh.vertices.max(0) - mesh.vertices.min(0))
+    diagonal_m = principal_diagonal(mesh.vertices, mesh.faces)[1]       # the experiment's sizing rule
     assert plan.frame.scale == pytest.approx(150.0 / diagonal_m)
     assert plan.sensor["width"] == pytest.approx(plan.sensor["width_mm"] / plan.frame.scale)
     for p in plan.points:

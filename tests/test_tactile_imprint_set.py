@@ -101,11 +101,13 @@ def write_points(path, mesh_scale, positions, normals):
 def test_imprints_command_writes_set_and_picture(tmp_path):
     from classify.cli import main
 
-    # A sphere of radius 0.4 in file units; scaled to a 150 mm diagonal its radius is 150 / (2 sqrt 3).
+    # A sphere of radius 0.4 in file units, scaled as the experiment scales objects: 150 mm principal-frame diagonal.
+    from meshsal.mesh.transform import principal_diagonal
+
     sphere = shapes.sphere(radius=0.4, n=24)
     shapes.write_obj(tmp_path / "sphere.obj", sphere)
-    radius_mm = 150.0 / (2.0 * np.sqrt(3.0))
-    scale = radius_mm / 0.4
+    scale = 150.0 / principal_diagonal(sphere.vertices, sphere.faces)[1]
+    radius_mm = 0.4 * scale
     top, side = [0.0, radius_mm, 0.0], [radius_mm, 0.0, 0.0]
     write_points(tmp_path / "points.json", scale, [top, side], [[0, 1, 0], [1, 0, 0]])
     out = tmp_path / "out" / "set.npz"

@@ -15,7 +15,7 @@ from pathlib import Path
 from meshsal.objects import toys, ycb
 from meshsal.mesh import Mesh
 
-__all__ = ["OBJECT_SETS", "ObjectRef", "resolve_objects", "load_ref"]
+__all__ = ["OBJECT_SETS", "ObjectRef", "resolve_objects", "load_ref", "load_object"]
 
 OBJECT_SETS = {"toys": toys.NAMES, "ycb": ycb.NAMES}
 
@@ -100,3 +100,24 @@ def load_ref(ref: ObjectRef, seed: int = 0) -> Mesh:
     if ref.kind == "toy":
         return toys.make(ref.name, seed=seed)
     return load_mesh(ref.path).replace(name=ref.name)
+
+
+def load_object(spec, seed: int = 0) -> Mesh:
+    """One object by name or file: a mesh file, a toy or a YCB scan (a file of that name wins).
+
+    The command line accepts any of these wherever it takes a mesh, so the
+    embedded objects need no export step.
+
+    Parameters
+    ----------
+    spec : str or os.PathLike
+        A mesh file path (OBJ, PLY, OFF, STL), one of ``toys.NAMES`` or one of ``ycb.NAMES``.
+    seed : int
+        The toy's paint seed.
+
+    Examples
+    --------
+    >>> load_object("cup").name, load_object("banana").name
+    ('cup', 'banana')
+    """
+    return load_ref(_ref(str(spec)), seed)

@@ -36,7 +36,7 @@ import numpy as np
 from meshsal.objects import sdf
 from meshsal.mesh import Mesh, face_areas
 
-__all__ = ["NAMES", "make", "repaint", "load_object"]
+__all__ = ["NAMES", "make", "repaint"]
 
 NAMES = ("cow", "glasses", "cup", "hand", "plane", "dromedary")
 
@@ -489,34 +489,3 @@ def _dromedary() -> _Design:
 
 _DESIGNS = {"cow": _cow, "glasses": _glasses, "cup": _cup, "hand": _hand, "plane": _plane,
             "dromedary": _dromedary}
-
-
-def load_object(spec, seed: int = 0) -> Mesh:
-    """A mesh file, or an embedded object (a toy or a YCB scan) when ``spec`` names one and no such file exists.
-
-    The command line accepts any of these wherever it takes a mesh, so the
-    embedded objects need no export step.
-
-    Parameters
-    ----------
-    spec : str or os.PathLike
-        A mesh file path (OBJ, PLY, OFF, STL), one of :data:`NAMES` or one
-        of ``meshsal.objects.ycb.NAMES``.
-    seed : int
-        The toy's paint seed.
-
-    Examples
-    --------
-    >>> load_object("cup").name, load_object("banana").name
-    ('cup', 'banana')
-    """
-    from pathlib import Path
-
-    from meshsal.objects import ycb
-    from meshsal.mesh.io import load_mesh
-
-    if str(spec) in NAMES and not Path(spec).exists():
-        return make(str(spec), seed=seed)
-    if str(spec) in ycb.NAMES and not Path(spec).exists():
-        return ycb.load(str(spec))
-    return load_mesh(spec)
