@@ -26,7 +26,7 @@ import numpy as np
 
 import meshsal
 from meshsal import attention
-from meshsal.views import render
+from meshsal.views import cameras as cameras_mod, render
 from meshsal.attention.combine import channel_function
 from meshsal.mesh.curvature import mesh_saliency
 
@@ -58,7 +58,7 @@ def channel_over_views(name, views, vertex_saliency, pool):
 
 def bench_channels(mesh_path: Path, size: int, repeats: int, threads: int) -> None:
     mesh = meshsal.load_mesh(mesh_path)
-    cameras = [c for s in render.view_rig() for c in s]
+    cameras = [c for s in cameras_mod.view_rig() for c in s]
     start = time.perf_counter()
     views = render.render_views(mesh, cameras, size=size)
     render_s = time.perf_counter() - start

@@ -21,7 +21,8 @@ from meshsal import load_mesh, scale_to
 from meshsal.attention import saliency
 from meshsal.mesh.curvature import mesh_saliency
 from meshsal.points import attention_points, interest_points
-from meshsal.views.render import render_views, view_rig
+from meshsal.views.cameras import view_rig
+from meshsal.views.render import render_views
 
 DEFAULT_MESHES = Path(__file__).resolve().parents[2] / "shared" / "meshes"
 MESHES = (("cow (spot, textured)", "spot/spot.obj"), ("nefertiti", "nefertiti.obj"))

@@ -32,7 +32,8 @@ import numpy as np
 from meshsal import load_mesh
 from meshsal.mesh.embree import embree_scene
 from meshsal.mesh import bounding_sphere
-from meshsal.views.render import _candidates, _hull_points, _pixel_grid, _rays, render_views, view_rig
+from meshsal.views.cameras import camera_rays, view_rig
+from meshsal.views.render import _candidates, _hull_points, _pixel_grid, render_views
 from meshsal.views.tracer import tracer
 
 DEFAULT_MESHES = Path(__file__).resolve().parents[2] / "shared" / "meshes"
@@ -57,7 +58,7 @@ def every_pixel_rays(mesh, cameras, size):
     grid = _pixel_grid(size)
     rays = []
     for c in cameras:
-        origins, directions, _ = _rays(c, center, radius, grid.xy1)
+        origins, directions, _ = camera_rays(c, center, radius, grid.xy1)
         rays.append(np.hstack([origins, np.broadcast_to(directions, origins.shape)]))
     return np.vstack(rays)
 
@@ -66,7 +67,7 @@ def candidate_rays(mesh, cameras, size):
     """One (origins, direction) pair per view: the rays the renderer casts."""
     center, radius = bounding_sphere(mesh.vertices)
     hull, grid = _hull_points(mesh.vertices), _pixel_grid(size)
-    return [_rays(c, center, radius, grid.xy1[_candidates(c, center, radius, grid, hull)])[:2] for c in cameras]
+    return [camera_rays(c, center, radius, grid.xy1[_candidates(c, center, radius, grid, hull)])[:2] for c in cameras]
 
 
 def open3d_contenders(mesh, every, same) -> dict:

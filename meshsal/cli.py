@@ -58,7 +58,8 @@ def _cmd_render(args) -> int:
     from meshsal.util.atomic import write_png
     from meshsal.views.overlay import tile
     from meshsal.util.progress import progress
-    from meshsal.views.render import render_views, view_rig
+    from meshsal.views.cameras import view_rig
+    from meshsal.views.render import render_views
     from meshsal.objects import load_object
 
     if args.size < 16:

@@ -260,7 +260,8 @@ def test_map_peaks_thresholds_relative_to_the_maximum():
 
 @pytest.mark.parametrize("projection", ["orthographic", "perspective"])
 def test_project_pixel_paper_matches_face_id_mapping(projection):
-    from meshsal.views.render import Camera, render, surface_points, view_rig
+    from meshsal.views.cameras import Camera, view_rig
+    from meshsal.views.render import render, surface_points
 
     mesh, _, _ = planted_sphere()
     cameras = [view_rig()[0][0], view_rig()[9][3], view_rig()[17][1],

@@ -5,7 +5,8 @@ import pytest
 
 from meshsal.mesh.embree import embree_scene
 from meshsal.mesh import Mesh
-from meshsal.views.render import Camera, project, render, render_views, surface_points, view_rig
+from meshsal.views.cameras import Camera, project, view_rig
+from meshsal.views.render import render, render_views, surface_points
 from meshsal.views.tracer import tracer
 from shapes import icosphere, plane
 

@@ -9,7 +9,8 @@ from shapes import icosphere
 from meshsal import attention
 from meshsal.attention import CHANNELS, SaliencyResult, combine_maps, curvature, erode_mask, saliency
 from meshsal.attention.combine import outline_radius
-from meshsal.views.render import project, render, surface_points, view_rig
+from meshsal.views.cameras import project, view_rig
+from meshsal.views.render import render, surface_points
 
 SIZE = 96
 

@@ -3,7 +3,8 @@
 import numpy as np
 
 import meshsal
-from meshsal.views.render import render_views, view_rig
+from meshsal.views.cameras import view_rig
+from meshsal.views.render import render_views
 
 
 def test_views_are_the_same_with_one_thread_and_with_two():

@@ -184,7 +184,8 @@ def test_a_mesh_without_faces_is_refused():
 
 def test_renders_of_a_scanned_bust_match_a_robust_scene(shared_mesh):
     from meshsal import load_mesh
-    from meshsal.views.render import render_views, view_rig
+    from meshsal.views.cameras import view_rig
+    from meshsal.views.render import render_views
 
     bust = load_mesh(shared_mesh("nefertiti.obj"))
     cameras = [c for s in view_rig() for c in s]

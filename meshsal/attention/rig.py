@@ -1,6 +1,6 @@
 """Attention on a mesh's 72 views: render the rig once, compute the channels once, combine as needed.
 
-:func:`view_channels` renders the 72 views of :func:`meshsal.views.render.view_rig`
+:func:`view_channels` renders the 72 views of :func:`meshsal.views.cameras.view_rig`
 and computes each one's eight channel maps; :func:`attention_maps` combines
 them into saliency maps with any combination, so several point methods share
 one rendering.  :func:`saliency_maps` does both in one call.
@@ -31,7 +31,8 @@ class ViewChannels:
 
 
 def _rig_views(mesh: Mesh, size: int, threads: int | None) -> list:
-    from meshsal.views.render import render_views, view_rig
+    from meshsal.views.cameras import view_rig
+    from meshsal.views.render import render_views
 
     return render_views(mesh, [c for s in view_rig() for c in s], size=size, threads=threads)
 

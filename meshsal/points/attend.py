@@ -2,7 +2,7 @@
 
 The paper's pipeline (Rouhafzay, Pedneault & Cretu, 2017), done on the mesh:
 
-1. render the 72 views of :func:`meshsal.views.render.view_rig` and compute
+1. render the 72 views of :func:`meshsal.views.cameras.view_rig` and compute
    each one's saliency map (:mod:`meshsal.attention.rig`, masked to the
    object; the mesh saliency of the curvature channel is computed once);
 2. choose the best set of 4 views: the highest average saliency level, where

@@ -89,7 +89,7 @@ def visible_points(view, points: np.ndarray, tolerance: float = 2.0):
     rows_cols : (k, 2) float64
     visible : (k,) bool
     """
-    from meshsal.views.render import project
+    from meshsal.views.cameras import project
 
     P = np.atleast_2d(np.asarray(points, dtype=np.float64))
     rc = project(view, P)

@@ -1,29 +1,9 @@
-"""CPU ray-cast renderer on Embree: the 72-view rig, views with exact pixel-to-surface maps.
+"""CPU ray-cast renderer on Embree: views with exact pixel-to-surface maps.
 
-Every pixel of a :class:`View` knows the face it sees (``face_id``) and where
-on that face (``bary``), so later stages map any pixel back onto the surface
-exactly, with no approximate geometry.
-
-The view rig
-------------
-18 sets of 4 cameras.  Set ``i`` turns around an axis ``a_i``; its 4 cameras
-sit on the great circle perpendicular to ``a_i``, 90 degrees apart, and look
-at the centre.  The axes follow a golden-angle spiral over the upper
-hemisphere with ``a_i . y`` falling evenly from 1 (set 0: the turntable
-around +y, first camera on +z) to 0 (axes in the horizontal plane, whose
-circles pass over both poles), so the 72 views together see the top, the
-bottom and every side.  Each set starts ``5 * i`` degrees further round its
-circle, so no two sets repeat a viewpoint.  A camera's ``up`` is its set's
-axis.
-
-Framing
--------
-Orthographic (default): the frame is a square of half-width
-``radius * (1 + margin)`` around the bounding sphere (centre of the bounding
-box, radius to the farthest vertex), the eye ``2 * radius`` before the centre.
-Perspective (the paper's camera): view angle ``fov_deg``, the eye at the
-distance where the bounding sphere plus the margin just fills the view.
-``depth`` is the distance from the eye along the viewing direction.
+Every pixel of a :class:`~meshsal.views.cameras.View` knows the face it sees
+(``face_id``) and where on that face (``bary``), so later stages map any
+pixel back onto the surface exactly, with no approximate geometry.  The
+cameras, the 72-view rig and their framing are in :mod:`meshsal.views.cameras`.
 
 Casting and shading
 -------------------
@@ -48,172 +28,13 @@ import cv2
 import numpy as np
 
 from meshsal.mesh import Mesh, bounding_sphere, vertex_normals
+from meshsal.views.cameras import Camera, View, camera_rays, eye_position, image_coords, pixel_size
 from meshsal.views.tracer import Tracer, tracer
 
-__all__ = ["Camera", "View", "view_rig", "render", "render_views", "surface_points", "project"]
+__all__ = ["render", "render_views", "surface_points"]
 
-N_SETS = 18
-VIEWS_PER_SET = 4
 AMBIENT = 0.3
 DEFAULT_GRAY = 0.8
-_GOLDEN_ANGLE = np.pi * (3.0 - np.sqrt(5.0))
-
-
-@dataclass(frozen=True, eq=False)
-class Camera:
-    """Where a view is taken from; the framing comes from the mesh at render time.
-
-    Attributes
-    ----------
-    direction : (3,) float64
-        Unit vector from the camera towards the object centre.
-    up : (3,) float64
-        Unit vector perpendicular to ``direction``; image rows run against it.
-    projection : {"orthographic", "perspective"}
-    fov_deg : float
-        Full view angle of the perspective camera.
-    margin : float
-        Fraction of the bounding-sphere radius left free around it.
-    set_index, view_index : int
-        Position in :func:`view_rig` (-1 for a free camera).
-    """
-
-    direction: np.ndarray
-    up: np.ndarray
-    projection: str = "orthographic"
-    fov_deg: float = 30.0
-    margin: float = 0.05
-    set_index: int = -1
-    view_index: int = -1
-
-    def __post_init__(self):
-        d = np.asarray(self.direction, dtype=np.float64).reshape(3)
-        u = np.asarray(self.up, dtype=np.float64).reshape(3)
-        if np.linalg.norm(d) == 0:
-            raise ValueError("camera direction must be a non-zero vector")
-        d = d / np.linalg.norm(d)
-        u = u - d * (u @ d)
-        if np.linalg.norm(u) < 1e-9:
-            raise ValueError("camera up must not be parallel to its direction")
-        object.__setattr__(self, "direction", d)
-        object.__setattr__(self, "up", u / np.linalg.norm(u))
-        if self.projection not in ("orthographic", "perspective"):
-            raise ValueError(f"projection must be 'orthographic' or 'perspective', got {self.projection!r}")
-        if not 0 < self.fov_deg < 180:
-            raise ValueError(f"fov_deg must lie in (0, 180), got {self.fov_deg}")
-        if self.margin < 0:
-            raise ValueError(f"margin must be >= 0, got {self.margin}")
-
-    @property
-    def right(self) -> np.ndarray:
-        """Unit vector along image columns: ``cross(direction, up)``."""
-        (dx, dy, dz), (ux, uy, uz) = self.direction.tolist(), self.up.tolist()
-        # Spelled out: np.cross costs ten times more on 3-vectors, and every view asks several times.
-        return np.array([dy * uz - dz * uy, dz * ux - dx * uz, dx * uy - dy * ux])
-
-
-@dataclass(frozen=True, eq=False)
-class View:
-    """One rendered image with its exact pixel-to-surface map.
-
-    Attributes
-    ----------
-    rgb : (H, W, 3) float32 in [0, 1]
-    depth : (H, W) float32, distance from the eye along the view direction; inf on background
-    face_id : (H, W) int32, the face seen at each pixel; -1 on background
-    bary : (H, W, 3) float32, barycentric weights of that face's three vertices
-    faces : (m, 3) int32, the rendered mesh's faces (shared, not copied)
-    camera : Camera
-    center : (3,) float64, centre of the framed bounding sphere
-    radius : float, its radius
-    eye : (3,) float64, the eye (perspective) or the centre of the image plane (orthographic)
-    pixel_size : float, world units per pixel (orthographic; at the centre's depth for perspective)
-
-    ``mask`` (pixels that see the object) and ``vertex_ids`` (the corners of
-    the face each pixel sees) are derived from ``face_id`` on access.
-    """
-
-    rgb: np.ndarray
-    depth: np.ndarray
-    face_id: np.ndarray
-    bary: np.ndarray
-    faces: np.ndarray
-    camera: Camera
-    center: np.ndarray
-    radius: float
-    eye: np.ndarray
-    pixel_size: float
-
-    @property
-    def size(self) -> int:
-        return int(self.rgb.shape[0])
-
-    @property
-    def mask(self) -> np.ndarray:
-        """(H, W) bool, the pixels that see the object."""
-        return self.face_id >= 0
-
-    @property
-    def vertex_ids(self) -> np.ndarray:
-        """(H, W, 3) int32, the three vertices (the face's corners) each pixel sees; -1 on background."""
-        out = np.full(self.face_id.shape + (3,), -1, np.int32)
-        seen = self.mask
-        out[seen] = self.faces[self.face_id[seen]]
-        return out
-
-
-def view_rig() -> list[list[Camera]]:
-    """The paper's 72 viewpoints: 18 sets of 4 cameras 90 degrees apart (see the module docstring).
-
-    Returns
-    -------
-    list of 18 lists of 4 Camera
-
-    Examples
-    --------
-    >>> rig = view_rig()
-    >>> len(rig), len(rig[0])
-    (18, 4)
-    >>> bool(np.allclose(rig[0][0].direction, [0, 0, -1]))  # the first camera sits on +z
-    True
-    """
-    rig = []
-    for i in range(N_SETS):
-        height = 1.0 - i / (N_SETS - 1)
-        ring = np.sqrt(1.0 - height**2)
-        azimuth = i * _GOLDEN_ANGLE
-        axis = np.array([ring * np.sin(azimuth), height, ring * np.cos(azimuth)])
-        reference = np.array([0.0, 0.0, 1.0]) if abs(axis[2]) < 0.9 else np.array([1.0, 0.0, 0.0])
-        e1 = reference - axis * (reference @ axis)
-        e1 /= np.linalg.norm(e1)
-        e2 = np.cross(axis, e1)
-        cameras = []
-        for k in range(VIEWS_PER_SET):
-            phi = np.deg2rad(5.0 * i + 90.0 * k)
-            position = np.cos(phi) * e1 + np.sin(phi) * e2
-            cameras.append(Camera(direction=-position, up=axis, set_index=i, view_index=VIEWS_PER_SET * i + k))
-        rig.append(cameras)
-    return rig
-
-
-def _eye(camera: Camera, center: np.ndarray, radius: float) -> np.ndarray:
-    """The eye (perspective) or the centre of the image plane (orthographic)."""
-    half = radius * (1.0 + camera.margin)
-    if camera.projection == "orthographic":
-        return center - camera.direction * 2.0 * radius
-    return center - camera.direction * half / np.sin(np.deg2rad(camera.fov_deg) / 2.0)
-
-
-def _image_coords(camera: Camera, center: np.ndarray, radius: float, size: int, points: np.ndarray) -> np.ndarray:
-    """Image coordinates (row, col), (k, 2) float64, of world points; pixel centres at half-integers."""
-    P = np.atleast_2d(np.asarray(points, dtype=np.float64))
-    x, y = ((P - center) @ np.stack([camera.right, camera.up], axis=1)).T
-    if camera.projection == "perspective":
-        z = (P - _eye(camera, center, radius)) @ camera.direction
-        scale = z * np.tan(np.deg2rad(camera.fov_deg) / 2.0)
-    else:
-        scale = radius * (1.0 + camera.margin)
-    return np.stack([(1.0 - y / scale) * size / 2.0, (x / scale + 1.0) * size / 2.0], axis=1)
 
 
 def _hull_points(vertices: np.ndarray) -> np.ndarray:
@@ -268,46 +89,13 @@ def _candidates(camera: Camera, center: np.ndarray, radius: float, grid: _PixelG
     image of its convex hull: on a bust only a third of the frame's rays are
     cast.  The filled polygon grows by a pixel to be safe at its rim.
     """
-    rc = _image_coords(camera, center, radius, grid.size, hull)
+    rc = image_coords(camera, center, radius, grid.size, hull)
     # OpenCV puts pixel centres at integers; 4 fractional bits keep the vertices' sub-pixel positions.
     xy = np.round(rc[:, ::-1] * 16.0 - 8.0).astype(np.int32)
     mask = np.zeros((grid.size, grid.size), np.uint8)
     cv2.fillConvexPoly(mask, cv2.convexHull(xy), 1, lineType=cv2.LINE_8, shift=4)
     inside = cv2.dilate(mask, np.ones((3, 3), np.uint8)).reshape(-1).view(bool)
     return np.flatnonzero(np.take(inside, grid.pixels))
-
-
-def _rays(camera: Camera, center: np.ndarray, radius: float, xy1: np.ndarray):
-    """Rays through image-plane points, ``xy1`` (k, 3) float32 rows (x, y, 1) from :func:`_pixel_grid`.
-
-    Returns ``origins`` (k, 3) float32, ``directions`` (k, 3) float32 or one
-    shared (1, 3) row for the orthographic camera, and the factor turning a
-    hit distance into depth along the view direction ((k,), or None when it
-    is 1).
-    """
-    # One matrix takes (x, y, 1) to the ray's origin (orthographic) or direction (perspective).
-    to_world = np.empty((3, 3), np.float32)
-    to_world[0], to_world[1] = camera.right, camera.up
-    eye = _eye(camera, center, radius).astype(np.float32)
-    if camera.projection == "orthographic":
-        to_world[:2] *= radius * (1.0 + camera.margin)
-        to_world[2] = eye
-        return xy1 @ to_world, camera.direction.astype(np.float32)[None], None
-    to_world[:2] *= np.tan(np.deg2rad(camera.fov_deg) / 2.0)
-    to_world[2] = camera.direction
-    directions = xy1 @ to_world
-    depth_factor = 1.0 / np.linalg.norm(directions, axis=1)
-    directions *= depth_factor[:, None]
-    return np.broadcast_to(eye, directions.shape).copy(), directions, depth_factor
-
-
-def _pixel_size(camera: Camera, radius: float, size: int) -> float:
-    """World units per pixel (at the centre's depth for a perspective camera)."""
-    half = radius * (1.0 + camera.margin)
-    if camera.projection == "orthographic":
-        return 2.0 * half / size
-    half_angle = np.deg2rad(camera.fov_deg) / 2.0
-    return 2.0 * half / np.sin(half_angle) * np.tan(half_angle) / size
 
 
 def _sample_texture(texture: np.ndarray, uv: np.ndarray) -> np.ndarray:
@@ -420,7 +208,7 @@ def _render_one(stage: _Stage, camera: Camera, images: _Images, k: int) -> View:
     grid = stage.grid
     cast = _candidates(camera, stage.center, stage.radius, grid, stage.hull)
     pixels = grid.pixels[cast]
-    origins, directions, depth_factor = _rays(camera, stage.center, stage.radius, np.take(grid.xy1, cast, axis=0))
+    origins, directions, depth_factor = camera_rays(camera, stage.center, stage.radius, np.take(grid.xy1, cast, axis=0))
     # Misses keep tfar = inf, which is the background's depth.
     hit = stage.tracer.first_hits(origins, directions)
     depth, face_id = images.depth[k], images.face_id[k]
@@ -433,7 +221,7 @@ def _render_one(stage: _Stage, camera: Camera, images: _Images, k: int) -> View:
     face = hit["primID"][hits]
     u, v = hit["u"][hits], hit["v"][hits]
     w = 1.0 - u - v
-    eye = _eye(camera, stage.center, stage.radius)
+    eye = eye_position(camera, stage.center, stage.radius)
     rgb = _shade(stage, camera, eye, face, np.take(stage.mesh.faces, face, axis=0), w, u, v)
     if rgb.ndim == 1:  # gray: scatter one channel, copy it densely to the others
         images.rgb[k][seen, 0] = rgb
@@ -445,7 +233,7 @@ def _render_one(stage: _Stage, camera: Camera, images: _Images, k: int) -> View:
     return View(rgb=images.rgb[k].reshape(shape + (3,)), depth=depth.reshape(shape),
                 face_id=face_id.reshape(shape), bary=images.bary[k].reshape(shape + (3,)),
                 faces=stage.mesh.faces, camera=camera, center=stage.center, radius=stage.radius, eye=eye,
-                pixel_size=_pixel_size(camera, stage.radius, grid.size))
+                pixel_size=pixel_size(camera, stage.radius, grid.size))
 
 
 def _check_size(size) -> int:
@@ -465,6 +253,7 @@ def render(mesh: Mesh, camera: Camera, size: int = 256) -> View:
     --------
     >>> from meshsal.mesh import Mesh
     >>> tri = Mesh(vertices=[[-1, -1, 0], [1, -1, 0], [0, 1, 0]], faces=[[0, 1, 2]])
+    >>> from meshsal.views.cameras import view_rig
     >>> view = render(tri, view_rig()[0][0], size=32)
     >>> view.rgb.shape, bool(view.mask[16, 16])
     ((32, 32, 3), True)
@@ -540,12 +329,3 @@ def surface_points(mesh: Mesh, view: View, rows, cols) -> np.ndarray:
         raise ValueError("some pixels show the background, not the surface")
     corners = mesh.vertices[mesh.faces[faces]]
     return np.einsum("kc,kcd->kd", view.bary[rows, cols].astype(np.float64), corners)
-
-
-def project(view: View, points: np.ndarray) -> np.ndarray:
-    """Image coordinates (row, col), (k, 2) float64, of world points; pixel centres at half-integers.
-
-    Pixel ``(i, j)`` covers ``[i, i+1) x [j, j+1)``, so a point seen at the
-    centre of pixel (i, j) projects to (i + 0.5, j + 0.5).
-    """
-    return _image_coords(view.camera, view.center, view.radius, view.size, points)
