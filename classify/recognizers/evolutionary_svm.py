@@ -35,14 +35,16 @@ there are none, as in LIBSVM.
 
 from __future__ import annotations
 
+import dataclasses
 import numbers
+from dataclasses import dataclass
 
 import numpy as np
 from sklearn.base import BaseEstimator, ClassifierMixin
 from sklearn.metrics.pairwise import rbf_kernel
 from sklearn.utils.validation import check_is_fitted
 
-__all__ = ["EvolutionarySVM", "solve_dual", "as_matrix"]
+__all__ = ["EvolutionarySVM", "Strategy", "solve_dual", "as_matrix"]
 
 
 def as_matrix(X, name="X"):
@@ -67,18 +69,12 @@ def as_matrix(X, name="X"):
     return X
 
 
-def solve_dual(K, Y, C=1.0, mu=4, lam=64, pairs=1, max_generations=3000, patience=300,
-               sigma0=0.5, seed=0):
-    """Solve several SVM duals sharing one kernel matrix with a (mu+lambda)-ES.
+@dataclass(frozen=True)
+class Strategy:
+    """The (mu+lambda) evolution strategy of :func:`solve_dual`.
 
-    Parameters
+    Attributes
     ----------
-    K : (n, n) float64
-        Kernel matrix of the training samples.
-    Y : (p, n) float64
-        One row of +-1 labels per binary problem (one-vs-rest: one per class).
-    C : float
-        Box constraint.
     mu, lam : int
         Parents and offspring per generation (per problem).
     pairs : int
@@ -90,6 +86,31 @@ def solve_dual(K, Y, C=1.0, mu=4, lam=64, pairs=1, max_generations=3000, patienc
         Initial step size as a fraction of C.
     seed : int
         Seed of the strategy's random generator.
+    """
+
+    mu: int = 4
+    lam: int = 64
+    pairs: int = 1
+    max_generations: int = 3000
+    patience: int = 300
+    sigma0: float = 0.5
+    seed: object = 0
+
+
+def solve_dual(K, Y, C=1.0, strategy: Strategy | None = None, **changes):
+    """Solve several SVM duals sharing one kernel matrix with a (mu+lambda)-ES.
+
+    Parameters
+    ----------
+    K : (n, n) float64
+        Kernel matrix of the training samples.
+    Y : (p, n) float64
+        One row of +-1 labels per binary problem (one-vs-rest: one per class).
+    C : float
+        Box constraint.
+    strategy : Strategy, optional
+        The strategy's settings (default ``Strategy()``), changed by any
+        ``**changes`` named as its fields (``max_generations=4000``...).
 
     Returns
     -------
@@ -108,10 +129,12 @@ def solve_dual(K, Y, C=1.0, mu=4, lam=64, pairs=1, max_generations=3000, patienc
     >>> bool(abs(a[0] @ [1, 1, -1, -1]) < 1e-9 and w[0] > 0)
     True
     """
+    es = dataclasses.replace(strategy or Strategy(), **changes)
+    mu, lam, pairs, sigma0 = es.mu, es.lam, es.pairs, es.sigma0
     K = np.asarray(K, dtype=np.float64)
     Y = np.atleast_2d(np.asarray(Y, dtype=np.float64))
     p, n = Y.shape
-    rng = np.random.default_rng(seed)
+    rng = np.random.default_rng(es.seed)
     tau = 1.0 / np.sqrt(2.0 * pairs)
     m = 2 * pairs
 
@@ -122,7 +145,7 @@ def solve_dual(K, Y, C=1.0, mu=4, lam=64, pairs=1, max_generations=3000, patienc
     rows = np.arange(p)[:, None]
     stall = 0
     generation = 0
-    for generation in range(1, max_generations + 1):
+    for generation in range(1, es.max_generations + 1):
         parent = rng.integers(0, mu, size=(p, lam))
         sigma = np.clip(S[rows, parent] * np.exp(tau * rng.standard_normal((p, lam))), 1e-6, 1.0)
         idx = rng.integers(0, n, size=(p, lam, m))
@@ -176,7 +199,7 @@ def solve_dual(K, Y, C=1.0, mu=4, lam=64, pairs=1, max_generations=3000, patienc
         A, G, S = newA, newG, newS
         F = cand_F[rows, best]
         stall = 0 if improved else stall + 1
-        if stall >= patience:
+        if stall >= es.patience:
             break
     top = np.argmax(F, axis=1)
     return A[np.arange(p), top], F[np.arange(p), top], generation
@@ -269,9 +292,8 @@ class EvolutionarySVM(ClassifierMixin, BaseEstimator):
         else:
             Y = np.where(codes[None, :] == np.arange(len(self.classes_))[:, None], 1.0, -1.0)
         alpha, self.fitness_, self.n_generations_ = solve_dual(
-            K, Y, C=float(self.C), mu=self.mu, lam=self.lam, pairs=self.pairs,
-            max_generations=self.max_generations, patience=self.patience,
-            sigma0=self.sigma0, seed=self.random_state)
+            K, Y, float(self.C), Strategy(self.mu, self.lam, self.pairs, self.max_generations, self.patience,
+                                          self.sigma0, self.random_state))
         self.intercept_ = np.array([_bias(K, a, yy, float(self.C)) for a, yy in zip(alpha, Y)])
         used = (alpha > 0).any(axis=0)
         self.support_ = np.flatnonzero(used)

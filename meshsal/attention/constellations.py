@@ -65,14 +65,16 @@ screen).
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 
 import cv2
 import numpy as np
 
+from meshsal.attention.local import luma
 from meshsal.attention.pyramid import check_image
 
-__all__ = ["symmetries", "Symmetries", "Keypoints", "sift_keypoints", "mirror_descriptors"]
+__all__ = ["symmetries", "ConstellationOptions", "Symmetries", "Keypoints", "sift_keypoints", "mirror_descriptors"]
 
 # Hough space of bilateral axes: 2-degree theta bins, r bins of 1% of the
 # image diagonal; the blur spreads a vote over about its localisation error.
@@ -370,27 +372,12 @@ def _rotational(kp, pairs, loc, shape, diag, sigma_s, sigma_d, min_rotation, n_c
     return np.array(centres).reshape(-1, 3), tuple(support)
 
 
-def symmetries(
-    img: np.ndarray,
-    *,
-    n_features: int = 200,
-    work_scale: float = 0.5,
-    k: int = 5,
-    match_ratio: float = 0.5,
-    sigma_s: float = 1.0,
-    sigma_d: float | None = 0.25,
-    min_distance: float = 0.02,
-    min_rotation_deg: float = 15.0,
-    n_axes: int = 3,
-    n_centres: int = 3,
-    min_strength: float = 0.25,
-    min_pairs: int = 2,
-) -> Symmetries:
-    """Strongest bilateral axes and rotation centres of an image (Loy & Eklundh 2006).
+@dataclass(frozen=True)
+class ConstellationOptions:
+    """How :func:`symmetries` matches features and keeps symmetries.
 
-    Parameters
+    Attributes
     ----------
-    img : (H, W, 3) float32 in [0, 1]
     n_features : int, default 200
         SIFT keypoints kept (strongest by contrast); bounds the cost.
     work_scale : float, default 0.5
@@ -422,6 +409,52 @@ def symmetries(
         distinct keypoint locations): a lone pair of look-alike features in
         clutter is no symmetry.
 
+    """
+
+    n_features: int = 200
+    work_scale: float = 0.5
+    k: int = 5
+    match_ratio: float = 0.5
+    sigma_s: float = 1.0
+    sigma_d: float | None = 0.25
+    min_distance: float = 0.02
+    min_rotation_deg: float = 15.0
+    n_axes: int = 3
+    n_centres: int = 3
+    min_strength: float = 0.25
+    min_pairs: int = 2
+
+    def __post_init__(self):
+        if int(self.n_features) < 2:
+            raise ValueError(f"symmetry: n_features must be at least 2, got {self.n_features}")
+        if not 0.0 < self.work_scale <= 1.0:
+            raise ValueError(f"symmetry: work_scale must be in (0, 1], got {self.work_scale}")
+        if int(self.k) < 1:
+            raise ValueError(f"symmetry: k must be at least 1, got {self.k}")
+        if not self.match_ratio > 0.0:
+            raise ValueError(f"symmetry: match_ratio must be positive, got {self.match_ratio}")
+        if not self.sigma_s > 0.0:
+            raise ValueError(f"symmetry: sigma_s must be positive, got {self.sigma_s}")
+        if self.sigma_d is not None and not self.sigma_d > 0.0:
+            raise ValueError(f"symmetry: sigma_d must be positive or None, got {self.sigma_d}")
+        if int(self.n_axes) < 0 or int(self.n_centres) < 0:
+            raise ValueError(f"symmetry: n_axes and n_centres must be >= 0, got {self.n_axes}, {self.n_centres}")
+        if not 0.0 <= self.min_strength <= 1.0:
+            raise ValueError(f"symmetry: min_strength must be in [0, 1], got {self.min_strength}")
+        if int(self.min_pairs) < 1:
+            raise ValueError(f"symmetry: min_pairs must be at least 1, got {self.min_pairs}")
+
+
+def symmetries(img: np.ndarray, options: ConstellationOptions | None = None, **changes) -> Symmetries:
+    """Strongest bilateral axes and rotation centres of an image (Loy & Eklundh 2006).
+
+    Parameters
+    ----------
+    img : (H, W, 3) float32 in [0, 1]
+    options : ConstellationOptions, optional
+        Default ``ConstellationOptions()``, changed by any ``**changes``
+        named as its fields (``sigma_d=None``...).
+
     Returns
     -------
     Symmetries
@@ -438,35 +471,35 @@ def symmetries(
     True
     """
     img = check_image(img, "symmetry")
-    _check_params(n_features, work_scale, k, match_ratio, sigma_s, sigma_d, n_axes, n_centres, min_strength, min_pairs)
+    o = dataclasses.replace(options or ConstellationOptions(), **changes)
     h, w = img.shape[:2]
-    gray = img @ np.array([0.299, 0.587, 0.114], np.float32)
-    kp = sift_keypoints(gray, n_features, work_scale)
+    gray = luma(img)
+    kp = sift_keypoints(gray, o.n_features, o.work_scale)
     none = np.zeros((0, 3))
     if len(kp.xy) < 2:
         return Symmetries(kp, none, (), none, ())
     diag = float(np.hypot(h, w))
-    sd = None if sigma_d is None else sigma_d * diag
-    allowed = _allowed_pairs(kp, max(min_distance * diag, 1.0))
+    sd = None if o.sigma_d is None else o.sigma_d * diag
+    allowed = _allowed_pairs(kp, max(o.min_distance * diag, 1.0))
     loc = np.unique(np.rint(kp.xy[:, 1]) * (w + 1) + np.rint(kp.xy[:, 0]), return_inverse=True)[1]
-    mirror_pairs = _matches(kp.descriptors, mirror_descriptors(kp.descriptors), allowed, k, match_ratio)
+    mirror_pairs = _matches(kp.descriptors, mirror_descriptors(kp.descriptors), allowed, o.k, o.match_ratio)
     axes, axis_pairs = none, ()
-    if len(mirror_pairs) and n_axes:
+    if len(mirror_pairs) and o.n_axes:
         centre = np.array([(w - 1) / 2.0, (h - 1) / 2.0])
-        axes, axis_pairs = _bilateral(kp, mirror_pairs, loc, centre, diag, sigma_s, sd, n_axes, min_pairs)
-    rotation_pairs = _matches(kp.descriptors, kp.descriptors, allowed, k, match_ratio)
+        axes, axis_pairs = _bilateral(kp, mirror_pairs, loc, centre, diag, o.sigma_s, sd, o.n_axes, o.min_pairs)
+    rotation_pairs = _matches(kp.descriptors, kp.descriptors, allowed, o.k, o.match_ratio)
     centres, centre_pairs = none, ()
-    if len(rotation_pairs) and n_centres:
-        min_rotation = np.radians(min_rotation_deg)
+    if len(rotation_pairs) and o.n_centres:
+        min_rotation = np.radians(o.min_rotation_deg)
         centres, centre_pairs = _rotational(
-            kp, rotation_pairs, loc, (h, w), diag, sigma_s, sd, min_rotation, n_centres, min_pairs
+            kp, rotation_pairs, loc, (h, w), diag, o.sigma_s, sd, min_rotation, o.n_centres, o.min_pairs
         )
     top = max(axes[:, 2].max(initial=0.0), centres[:, 2].max(initial=0.0))
     if top <= 0:
         return Symmetries(kp, none, (), none, ())
-    keep_a = np.flatnonzero(axes[:, 2] >= min_strength * top)
+    keep_a = np.flatnonzero(axes[:, 2] >= o.min_strength * top)
     keep_a = keep_a[np.argsort(-axes[keep_a, 2], kind="stable")]
-    keep_c = np.flatnonzero(centres[:, 2] >= min_strength * top)
+    keep_c = np.flatnonzero(centres[:, 2] >= o.min_strength * top)
     keep_c = keep_c[np.argsort(-centres[keep_c, 2], kind="stable")]
     return Symmetries(
         kp,
@@ -475,24 +508,3 @@ def symmetries(
         centres[keep_c],
         tuple(centre_pairs[i] for i in keep_c),
     )
-
-
-def _check_params(n_features, work_scale, k, match_ratio, sigma_s, sigma_d, n_axes, n_centres, min_strength, min_pairs):
-    if int(n_features) < 2:
-        raise ValueError(f"symmetry: n_features must be at least 2, got {n_features}")
-    if not 0.0 < work_scale <= 1.0:
-        raise ValueError(f"symmetry: work_scale must be in (0, 1], got {work_scale}")
-    if int(k) < 1:
-        raise ValueError(f"symmetry: k must be at least 1, got {k}")
-    if not match_ratio > 0.0:
-        raise ValueError(f"symmetry: match_ratio must be positive, got {match_ratio}")
-    if not sigma_s > 0.0:
-        raise ValueError(f"symmetry: sigma_s must be positive, got {sigma_s}")
-    if sigma_d is not None and not sigma_d > 0.0:
-        raise ValueError(f"symmetry: sigma_d must be positive or None, got {sigma_d}")
-    if int(n_axes) < 0 or int(n_centres) < 0:
-        raise ValueError(f"symmetry: n_axes and n_centres must be >= 0, got {n_axes}, {n_centres}")
-    if not 0.0 <= min_strength <= 1.0:
-        raise ValueError(f"symmetry: min_strength must be in [0, 1], got {min_strength}")
-    if int(min_pairs) < 1:
-        raise ValueError(f"symmetry: min_pairs must be at least 1, got {min_pairs}")

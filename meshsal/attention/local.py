@@ -15,10 +15,8 @@ from meshsal.attention.pyramid import check_image, scale_to_max
 
 __all__ = ["entropy", "contrast", "local_entropy", "local_variance", "luma", "default_contrast_window"]
 
-_LUMA = np.array([0.2126, 0.7152, 0.0722], dtype=np.float32)
-
-
-_LUMA = _LUMA[None, :]
+# Rec. 709 weights, one row for cv2.transform.
+_LUMA = np.array([[0.2126, 0.7152, 0.0722]], dtype=np.float32)
 _MEAN = np.full((1, 3), 1.0 / 3.0, np.float32)
 
 
