@@ -68,3 +68,17 @@ def test_closed_orientation_is_zero_for_anything_but_a_consistently_oriented_clo
         flat = plane(size=2.0, n=3)
         V, F = flat.vertices, flat.faces
     assert closed_orientation(V, F) == 0
+
+
+def test_edge_graph_distances_are_lengths_along_edges_counted_once():
+    from scipy.sparse.csgraph import dijkstra
+
+    from meshsal.mesh.geometry import edge_graph
+
+    sphere = icosphere(radius=1.0, subdivisions=2)
+    graph = edge_graph(sphere.vertices, sphere.faces)
+    d = dijkstra(graph, indices=[0])[0]
+    ring = np.unique(sphere.faces[(sphere.faces == 0).any(axis=1)])
+    ring = ring[ring != 0]
+    # Each neighbour of a closed mesh's vertex is one edge away, however many faces share that edge.
+    np.testing.assert_allclose(d[ring], np.linalg.norm(sphere.vertices[ring] - sphere.vertices[0], axis=1))

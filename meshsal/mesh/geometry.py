@@ -8,7 +8,7 @@ from __future__ import annotations
 import numpy as np
 
 __all__ = ["face_normals", "face_areas", "vertex_normals", "bounding_sphere", "closed_orientation", "half_edges",
-           "vertex_adjacency", "ring_max"]
+           "vertex_adjacency", "edge_graph", "ring_max"]
 
 
 def face_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
@@ -115,6 +115,32 @@ def vertex_adjacency(faces: np.ndarray, n_vertices: int):
     A = sparse.coo_matrix((np.ones(i.size), (i, j)), shape=(n_vertices, n_vertices)).tocsr()
     A = ((A + A.T) > 0).astype(np.float64)
     return A.tocsr()
+
+
+def edge_graph(vertices: np.ndarray, faces: np.ndarray):
+    """The mesh's edges as a symmetric (n, n) scipy CSR graph weighted by their lengths, each edge once.
+
+    Shortest paths along it (``scipy.sparse.csgraph.dijkstra``) are distances
+    along mesh edges.  A zero-length edge keeps a tiny positive weight, so it
+    still joins its two vertices.
+
+    Examples
+    --------
+    >>> V = np.array([[0, 0, 0], [3, 0, 0], [0, 4, 0], [3, 4, 0.]])
+    >>> G = edge_graph(V, [[0, 1, 2], [1, 3, 2]])
+    >>> float(G[0, 1]), float(G[1, 2]), float(G[2, 1])
+    (3.0, 5.0, 5.0)
+    """
+    import igl
+    from scipy import sparse
+
+    V = np.asarray(vertices, dtype=np.float64)
+    E = igl.edges(np.ascontiguousarray(faces, dtype=np.int64))
+    length = np.linalg.norm(V[E[:, 0]] - V[E[:, 1]], axis=1)
+    length = np.maximum(length, 1e-12 * max(float(length.max(initial=0.0)), 1e-300))
+    n = len(V)
+    return sparse.coo_matrix((np.r_[length, length], (np.r_[E[:, 0], E[:, 1]], np.r_[E[:, 1], E[:, 0]])),
+                             shape=(n, n)).tocsr()
 
 
 def ring_max(adjacency, values: np.ndarray) -> np.ndarray:

@@ -25,12 +25,12 @@ from __future__ import annotations
 import numpy as np
 
 from meshsal.mesh import Mesh, vertex_normals
-from meshsal.mesh.geometry import half_edges
+from meshsal.mesh.geometry import edge_graph
 from meshsal.points.record import InterestPoints
 from meshsal.points.rules import PointOptions, Rules
 from meshsal.points.select import TouchFilter, saliency_fill, select, surface_candidates
 
-__all__ = ["best_view_set", "map_peaks", "salient_vertices", "edge_graph", "view_votes", "attention_points",
+__all__ = ["best_view_set", "map_peaks", "salient_vertices", "view_votes", "attention_points",
            "check_field"]
 
 
@@ -116,20 +116,10 @@ def salient_vertices(mesh: Mesh, views, maps: np.ndarray, threshold: float):
     return counts
 
 
-def edge_graph(mesh: Mesh):
-    """(n, n) sparse CSR graph of the mesh edges, each weighted by its length once per face corner using it."""
-    from scipy import sparse
-
-    a, b = half_edges(mesh.faces)
-    length = np.linalg.norm(mesh.vertices[a] - mesh.vertices[b], axis=1)
-    # Zero-length edges would vanish from a sparse graph; keep them as tiny steps.
-    length = np.maximum(length, 1e-12 * max(float(length.max()), 1e-300))
-    n = mesh.n_vertices
-    return sparse.coo_matrix((np.r_[length, length], (np.r_[a, b], np.r_[b, a])), shape=(n, n)).tocsr()
-
-
 def view_votes(graph, salient, vertex_ids: np.ndarray, radius: float, chunk: int = 32):
     """Views voting for each vertex: some vertex within ``radius`` along ``graph`` is salient there.
+
+    ``graph`` is the mesh's :func:`meshsal.mesh.geometry.edge_graph`.
 
     Returns
     -------
@@ -201,7 +191,7 @@ def attention_points(mesh: Mesh, views, maps: np.ndarray, vertex_saliency: np.nd
     bary /= bary.sum(axis=1, keepdims=True)
     found = surface_candidates(mesh, vn, faces, bary, scores)
 
-    graph = edge_graph(mesh)
+    graph = edge_graph(mesh.vertices, mesh.faces)
     salient = salient_vertices(mesh, views, maps, threshold)
     votes, _ = view_votes(graph, salient, found.vertex_ids, spacing)
     peaks = found.take(np.lexsort((np.arange(len(found)), -scores, -votes)))

@@ -30,7 +30,8 @@ import numpy as np
 from meshsal.attention import CHANNELS
 from meshsal.mesh import Mesh, vertex_normals
 from meshsal.mesh.curvature import mean_curvature
-from meshsal.points.attend import check_field, edge_graph, salient_vertices, view_votes
+from meshsal.mesh.geometry import edge_graph
+from meshsal.points.attend import check_field, salient_vertices, view_votes
 from meshsal.points.record import InterestPoints
 from meshsal.points.rules import PointOptions, Rules
 from meshsal.points.sampling import farthest_points
@@ -113,7 +114,8 @@ def point_features(mesh: Mesh, views, results, maps: np.ndarray, vertex_saliency
     """
     ids = np.asarray(vertex_ids, dtype=np.int64)
     means, seen = _channel_means(mesh, views, results)
-    votes, _ = view_votes(edge_graph(mesh), salient_vertices(mesh, views, maps, threshold), ids, spacing)
+    votes, _ = view_votes(edge_graph(mesh.vertices, mesh.faces), salient_vertices(mesh, views, maps, threshold), ids,
+                          spacing)
     curvature = np.abs(mean_curvature(mesh.vertices, mesh.faces))[ids]
     columns = [means[:, ids].T, seen[ids, None], votes[:, None].astype(np.float64),
                np.asarray(vertex_saliency, np.float64)[ids, None], curvature[:, None]]
