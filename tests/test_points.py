@@ -303,7 +303,9 @@ def test_cli_writes_every_file_in_the_source_frame(tmp_path, capsys):
     positions = np.array([p["position"] for p in pts])
     assert distance_to_surface(positions, source).max() < 1e-6
     assert np.allclose(np.linalg.norm([p["normal"] for p in pts], axis=1), 1.0)
-    np.testing.assert_allclose(doc["min_spacing"], 16.0 / 150.0 * np.linalg.norm(np.ptp(source.vertices, 0)))
+    from meshsal.mesh.transform import principal_diagonal     # the experiment's sizing rule
+
+    np.testing.assert_allclose(doc["min_spacing"], 16.0 / 150.0 * principal_diagonal(source.vertices, source.faces)[1])
     assert doc["combination"] == "equal" and doc["untouchable"] >= 0
     assert (doc["format"], doc["version"]) == ("visuotactile.points", 1)
     again = InterestPoints.load(out / "points.json")             # the versioned format round-trips
