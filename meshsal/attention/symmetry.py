@@ -50,6 +50,7 @@ import cv2
 import numpy as np
 from numpy.lib.stride_tricks import sliding_window_view
 
+from meshsal.attention.local import luma
 from meshsal.attention.pyramid import center_surround_map, check_image, gaussian_pyramid, upsample
 
 __all__ = ["symmetry"]
@@ -70,7 +71,6 @@ _ALONG = 8.0
 _FLOOR = 1e-4
 # Evidence exponent: chance correlations of random texture fade, near-exact ones stay.
 _POWER = 4
-_LUMA = np.array([0.299, 0.587, 0.114], np.float32)
 
 
 def _mirror_correlation(b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -192,7 +192,7 @@ def symmetry(img: np.ndarray) -> np.ndarray:
     (0.57, 0.02)
     """
     img = check_image(img, "symmetry")
-    feature = _mirror_feature(img @ _LUMA)
+    feature = _mirror_feature(luma(img))
     top = float(feature.max())
     if not top > 0.0:
         return np.zeros(img.shape[:2], np.float32)

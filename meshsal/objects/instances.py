@@ -8,7 +8,7 @@ table.  :func:`draw_instance` draws those variations from a generator;
 :func:`meshsal.mesh.transform.scale_to_principal` has brought to its nominal
 size, centroid at the origin.
 
-* pose: a rotation uniform over SO(3) (a uniform unit quaternion);
+* pose: a rotation uniform over SO(3) (a uniform unit quaternion, ``scipy.spatial.transform.Rotation``);
 * size: a scale factor uniform in ``1 ± scale_spread`` (5 % by default);
 * paint: the toys of :mod:`meshsal.objects.toys` are repainted with a new paint
   seed; any other coloured mesh (vertex colours or a texture) has its hue
@@ -21,6 +21,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.spatial.transform import Rotation
 
 from meshsal.mesh import Mesh, Similarity
 
@@ -69,13 +70,8 @@ def random_rotation(rng: np.random.Generator) -> np.ndarray:
     >>> bool(np.allclose(R @ R.T, np.eye(3))), bool(np.isclose(np.linalg.det(R), 1.0))
     (True, True)
     """
-    q = rng.standard_normal(4)
-    w, x, y, z = q / np.linalg.norm(q)
-    return np.array([
-        [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
-        [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
-        [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
-    ])
+    w, x, y, z = rng.standard_normal(4)
+    return Rotation.from_quat([x, y, z, w]).as_matrix()
 
 
 def draw_instance(rng: np.random.Generator, scale_spread: float = 0.05, hue_deg: float = 30.0,
