@@ -13,7 +13,8 @@ candidate points and see how well their imprints tell the object apart
   it, how many views see it, its attention votes, its mesh saliency and
   its absolute mean curvature;
 * :class:`TouchModel` and :func:`fit_touch_model`: a ridge regression from
-  standardized features to distinctiveness, plus the channel weights of the
+  standardized features to distinctiveness (scikit-learn's ``StandardScaler``
+  and ``Ridge``), plus the channel weights of the
   paper's combination that best predict it (non-negative least squares,
   mean 1, so equal weights are all ones).
 
@@ -228,6 +229,8 @@ def fit_touch_model(features: np.ndarray, target: np.ndarray, alpha: float = 1.0
     True
     """
     from scipy.optimize import nnls
+    from sklearn.linear_model import Ridge
+    from sklearn.preprocessing import StandardScaler
 
     X = np.asarray(features, dtype=np.float64)
     y = np.asarray(target, dtype=np.float64)
@@ -241,17 +244,14 @@ def fit_touch_model(features: np.ndarray, target: np.ndarray, alpha: float = 1.0
         raise ValueError("features and target must be finite")
     if not alpha >= 0:
         raise ValueError(f"alpha must be >= 0, got {alpha}")
-    mean = X.mean(axis=0)
-    scale = X.std(axis=0)
-    scale = np.where(scale > 1e-12, scale, 1.0)
-    Z = (X - mean) / scale
-    yc = y - y.mean()
-    coef = np.linalg.solve(Z.T @ Z + alpha * len(y) * np.eye(Z.shape[1]), Z.T @ yc)
+    scaler = StandardScaler().fit(X)
+    ridge = Ridge(alpha=alpha * len(y)).fit(scaler.transform(X), y)
     # The combination sums channels scaled to [0, 1]: their raw values, centred, with non-negative weights.
     C = X[:, :len(CHANNELS)] - X[:, :len(CHANNELS)].mean(axis=0)
-    w, _ = nnls(C, yc)
+    w, _ = nnls(C, y - y.mean())
     w = np.ones(len(CHANNELS)) if not w.sum() > 0 else w * len(CHANNELS) / w.sum()
-    return TouchModel(mean, scale, coef, float(y.mean()), dict(zip(CHANNELS, w.tolist())), tuple(trained_on))
+    return TouchModel(scaler.mean_, scaler.scale_, ridge.coef_, float(ridge.intercept_),
+                      dict(zip(CHANNELS, w.tolist())), tuple(trained_on))
 
 
 def learned_points(mesh: Mesh, pool: np.ndarray, features: np.ndarray, model: TouchModel,
