@@ -19,6 +19,7 @@ from dataclasses import asdict, dataclass
 import numpy as np
 
 from meshsal.mesh import Mesh
+from meshsal.mesh.geometry import tangent_frames
 from meshsal.util.registry import Registry
 
 __all__ = [
@@ -44,7 +45,6 @@ PLANES = ("pca", "paper")
 
 # The in-plane frame follows world +y (meshes are y-up) unless the normal is
 # within this angle of +-y, where the projection of y degenerates.
-_POLE_COS = float(np.cos(np.deg2rad(10.0)))
 
 
 @dataclass(frozen=True)
@@ -169,10 +169,6 @@ class Poses:
         return int(self.centers.shape[0])
 
 
-def _unit(v: np.ndarray) -> np.ndarray:
-    return v / np.linalg.norm(v, axis=-1, keepdims=True)
-
-
 def check_points(positions, normals, angles_deg=None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Validate touch points: (k,3) positions, (k,3) non-zero normals (unit on return), (k,) angles."""
     P = np.asarray(positions, dtype=np.float64)
@@ -192,48 +188,6 @@ def check_points(positions, normals, angles_deg=None) -> tuple[np.ndarray, np.nd
     if not np.isfinite(A).all():
         raise ValueError("angles_deg must be finite")
     return P, N / length[:, None], A
-
-
-def tangent_frames(normals: np.ndarray, angles_deg=None) -> tuple[np.ndarray, np.ndarray]:
-    """Deterministic image axes ``(ups, rights)`` for unit normals, turned by ``angles_deg``.
-
-    At angle 0 the image's up is world +y projected onto the pad plane, so
-    imprints of a y-up object appear upright.  Within 10 degrees of the
-    poles (normal near +-y) it is -z for a normal near +y (looking down, the
-    back of the object is up) and +z near -y.  ``right = cross(up, normal)``.
-    A positive angle turns the pad's axes clockwise as seen from outside
-    (the new up is ``cos a * up + sin a * right``), so the image content turns
-    counter-clockwise: 90 degrees gives exactly ``np.rot90(image)`` (k=1) of
-    the unturned image on a square pad.
-
-    Parameters
-    ----------
-    normals : (k, 3) float64, unit
-    angles_deg : (k,) float64, optional
-
-    Returns
-    -------
-    ups, rights : (k, 3) float64
-
-    Examples
-    --------
-    >>> up, right = tangent_frames(np.array([[0.0, 0.0, 1.0]]))
-    >>> up.round(6).tolist(), right.round(6).tolist()
-    ([[0.0, 1.0, 0.0]], [[1.0, 0.0, 0.0]])
-    """
-    N = np.asarray(normals, dtype=np.float64)
-    ny = N[:, 1]
-    ref = np.zeros_like(N)
-    polar = np.abs(ny) > _POLE_COS
-    ref[~polar, 1] = 1.0
-    ref[polar, 2] = -np.sign(ny[polar])
-    up = _unit(ref - (ref * N).sum(1, keepdims=True) * N)
-    right = np.cross(up, N)
-    if angles_deg is not None:
-        a = np.deg2rad(np.asarray(angles_deg, dtype=np.float64))[:, None]
-        c, s = np.cos(a), np.sin(a)
-        up, right = c * up + s * right, c * right - s * up
-    return up, right
 
 
 # The pca fit works on component-major (3, n) vertex arrays: on large meshes

@@ -8,7 +8,7 @@ from __future__ import annotations
 import numpy as np
 
 __all__ = ["face_normals", "face_areas", "vertex_normals", "bounding_sphere", "closed_orientation", "half_edges",
-           "vertex_adjacency", "edge_graph", "ring_max"]
+           "vertex_adjacency", "edge_graph", "ring_max", "tangent_frames"]
 
 
 def face_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
@@ -162,3 +162,53 @@ def ring_max(adjacency, values: np.ndarray) -> np.ndarray:
     out = np.full(adjacency.shape[0], -np.inf)
     out[heads] = np.maximum.reduceat(values[adjacency.indices], adjacency.indptr[heads])
     return out
+
+
+# Within 10 degrees of the poles world +y projects too short to orient a frame.
+_POLE_COS = float(np.cos(np.deg2rad(10.0)))
+
+
+def tangent_frames(normals: np.ndarray, angles_deg=None) -> tuple[np.ndarray, np.ndarray]:
+    """Deterministic tangent axes ``(ups, rights)`` for unit normals, turned by ``angles_deg``.
+
+    The frame of a tactile pad's image (``tactile``) and of the disc a pad
+    sweeps in the touch check (``meshsal.points.touch``).
+
+    At angle 0 the image's up is world +y projected onto the pad plane, so
+    imprints of a y-up object appear upright.  Within 10 degrees of the
+    poles (normal near +-y) it is -z for a normal near +y (looking down, the
+    back of the object is up) and +z near -y.  ``right = cross(up, normal)``.
+    A positive angle turns the pad's axes clockwise as seen from outside
+    (the new up is ``cos a * up + sin a * right``), so the image content turns
+    counter-clockwise: 90 degrees gives exactly ``np.rot90(image)`` (k=1) of
+    the unturned image on a square pad.
+
+    Parameters
+    ----------
+    normals : (k, 3) float64, unit
+    angles_deg : (k,) float64, optional
+
+    Returns
+    -------
+    ups, rights : (k, 3) float64
+
+    Examples
+    --------
+    >>> up, right = tangent_frames(np.array([[0.0, 0.0, 1.0]]))
+    >>> up.round(6).tolist(), right.round(6).tolist()
+    ([[0.0, 1.0, 0.0]], [[1.0, 0.0, 0.0]])
+    """
+    N = np.asarray(normals, dtype=np.float64)
+    ny = N[:, 1]
+    ref = np.zeros_like(N)
+    polar = np.abs(ny) > _POLE_COS
+    ref[~polar, 1] = 1.0
+    ref[polar, 2] = -np.sign(ny[polar])
+    up = ref - (ref * N).sum(1, keepdims=True) * N
+    up /= np.linalg.norm(up, axis=1, keepdims=True)
+    right = np.cross(up, N)
+    if angles_deg is not None:
+        a = np.deg2rad(np.asarray(angles_deg, dtype=np.float64))[:, None]
+        c, s = np.cos(a), np.sin(a)
+        up, right = c * up + s * right, c * right - s * up
+    return up, right

@@ -19,6 +19,7 @@ from __future__ import annotations
 import numpy as np
 
 from meshsal.mesh import Mesh
+from meshsal.mesh.geometry import tangent_frames
 
 __all__ = ["contact_gap", "touchable", "PAD_FRACTION", "default_pad_width"]
 
@@ -31,14 +32,6 @@ def default_pad_width(mesh: Mesh) -> float:
     """``PAD_FRACTION`` times the bounding-box diagonal, in mesh units."""
     lo, hi = mesh.vertices.min(axis=0), mesh.vertices.max(axis=0)
     return PAD_FRACTION * float(np.linalg.norm(hi - lo))
-
-
-def _frames(normals: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Two unit vectors spanning each unit normal's tangent plane, (k, 3) each; any roll will do."""
-    helper = np.where(np.abs(normals[:, :1]) < 0.9, [[1.0, 0.0, 0.0]], [[0.0, 1.0, 0.0]])
-    u = np.cross(normals, helper)
-    u /= np.linalg.norm(u, axis=1, keepdims=True)
-    return u, np.cross(normals, u)
 
 
 def contact_gap(mesh: Mesh, positions: np.ndarray, normals: np.ndarray, pad_width: float,
@@ -95,7 +88,7 @@ def contact_gap(mesh: Mesh, positions: np.ndarray, normals: np.ndarray, pad_widt
     lo, hi = mesh.vertices.min(axis=0), mesh.vertices.max(axis=0)
     height = 2.0 * float(np.linalg.norm(hi - lo)) + radius
     scene = embree_scene(mesh) if scene is None else scene
-    U, V = _frames(N)
+    U, V = tangent_frames(N)
     origins = (P + height * N)[:, None] + a[None, :, None] * U[:, None] + b[None, :, None] * V[:, None]
     hit = scene.run(np.ascontiguousarray(origins.reshape(-1, 3), np.float32),
                     np.ascontiguousarray(np.repeat(-N, a.size, axis=0), np.float32), output=1)
