@@ -66,12 +66,13 @@ def main() -> int:
             rates = {k: R[:, columns] for k, R in cells[method].items()}
             row = [method]
             for k in SHOWN:
-                s = stats.summarize(rates[k], seed)
+                s = stats.summarize(rates[k], seed, [names[c] for c in columns])
                 row.append(format_rate(s.mean, s.ci_low, s.ci_high))
                 if method == baseline:
                     row.append("baseline")
                 else:
-                    d = stats.paired_difference(rates[k], cells[baseline][k][:, columns], seed)
+                    d = stats.paired_difference(rates[k], cells[baseline][k][:, columns], seed,
+                                                [names[c] for c in columns])
                     row.append(format_diff(d.mean, d.ci_low, d.ci_high, d.p_value))
             row.append(_touches_to(rates, k_max))
             print("| " + " | ".join(row) + " |")

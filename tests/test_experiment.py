@@ -55,6 +55,15 @@ def test_the_rates_of_an_object_set_do_not_depend_on_the_order_objects_are_given
             np.testing.assert_array_equal(given.rates[key], flipped.rates[key][:, ::-1])
 
 
+def test_results_csv_does_not_depend_on_the_order_objects_are_given_in(tmp_path):
+    kwargs = dict(methods=("random", "uniform"), classifiers=("knn",), settings=SMALL, replicates=3, repeats=2,
+                  folds=3, cache_dir=None, quiet=True, n_jobs=1)
+    experiment.run_experiment(_objects(), out_dir=tmp_path / "given", **kwargs)
+    experiment.run_experiment(_objects()[::-1], out_dir=tmp_path / "flipped", **kwargs)
+    given = (tmp_path / "given" / "results.csv").read_text()
+    assert given == (tmp_path / "flipped" / "results.csv").read_text()      # means, intervals, comparisons
+
+
 def test_results_csv_is_identical_for_one_and_two_jobs(tmp_path):
     kwargs = dict(methods=("random",), settings=SMALL, replicates=2, repeats=2, folds=3, cache_dir=None, quiet=True)
     one = experiment.run_experiment(_objects(), n_jobs=1, out_dir=tmp_path / "one", **kwargs)

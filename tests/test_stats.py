@@ -108,3 +108,19 @@ def test_knn_is_invariant_to_the_order_of_its_training_set():
     a = classify.make("knn", ks=(1, 3)).fit(X, y).predict_proba(queries)
     b = classify.make("knn", ks=(1, 3)).fit(X[perm], y[perm]).predict_proba(queries)
     assert np.array_equal(a, b)
+
+
+def test_intervals_follow_the_objects_names_not_their_order():
+    rng = np.random.default_rng(3)
+    R, B = rng.uniform(0, 100, (6, 5)), rng.uniform(0, 100, (6, 5))
+    names = ["cow", "cup", "hand", "plane", "glasses"]
+    turn = [3, 0, 4, 1, 2]
+    a, b = stats.summarize(R, 7, names), stats.summarize(R[:, turn], 7, [names[i] for i in turn])
+    assert (a.ci_low, a.ci_high) == (b.ci_low, b.ci_high)
+    d, e = stats.paired_difference(R, B, 7, names), stats.paired_difference(R[:, turn], B[:, turn], 7,
+                                                                              [names[i] for i in turn])
+    assert (d.ci_low, d.ci_high) == (e.ci_low, e.ci_high)
+    # By position, the same resamples draw other objects: the interval moves.
+    assert stats.summarize(R[:, turn], 7).ci_low != a.ci_low
+    with pytest.raises(ValueError, match="distinct object names"):
+        stats.summarize(R, 7, names[:4])

@@ -54,8 +54,11 @@ def _paper_measurements(objects: ObjectSet, methods, config: ExperimentConfig, r
     return out
 
 
-def _summarize(measurements: list, config: ExperimentConfig) -> tuple:
-    """Cells, paired comparisons with the baseline, confusions, selection kept and rate matrices."""
+def _summarize(measurements: list, config: ExperimentConfig, names) -> tuple:
+    """Cells, paired comparisons with the baseline, confusions, selection kept and rate matrices.
+
+    ``names`` are the objects in the order of the rate matrices' columns.
+    """
     seed = config.settings.seed
     rates, sets, kept = {}, {}, {}
     for m in measurements:
@@ -64,15 +67,15 @@ def _summarize(measurements: list, config: ExperimentConfig) -> tuple:
             rates[key], sets[key] = R, m.touch_sets[k]
         if m.kept is not None:
             kept[f"{m.method}/{m.protocol}/{m.n_objects}"] = m.kept
-    cells = tuple(Cell(*key, **dataclasses.asdict(stats.summarize(R, seed)), touch_sets=sets[key])
-                  for key, R in rates.items())
+    cells = tuple(Cell(*key, **dataclasses.asdict(stats.summarize(R, seed, names[:key.n_objects])),
+                       touch_sets=sets[key]) for key, R in rates.items())
     comparisons = []
     if len(config.methods) > 1:
         for key, R in rates.items():
             # A model method as the baseline has no paper-protocol rates to compare with.
             other = key._replace(method=config.baseline)
             if key.method != config.baseline and other in rates:
-                d = stats.paired_difference(R, rates[other], seed)
+                d = stats.paired_difference(R, rates[other], seed, names[:key.n_objects])
                 comparisons.append(Comparison(key.method, config.baseline, *key[1:], d.mean, d.ci_low, d.ci_high,
                                               d.p_value, d.replicates))
     return cells, tuple(comparisons), tuple(m.confusion for m in measurements), kept, rates
@@ -139,7 +142,7 @@ def run_experiment(objects=None, config: ExperimentConfig | None = None, *, exec
                     measurements += instance_recognition(m, n, stage, objects, config, runtime)
             timings["instance_recognition"] = time.perf_counter() - t0
 
-    cells, comparisons, confusions, kept, rates = _summarize(measurements, config)
+    cells, comparisons, confusions, kept, rates = _summarize(measurements, config, objects.names)
     timings["total"] = time.perf_counter() - started
     run_settings = {"objects": list(objects.names), **config.to_json(), "libraries": cache_mod.library_versions(),
                     "cache_dir": None if cache_dir is None else str(cache_dir),
@@ -183,7 +186,7 @@ def run_real(imprint_set, config: ExperimentConfig | None = None, *, out_dir=Non
         for n in _object_sets(len(names)):
             mask = y < n
             measurements += paper_recognition("real", X[mask], y[mask], points[mask], names[:n], config, runtime)
-    cells, _, confusions, kept, rates = _summarize(measurements, config.replace(methods=("real",)))
+    cells, _, confusions, kept, rates = _summarize(measurements, config.replace(methods=("real",)), names)
     settings = {"real": str(imprint_set.source), "n_imprints": int(len(y)), "folds": config.folds,
                 "repeats": config.repeats, "seed": config.settings.seed, "threshold": config.threshold,
                 "classifiers": list(config.classifiers), "features": config.features,

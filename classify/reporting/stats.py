@@ -4,7 +4,9 @@ A rate is measured per replicate (a fresh draw of instances, devices and
 folds) and per object, so its uncertainty has two sources: which replicates
 were drawn and which objects the set happens to hold.  The intervals here
 resample both, independently and with replacement (a two-way bootstrap,
-percentile interval), from a seeded generator.  Methods compared on the same
+percentile interval), from a seeded generator.  Given the objects' names,
+the columns are resampled in the order of the names, so the order the
+objects were given in changes no interval.  Methods compared on the same
 replicates and objects are compared through their paired differences, with
 the same bootstrap and a Wilcoxon signed-rank test over replicates.
 """
@@ -86,16 +88,28 @@ def bootstrap_means(rates, n_boot: int = BOOTSTRAP, seed: int = 0) -> np.ndarray
     return np.einsum("br,rc,bc->b", row_counts, R, col_counts) / (R.shape[0] * R.shape[1])
 
 
-def _interval(rates, seed) -> tuple[float, float]:
-    R = _matrix(rates)
+def _by_name(R: np.ndarray, names) -> np.ndarray:
+    """The columns in the order of their objects' names (as given when ``names`` is None)."""
+    if names is None:
+        return R
+    names = list(names)
+    if len(names) != R.shape[1] or len(set(names)) != len(names):
+        raise ValueError(f"expected {R.shape[1]} distinct object names, got {names}")
+    return R[:, np.argsort(names, kind="stable")]
+
+
+def _interval(rates, seed, names=None) -> tuple[float, float]:
+    R = _by_name(_matrix(rates), names)
     if R.size == 1:
         return float(R[0, 0]), float(R[0, 0])
     low, high = np.quantile(bootstrap_means(R, seed=seed), [0.025, 0.975])
     return float(low), float(high)
 
 
-def summarize(rates, seed: int = 0) -> Summary:
+def summarize(rates, seed: int = 0, names=None) -> Summary:
     """Mean, per-replicate spread and 95 % bootstrap interval of a (replicates, objects) rate matrix.
+
+    ``names`` (one per column) makes the interval independent of the column order.
 
     Examples
     --------
@@ -106,12 +120,14 @@ def summarize(rates, seed: int = 0) -> Summary:
     R = _matrix(rates)
     per_replicate = R.mean(axis=1)
     std = float(per_replicate.std(ddof=1)) if len(per_replicate) > 1 else 0.0
-    low, high = _interval(R, seed)
+    low, high = _interval(R, seed, names)
     return Summary(float(R.mean()), std, low, high, int(R.shape[0]))
 
 
-def paired_difference(a, b, seed: int = 0) -> Difference:
+def paired_difference(a, b, seed: int = 0, names=None) -> Difference:
     """The paired difference ``a - b`` of two (replicates, objects) rate matrices.
+
+    ``names`` (one per column) makes the interval independent of the column order.
 
     Examples
     --------
@@ -128,5 +144,5 @@ def paired_difference(a, b, seed: int = 0) -> Difference:
         p = 1.0
     else:
         p = float(stats.wilcoxon(per_replicate, zero_method="zsplit").pvalue)
-    low, high = _interval(D, seed)
+    low, high = _interval(D, seed, names)
     return Difference(float(D.mean()), low, high, p, int(D.shape[0]))
