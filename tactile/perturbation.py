@@ -149,7 +149,9 @@ def acquire(mesh: Mesh, positions, normals, sensor: Sensor | None = None, pertur
     rng : numpy.random.Generator or int or None
         Source of every random draw; an integer seeds a new generator, so
         equal seeds give equal readings (the default seed is 0).  None
-        draws fresh entropy from the operating system.
+        draws fresh entropy from the operating system.  The device (gain map,
+        dead taxels) comes first and from a stream of its own, so one
+        generator state gives one device whatever points are touched.
     workers : int, optional
         Ray-casting threads.
     scene : optional
@@ -174,7 +176,11 @@ def acquire(mesh: Mesh, positions, normals, sensor: Sensor | None = None, pertur
     perturb = Perturbation.none() if perturb is None else perturb
     if not isinstance(perturb, Perturbation):
         raise ValueError(f"perturb must be a Perturbation, got {type(perturb).__name__}")
-    rng = _rng(rng)
+    # The device (gain map, dead taxels) comes from its own stream: one session's device is the same
+    # whatever points it touches, so methods touching other places meet the same device.
+    device, rng = _rng(rng).spawn(2)
+    gain = 1.0 + perturb.gain_spread * device.standard_normal((sensor.rows, sensor.cols))
+    dead = device.random((sensor.rows, sensor.cols)) < perturb.dead_fraction
     P, N, _ = check_points(positions, normals)
     k = P.shape[0]
     if k == 0:
@@ -200,13 +206,11 @@ def acquire(mesh: Mesh, positions, normals, sensor: Sensor | None = None, pertur
         sigma = perturb.blur_mm / sensor.pitch_mm
         images = gaussian_filter(images, sigma=(0.0, sigma, sigma), mode="constant", cval=0.0)
     if perturb.gain_spread > 0:
-        gain = 1.0 + perturb.gain_spread * rng.standard_normal((sensor.rows, sensor.cols))
         images = images * np.maximum(gain, 0.0)
     if perturb.noise > 0:
         images = images + perturb.noise * rng.standard_normal(images.shape)
     images = np.clip(images, 0.0, 1.0)
     if perturb.dead_fraction > 0:
-        dead = rng.random((sensor.rows, sensor.cols)) < perturb.dead_fraction
         images = np.where(dead, 0.0, images)
     if perturb.adc_bits > 0:
         levels = float(2 ** perturb.adc_bits - 1)

@@ -69,6 +69,20 @@ def test_gain_spread_is_one_map_per_device():
     assert out.std() > 0.02
 
 
+def test_one_session_stream_is_one_device_whatever_it_touches():
+    plane = shapes.plane()
+    sensor = Sensor(mode="pressure")
+    device = Perturbation(gain_spread=0.2, dead_fraction=0.1, uniform_rotation=True)   # rolls are drawn per touch
+    up = np.array([[0.0, 1.0, 0.0]])
+    one = acquire(plane, [[0.0, 0.0, 0.0]], up, sensor, device, rng=np.random.default_rng([5, 1]))
+    three = acquire(plane, [[20.0, 0.0, 0.0], [0.0, 0.0, 0.0], [-20.0, 0.0, 5.0]], np.repeat(up, 3, axis=0), sensor,
+                    device, rng=np.random.default_rng([5, 1]))
+    # A flat plane looks the same under any roll: the same gain map and dead taxels read the same imprint.
+    np.testing.assert_array_equal(one[0], three[1])
+    other = acquire(plane, [[0.0, 0.0, 0.0]], up, sensor, device, rng=np.random.default_rng([5, 2]))
+    assert not np.array_equal(one[0], other[0])
+
+
 def test_cover_blur_spreads_a_sharp_edge():
     cube = shapes.box(half=30.0, n=60)
     sensor = Sensor(mode="pressure", plane="paper")
