@@ -6,7 +6,9 @@ import pytest
 import classify
 import tactile
 from classify.experiment import protocols
-from classify.experiment.protocols import InstanceData, InstanceJob, PaperJob, Recognizer
+from classify.experiment.protocols import InstanceData, InstanceJob, PaperJob
+from classify.recognizers import touches
+from classify.recognizers.touches import Recognizer
 
 
 def _tagged_pool(n_objects=3, per_object=20, seed=0):
@@ -52,14 +54,14 @@ def test_paper_job_never_trains_or_selects_on_a_test_imprint(monkeypatch):
         selected.append(Xs[:, 0, 0].astype(int))
         return Xs[:, 0, 0].astype(int) % 3 != 0                     # drop some training imprints
 
-    real_fit = protocols._fit
+    real_fit = touches.fit
 
     def spy_fit(name, params, X_train, y_train, g):
         fits.append(X_train[:, 0].astype(int))
         return real_fit(name, params, X_train, y_train, g)
 
     monkeypatch.setattr(tactile, "select_by_similarity", spy_select, raising=False)
-    monkeypatch.setattr(protocols, "_fit", spy_fit)
+    monkeypatch.setattr(touches, "fit", spy_fit)
     splits = protocols.paper_splits(y, groups, 5, 1, 3)
     out = protocols.paper_job(PaperJob(X, y, groups, splits, Recognizer("naive_bayes", True, {}, 0.85), 3))
     assert len(selected) == len(fits) == 5
@@ -105,7 +107,7 @@ def _tag(X):
 def test_instance_job_calibrates_on_held_out_instances_and_never_trains_on_the_test(monkeypatch):
     data = _instance_data()
     fits, scored = [], []
-    real_fit, real_proba = protocols._fit, protocols._proba
+    real_fit, real_proba = touches.fit, touches.posteriors
 
     def spy_fit(name, params, X_train, y_train, g):
         fits.append(_tag(X_train))
@@ -115,8 +117,8 @@ def test_instance_job_calibrates_on_held_out_instances_and_never_trains_on_the_t
         scored.append(_tag(X))
         return real_proba(model, X, n)
 
-    monkeypatch.setattr(protocols, "_fit", spy_fit)
-    monkeypatch.setattr(protocols, "_proba", spy_proba)
+    monkeypatch.setattr(touches, "fit", spy_fit)
+    monkeypatch.setattr(touches, "posteriors", spy_proba)
     out = protocols.instance_job(InstanceJob(data, Recognizer("knn", False, {}, 0.85), 5, 50, 0, 0))
     assert len(fits) == 4                                           # 3 held-out instances, then all of them
     for trained, held in zip(fits[:3], scored[:3]):

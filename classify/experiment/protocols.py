@@ -29,7 +29,6 @@ how many workers run.
 
 from __future__ import annotations
 
-import inspect
 from dataclasses import dataclass
 
 import numpy as np
@@ -38,13 +37,13 @@ from sklearn.model_selection import StratifiedGroupKFold
 from threadpoolctl import threadpool_limits
 
 from classify.experiment.streams import Stream, recognition_rng
-from classify.recognizers.classifiers import make
+from classify.recognizers import touches
+from classify.recognizers.touches import Recognizer, point_groups
 from classify.recognizers.fusion import calibrate, fit_calibration, fuse, touch_sets
 from meshsal.util.registry import Registry
 from tactile.features import describe
 
-__all__ = ["PROTOCOLS", "PROTOCOL_REGISTRY", "Split", "point_groups", "paper_splits", "select_training",
-           "Recognizer", "PaperJob", "PaperOutcome", "paper_job", "InstanceData", "InstanceJob", "InstanceOutcome",
+__all__ = ["PROTOCOLS", "PROTOCOL_REGISTRY", "Split", "paper_splits", "select_training", "PaperJob", "PaperOutcome", "paper_job", "InstanceData", "InstanceJob", "InstanceOutcome",
            "instance_job"]
 
 #: The evaluation protocols (this module's docstring describes them).
@@ -62,20 +61,6 @@ class Split:
     fold: int
     train: np.ndarray
     test: np.ndarray
-
-
-def point_groups(labels, points, instances=None) -> np.ndarray:
-    """One group id per imprint: its (object, point), or its (object, instance, point).
-
-    Examples
-    --------
-    >>> point_groups(np.array([0, 0, 1]), np.array([3, 3, 3])).tolist()
-    [3, 3, 100003]
-    """
-    labels, points = np.asarray(labels, np.int64), np.asarray(points, np.int64)
-    if instances is None:
-        return labels * 100000 + points
-    return (labels * 1000 + np.asarray(instances, np.int64)) * 100000 + points
 
 
 def paper_splits(labels, groups=None, folds=5, repeats=10, seed=0) -> list[Split]:
@@ -117,42 +102,11 @@ def select_training(imprints, labels, train, threshold=0.85) -> np.ndarray:
     return train[keep]
 
 
-def _fit(name, params, X, y, groups):
-    model = make(name, **params.get(name, {}))
-    if "groups" in inspect.signature(model.fit).parameters:
-        return model.fit(X, y, groups=groups)
-    return model.fit(X, y)
-
-
 def _confusion(truth, guess, n_classes) -> np.ndarray:
     """(n_classes, n_classes) int64 counts, rows true class (zeros when nothing was recognized)."""
     if len(truth) == 0:
         return np.zeros((n_classes, n_classes), np.int64)
     return confusion_matrix(truth, guess, labels=np.arange(n_classes)).astype(np.int64)
-
-
-def _proba(model, X, n_classes):
-    out = np.zeros((len(X), n_classes))
-    out[:, model.classes_] = model.predict_proba(X)
-    return out
-
-
-@dataclass(frozen=True)
-class Recognizer:
-    """How a job recognizes: the classifier and its parameters, selection and its threshold, the features.
-
-    Selection compares raw imprints (the paper's rule); the classifier sees
-    ``tactile.features.describe(imprints, features)``.
-    """
-
-    classifier: str
-    selection: bool = False
-    params: dict = None
-    threshold: float = 0.85
-    features: str = "raw"
-
-    def fit(self, X, y, groups):
-        return _fit(self.classifier, self.params or {}, X, y, groups)
 
 
 @dataclass(frozen=True, eq=False)
@@ -199,7 +153,7 @@ def paper_job(job: PaperJob) -> PaperOutcome:
                 pred[split.test] = y[train][0] if len(train) else -1
                 continue
             model = rec.fit(F[train], y[train], job.groups[train])
-            pred[split.test] = np.argmax(_proba(model, F[split.test], job.n_classes), axis=1)
+            pred[split.test] = np.argmax(touches.posteriors(model, F[split.test], job.n_classes), axis=1)
     hit = pred >= 0
     confusion = _confusion(y[hit], pred[hit], job.n_classes)
     rates = np.array([100.0 * np.mean(pred[y == c] == c) for c in range(job.n_classes)])
@@ -279,7 +233,7 @@ def _calibration(data: InstanceData, F, rec: Recognizer, n_classes: int):
         model, rows = _fit_selected(data, F, rest, rec)
         if len(np.unique(data.train_y[rows])) < 2:
             continue
-        proba.append(_proba(model, F[out], n_classes))
+        proba.append(touches.posteriors(model, F[out], n_classes))
         truth.append(data.train_y[out])
     if not proba:
         return fit_calibration(np.zeros((0, n_classes)), np.zeros(0, np.int64))
@@ -294,7 +248,7 @@ def instance_job(job: InstanceJob) -> InstanceOutcome:
         F = describe(data.train_X, rec.features)
         cal = _calibration(data, F, rec, n_classes)
         model, rows = _fit_selected(data, F, np.arange(len(data.train_y)), rec)
-        proba = [calibrate(_proba(model, describe(t, rec.features), n_classes), cal) if len(t)
+        proba = [calibrate(touches.posteriors(model, describe(t, rec.features), n_classes), cal) if len(t)
                  else np.zeros((0, n_classes)) for t in data.test]
     truth = np.concatenate([np.full(len(p), c) for c, p in enumerate(proba)]).astype(np.int64)
     guess = np.concatenate([np.argmax(p, axis=1) for p in proba]).astype(np.int64)

@@ -5,9 +5,9 @@ point helps recognition is measurable, though: on training objects, touch
 candidate points and see how well their imprints tell the object apart
 (``classify.experiment.survey.distinctiveness``).  This module holds the vision side:
 
-* :func:`candidate_pool`: the points a learned method may choose from,
-  farthest-point samples spread over the whole surface, the same on every
-  instance of an object;
+* :func:`~meshsal.points.places.candidate_pool`: the points a learned method
+  may choose from, farthest-point samples spread over the whole surface, the
+  same on every instance of an object;
 * :func:`point_features`: what vision knows about each candidate, the
   ``FEATURES``: the eight channel values averaged over the views that see
   it, how many views see it, its attention votes, its mesh saliency and
@@ -35,7 +35,7 @@ from meshsal.mesh.geometry import edge_graph
 from meshsal.points.attend import check_field, salient_vertices, view_votes
 from meshsal.points.record import InterestPoints
 from meshsal.points.rules import PointOptions, Rules
-from meshsal.points.sampling import farthest_points
+from meshsal.points.places import POOL_FACTOR, candidate_pool
 from meshsal.points.select import choose_without_views, vertex_candidates
 
 __all__ = ["FEATURES", "POOL_FACTOR", "candidate_pool", "point_features", "TouchModel", "fit_touch_model",
@@ -43,34 +43,8 @@ __all__ = ["FEATURES", "POOL_FACTOR", "candidate_pool", "point_features", "Touch
 
 #: The per-point visual features, in column order.
 FEATURES = tuple(f"{c}_mean" for c in CHANNELS) + ("views", "votes", "mesh_saliency", "curvature")
-#: Candidates per requested point in a pool.
-POOL_FACTOR = 20
 MODEL_FORMAT = "visuotactile.touch_model"
 MODEL_VERSION = 1
-
-
-def candidate_pool(mesh: Mesh, n: int = 15) -> np.ndarray:
-    """``POOL_FACTOR * n`` vertices spread over the surface, in farthest-point order.
-
-    The first is the vertex farthest from the vertices' mean, so the pool
-    depends on the shape alone: a turned, resized or repainted instance of an
-    object offers the same candidates, and whatever a model picks among them
-    can be found again on the next instance.
-
-    Returns
-    -------
-    (k,) int64 vertex ids (k <= POOL_FACTOR * n: all used vertices on a small mesh)
-
-    Examples
-    --------
-    >>> import meshsal
-    >>> candidate_pool(meshsal.objects.toys.make("cup"), n=2).shape
-    (40,)
-    """
-    used = np.unique(mesh.faces)
-    points = mesh.vertices[used]
-    start = int(np.argmax(np.linalg.norm(points - points.mean(axis=0), axis=1)))
-    return used[farthest_points(points, min(POOL_FACTOR * int(n), used.size), start=start)]
 
 
 def _channel_means(mesh: Mesh, views, results) -> tuple[np.ndarray, np.ndarray]:
