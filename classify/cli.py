@@ -16,6 +16,7 @@ def register(subparsers) -> None:
     from classify.recognizers.classifiers import CLASSIFIERS
     from classify.experiment import DEFAULT_REPLICATES, FULL_REPLICATES
     from classify.experiment.protocols import PROTOCOL_REGISTRY, PROTOCOLS
+    from classify.policies import POLICIES
     from meshsal.points import POINT_METHODS
 
     p = subparsers.add_parser(
@@ -41,6 +42,9 @@ def register(subparsers) -> None:
                    help="nominal size: every object is scaled to this principal-frame box diagonal (mm)")
     p.add_argument("--methods", type=_csv_list, default=("attention",),
                    help=f"comma-separated interest-point methods: {POINT_METHODS.help_text()}")
+    p.add_argument("--policies", type=_csv_list, default=(),
+                   help=f"comma-separated touch policies, run touch by touch on the instance protocol's instances "
+                        f"and compared with the baseline's fixed plan: {POLICIES.help_text()}")
     p.add_argument("--baseline", default=None,
                    help="the method the others are compared with (default: uniform if measured, else the first)")
     p.add_argument("--protocols", type=_csv_list, default=PROTOCOLS,
@@ -150,7 +154,7 @@ def _experiment(args) -> int:
                         train_instances=args.train_instances, train_sessions=args.train_sessions, seed=args.seed)
     config = ExperimentConfig(methods=args.methods, protocols=args.protocols, classifiers=args.classifiers or NAMES,
                               settings=settings, folds=args.folds, repeats=args.repeats, features=args.features,
-                              baseline=args.baseline,
+                              baseline=args.baseline, policies=args.policies,
                               replicates=FULL_REPLICATES if args.full else (args.replicates or DEFAULT_REPLICATES))
     if args.real:
         result = run_real(args.real, config, out_dir=args.out, quiet=args.quiet, n_jobs=args.jobs)

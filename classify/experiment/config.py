@@ -138,6 +138,14 @@ class ExperimentConfig:
     baseline : str or None
         The method others are compared with (default ``uniform`` when
         measured, else the first method); no comparison with one method.
+    policies : tuple of str
+        Touch policies (``classify.policies.POLICIES``) run in the sequential
+        protocol on the instance protocol's instances, compared with the
+        baseline method.
+    stop_levels : tuple of float
+        The stopping rule's thresholds: stop when the top class's calibrated
+        posterior reaches p (or after the last touch); accuracy against
+        touches used, for every method and policy of the instance protocol.
     """
 
     methods: tuple = ("attention",)
@@ -152,6 +160,8 @@ class ExperimentConfig:
     params: dict = field(default_factory=dict)
     features: str = "raw"
     baseline: str | None = None
+    policies: tuple = ()
+    stop_levels: tuple = (0.5, 0.8, 0.9, 0.95, 0.98, 0.99, 0.995, 0.999)
 
     def replace(self, **changes) -> ExperimentConfig:
         """A copy with some fields changed; an unknown field is a TypeError naming it."""
@@ -167,6 +177,7 @@ class ExperimentConfig:
             of range, or a baseline that is not among the methods.
         """
         from classify.experiment.protocols import PROTOCOL_REGISTRY
+        from classify.policies import POLICIES
         from classify.recognizers.classifiers import CLASSIFIERS
         from meshsal.points import POINT_METHODS
         from tactile.features import FEATURES
@@ -182,8 +193,14 @@ class ExperimentConfig:
             raise ValueError(f"baseline {baseline!r} is not among the methods {list(methods)}")
         if self.features not in FEATURES:
             raise ValueError(f"unknown features {self.features!r}; choose from {', '.join(FEATURES)}")
+        policies = POLICIES.check(self.policies) if self.policies else ()
+        if policies and "instance" not in protocols:
+            raise ValueError("touch policies run on the instance protocol's instances: add it to the protocols")
+        levels = tuple(float(p) for p in self.stop_levels)
+        if any(not 0.0 < p <= 1.0 for p in levels):
+            raise ValueError(f"stop levels must lie in (0, 1], got {list(levels)}")
         return self.replace(methods=methods, protocols=protocols, classifiers=classifiers, baseline=baseline,
-                            params=dict(self.params))
+                            params=dict(self.params), policies=policies, stop_levels=levels)
 
     def to_json(self) -> dict:
         """Every setting as ``results.json`` records it (with the classifiers' full parameters)."""
@@ -193,6 +210,7 @@ class ExperimentConfig:
                 "classifiers": list(self.classifiers), "baseline": self.baseline if len(self.methods) > 1 else None,
                 "replicates": self.replicates, "folds": self.folds, "repeats": self.repeats,
                 "threshold": self.threshold, "touch_sets_per_object": self.touch_sets_per_object,
-                "features": self.features, **self.settings.to_json(),
+                "features": self.features, "policies": list(self.policies), "stop_levels": list(self.stop_levels),
+                **self.settings.to_json(),
                 "classifier_params": {c: {k: repr(v) for k, v in make(c, **self.params.get(c, {})).get_params().items()}
                                       for c in self.classifiers}}

@@ -37,6 +37,7 @@ from sklearn.model_selection import StratifiedGroupKFold
 from threadpoolctl import threadpool_limits
 
 from classify.experiment.streams import Stream, recognition_rng
+from classify.policies.episodes import stopping_curve
 from classify.recognizers import touches
 from classify.recognizers.touches import Recognizer, point_groups
 from classify.recognizers.fusion import calibrate, fit_calibration, fuse, touch_sets
@@ -188,7 +189,9 @@ class InstanceJob:
 
     ``data`` the replicate's imprints; recognition after 1..``n_touches``
     touches of ``sets_per_k`` touch sets per object (all when fewer exist),
-    drawn from the streams of ``seed`` and ``replicate``.
+    drawn from the streams of ``seed`` and ``replicate``; and, touching the
+    plan's points in its order, when the stopping rule at each of
+    ``stop_levels`` would stop (:func:`classify.policies.stopping_curve`).
     """
 
     data: InstanceData
@@ -197,6 +200,7 @@ class InstanceJob:
     sets_per_k: int
     seed: int
     replicate: int
+    stop_levels: tuple = ()
 
 
 @dataclass(frozen=True)
@@ -207,13 +211,18 @@ class InstanceOutcome:
     k = 1..n_touches touches; ``sets`` (n_touches,) the fewest distinct touch
     sets any object had at k (0 where an object had fewer than k points);
     ``confusion`` single-touch counts, rows true object; ``kept`` the
-    fraction of training imprints selection kept.
+    fraction of training imprints selection kept; ``stop_correct``,
+    ``stop_touches`` (len(stop_levels), n_objects): with the plan's points
+    touched in order and the stopping rule at each level, 100 where the
+    decision at the stop was right (else 0) and the touches used.
     """
 
     rates: np.ndarray
     sets: np.ndarray
     confusion: np.ndarray
     kept: float
+    stop_correct: np.ndarray
+    stop_touches: np.ndarray
 
 
 def _fit_selected(data: InstanceData, F, rows, rec: Recognizer):
@@ -265,4 +274,20 @@ def instance_job(job: InstanceJob) -> InstanceOutcome:
             picks = fuse(p, chosen, recognition_rng(job.seed, job.replicate, k, data.names[c], Stream.TIES))
             rates[k - 1, c] = 100.0 * np.mean(picks == c)
             sets[k - 1] = min(sets[k - 1], len(chosen) if len(p) >= k else 0)
-    return InstanceOutcome(rates, sets, confusion, len(rows) / len(data.train_y))
+    stop_correct, stop_touches = _plan_stops(job, proba)
+    return InstanceOutcome(rates, sets, confusion, len(rows) / len(data.train_y), stop_correct, stop_touches)
+
+
+def _plan_stops(job: InstanceJob, proba: list) -> tuple[np.ndarray, np.ndarray]:
+    """The stopping rule on the plan's points in order: 100 where right at the stop, and the touches used."""
+    correct = np.zeros((len(job.stop_levels), len(proba)))
+    used = np.zeros((len(job.stop_levels), len(proba)))
+    for c, p in enumerate(proba):
+        if len(p) == 0 or not job.stop_levels:
+            continue
+        beliefs = np.cumprod(np.maximum(p[:job.n_touches], 1e-300), axis=0)
+        beliefs /= beliefs.sum(axis=1, keepdims=True)
+        rng = recognition_rng(job.seed, job.replicate, 0, job.data.names[c], Stream.EPISODE_TIES)
+        right, touches_used = stopping_curve([beliefs], np.array([c]), job.stop_levels, lambda e: rng)
+        correct[:, c], used[:, c] = 100.0 * right[:, 0], touches_used[:, 0]
+    return correct, used

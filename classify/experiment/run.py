@@ -24,9 +24,10 @@ from threadpoolctl import threadpool_limits
 from classify.experiment.config import DEFAULT_REPLICATES, FULL_REPLICATES, ExperimentConfig, Settings
 from classify.experiment.protocols import PROTOCOLS
 from classify.experiment.stages import (InstanceStage, ObjectSet, Runtime, instance_recognition, instance_stage,
-                                        load_objects, paper_recognition, paper_stage)
+                                        load_objects, paper_recognition, paper_stage, policy_recognition)
 from classify.reporting import stats
-from classify.reporting.results import Cell, CellKey, Comparison, ExperimentResult, format_tables, write_outputs
+from classify.reporting.results import (Cell, CellKey, Comparison, ExperimentResult, StoppingCell, format_tables,
+                                       write_outputs)
 from classify.runtime import cache as cache_mod
 from classify.runtime.cluster import Inline, worker_pool
 from meshsal.points import METHODS, MODEL_METHODS
@@ -55,30 +56,42 @@ def _paper_measurements(objects: ObjectSet, methods, config: ExperimentConfig, r
 
 
 def _summarize(measurements: list, config: ExperimentConfig, names) -> tuple:
-    """Cells, paired comparisons with the baseline, confusions, selection kept and rate matrices.
+    """Cells, paired comparisons with the baseline, confusions, selection kept, stopping cells and rate matrices.
 
-    ``names`` are the objects in the order of the rate matrices' columns.
+    ``names`` are the objects in the order of the rate matrices' columns.  A
+    touch policy (protocol "sequential") is compared with the baseline
+    method's fixed plan (protocol "instance").
     """
     seed = config.settings.seed
-    rates, sets, kept = {}, {}, {}
+    rates, sets, kept, stopping = {}, {}, {}, []
     for m in measurements:
         for k, R in m.rates.items():
             key = CellKey(m.method, m.protocol, m.classifier, m.n_objects, m.selection, k)
             rates[key], sets[key] = R, m.touch_sets[k]
         if m.kept is not None:
             kept[f"{m.method}/{m.protocol}/{m.n_objects}"] = m.kept
+        if m.stopping is not None and not m.selection:
+            correct, used = m.stopping
+            for level_index, level in enumerate(config.stop_levels):
+                who = names[:m.n_objects]
+                a = stats.summarize(correct[:, level_index], seed, who)
+                u = stats.summarize(used[:, level_index], seed, who)
+                stopping.append(StoppingCell(m.method, m.protocol, m.classifier, m.n_objects, level, a.mean,
+                                             a.ci_low, a.ci_high, u.mean, u.ci_low, u.ci_high, a.replicates))
     cells = tuple(Cell(*key, **dataclasses.asdict(stats.summarize(R, seed, names[:key.n_objects])),
                        touch_sets=sets[key]) for key, R in rates.items())
     comparisons = []
-    if len(config.methods) > 1:
+    if len(config.methods) > 1 or config.policies:
         for key, R in rates.items():
             # A model method as the baseline has no paper-protocol rates to compare with.
-            other = key._replace(method=config.baseline)
-            if key.method != config.baseline and other in rates:
+            other = key._replace(method=config.baseline,
+                                 protocol="instance" if key.protocol == "sequential" else key.protocol)
+            if key != other and other in rates:
                 d = stats.paired_difference(R, rates[other], seed, names[:key.n_objects])
                 comparisons.append(Comparison(key.method, config.baseline, *key[1:], d.mean, d.ci_low, d.ci_high,
                                               d.p_value, d.replicates))
-    return cells, tuple(comparisons), tuple(m.confusion for m in measurements), kept, rates
+    confusions = tuple(m.confusion for m in measurements if m.confusion is not None)
+    return cells, tuple(comparisons), confusions, kept, tuple(stopping), rates
 
 
 def run_experiment(objects=None, config: ExperimentConfig | None = None, *, executor=None, n_jobs: int = 2,
@@ -134,21 +147,27 @@ def run_experiment(objects=None, config: ExperimentConfig | None = None, *, exec
             timings["paper"] = time.perf_counter() - t0
         if "instance" in config.protocols:
             t0 = time.perf_counter()
-            stage = instance_stage(objects, config.methods, settings, config.replicates, runtime)
+            stage = instance_stage(objects, config.methods, settings, config.replicates, runtime,
+                                   places=bool(config.policies))
             timings["instance_points_and_imprints"] = time.perf_counter() - t0
             t0 = time.perf_counter()
             for m in config.methods:
                 for n in _object_sets(len(objects)):
                     measurements += instance_recognition(m, n, stage, objects, config, runtime)
             timings["instance_recognition"] = time.perf_counter() - t0
+            if config.policies:
+                t0 = time.perf_counter()
+                for n in _object_sets(len(objects)):
+                    measurements += policy_recognition(n, stage, objects, config, runtime)
+                timings["sequential"] = time.perf_counter() - t0
 
-    cells, comparisons, confusions, kept, rates = _summarize(measurements, config, objects.names)
+    cells, comparisons, confusions, kept, stopping, rates = _summarize(measurements, config, objects.names)
     timings["total"] = time.perf_counter() - started
     run_settings = {"objects": list(objects.names), **config.to_json(), "libraries": cache_mod.library_versions(),
                     "cache_dir": None if cache_dir is None else str(cache_dir),
                     "learned_channel_weights": [m.channel_weights for m in stage.models]}
     result = ExperimentResult(cells, comparisons, confusions, objects.names, _object_sets(len(objects)),
-                              config.classifiers, run_settings, kept, timings, rates)
+                              config.classifiers, run_settings, kept, timings, rates, stopping)
     if out_dir is not None:
         write_outputs(result, out_dir)
         for r, model in enumerate(stage.models):
@@ -186,7 +205,7 @@ def run_real(imprint_set, config: ExperimentConfig | None = None, *, out_dir=Non
         for n in _object_sets(len(names)):
             mask = y < n
             measurements += paper_recognition("real", X[mask], y[mask], points[mask], names[:n], config, runtime)
-    cells, _, confusions, kept, rates = _summarize(measurements, config.replace(methods=("real",)), names)
+    cells, _, confusions, kept, _, rates = _summarize(measurements, config.replace(methods=("real",)), names)
     settings = {"real": str(imprint_set.source), "n_imprints": int(len(y)), "folds": config.folds,
                 "repeats": config.repeats, "seed": config.settings.seed, "threshold": config.threshold,
                 "classifiers": list(config.classifiers), "features": config.features,

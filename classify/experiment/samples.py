@@ -31,10 +31,12 @@ import numpy as np
 from classify.experiment.config import Settings
 from classify.experiment.streams import Stream, instance_rng
 from classify.experiment.survey import Survey, touch_survey
+from classify.policies.knowledge import Places, PlaceSample
 from classify.runtime import cache as cache_mod
 
 __all__ = ["Settings", "TouchSample", "PaperSampleTask", "SampleTask", "InstanceSamples", "nominal_mesh",
-           "mesh_hash", "instance_spec", "point_options", "method_points", "paper_sample", "instance_samples"]
+           "mesh_hash", "instance_spec", "point_options", "method_points", "paper_sample", "place_sample",
+           "instance_samples"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -89,6 +91,8 @@ class SampleTask:
         Instance ``index`` of replicate ``replicate`` (0: the test instance).
     survey : bool
         Also the instance's touch survey (:func:`classify.experiment.survey.touch_survey`).
+    places : bool
+        Also its candidate places and their imprints, for the touch policies (:func:`place_sample`).
     model : meshsal.points.learned.TouchModel, optional
         The replicate's touch model, for the model methods.
     surveyed : Survey, optional
@@ -104,6 +108,7 @@ class SampleTask:
     replicate: int
     index: int
     survey: bool = False
+    places: bool = False
     model: object = None
     surveyed: Survey | None = None
     cache_dir: object = None
@@ -112,10 +117,12 @@ class SampleTask:
 
 @dataclass(frozen=True, eq=False)
 class InstanceSamples:
-    """What :func:`instance_samples` made of one instance: a :class:`TouchSample` per method, and its survey."""
+    """What :func:`instance_samples` made of one instance: a :class:`TouchSample` per method, its survey and its
+    places (when asked)."""
 
     by_method: dict
     survey: Survey | None = None
+    places: PlaceSample | None = None
 
 
 def nominal_mesh(mesh, settings: Settings):
@@ -216,6 +223,37 @@ def _sessions(mesh, pts, task: SampleTask, scene) -> TouchSample:
                        np.asarray(stack, np.float32).reshape(sessions, len(pts), *stack[0].shape[1:]))
 
 
+def place_sample(mesh, seen, vertex_saliency, task: SampleTask, scene) -> PlaceSample:
+    """An instance's candidate places, what vision sees there, and the imprints its sessions give there.
+
+    The places are ``meshsal.points.places.candidate_places`` (vertices with a
+    defined normal).  The test instance has its one session, a training
+    instance one session too (every place, instead of a method's n points):
+    session 0 of the same streams as the methods' sessions, so the same
+    devices.
+    """
+    import tactile
+    from meshsal.attention.rig import attention_maps
+    from meshsal.mesh import vertex_normals
+    from meshsal.points.learned import point_features
+    from meshsal.points.places import candidate_places
+    from meshsal.points.touch import touchable
+
+    settings = task.settings
+    vn = vertex_normals(mesh.vertices, mesh.faces)
+    ids = candidate_places(mesh, vertex_saliency, settings.n_points)
+    ids = ids[np.linalg.norm(vn[ids], axis=1) > 1e-12]
+    positions, normals = mesh.vertices[ids], vn[ids]
+    pad = settings.sensor.width_mm
+    places = Places(ids, positions, normals,
+                    point_features(mesh, seen.views, seen.results, attention_maps(seen, "equal"), vertex_saliency, ids,
+                                   0.5 * pad),
+                    touchable(mesh, positions, normals, pad, scene=scene))
+    rng = instance_rng(settings.seed, task.name, task.replicate, task.index, Stream.SESSION, 0)
+    imprints = tactile.acquire(mesh, positions, normals, settings.sensor, settings.perturbation, rng, scene=scene)
+    return PlaceSample(places, np.asarray(imprints, np.float32)[None])
+
+
 def _model_hash(model) -> str:
     return cache_mod.hash_arrays(model.mean, model.scale, model.coef, np.array([model.intercept]),
                                  np.array(list(model.channel_weights.values())))
@@ -248,19 +286,25 @@ def instance_samples(task: SampleTask) -> InstanceSamples:
     keys = {m: _key("instance", task.nominal, task.name, m, settings, task.replicate, task.index,
                     *(model_part if m in MODEL_METHODS else [])) for m in methods}
     survey_key = _key("survey", task.nominal, task.name, "", settings, task.replicate, task.index)
+    places_key = _key("places", task.nominal, task.name, "", settings, task.replicate, task.index)
     found = {m: cache_mod.load(task.cache_dir, key) for m, key in keys.items()}
     by_method = {m: TouchSample.from_arrays(a) for m, a in found.items() if a is not None}
     survey = None
     if task.survey:
         stored = cache_mod.load(task.cache_dir, survey_key)
         survey = None if stored is None else Survey.from_arrays(stored)
+    places = None
+    if task.places:
+        stored = cache_mod.load(task.cache_dir, places_key)
+        places = None if stored is None else PlaceSample.from_arrays(stored)
     missing = [m for m in methods if m not in by_method]
-    if not missing and (not task.survey or survey is not None):
-        return InstanceSamples({m: by_method[m] for m in methods}, survey)
+    if not missing and (not task.survey or survey is not None) and (not task.places or places is not None):
+        return InstanceSamples({m: by_method[m] for m in methods}, survey, places)
     mesh = make_instance(task.nominal, instance_spec(settings, task.name, task.replicate, task.index))
     vertex_saliency = mesh_saliency(mesh)
     seen = None
-    if any(m in ATTENTION_METHODS for m in missing) or (task.survey and survey is None):
+    if (any(m in ATTENTION_METHODS for m in missing) or (task.survey and survey is None)
+            or (task.places and places is None)):
         seen = view_channels(mesh, size=settings.view_size or 128, vertex_saliency=vertex_saliency,
                              threads=task.threads)
     scene = embree_scene(mesh)
@@ -276,4 +320,7 @@ def instance_samples(task: SampleTask) -> InstanceSamples:
                if task.index >= 1 else None)
         survey = touch_survey(mesh, seen, vertex_saliency, settings, scene, rng)
         cache_mod.store(task.cache_dir, survey_key, survey.to_arrays())
-    return InstanceSamples({m: by_method[m] for m in methods}, survey)
+    if task.places and places is None:
+        places = place_sample(mesh, seen, vertex_saliency, task, scene)
+        cache_mod.store(task.cache_dir, places_key, places.to_arrays())
+    return InstanceSamples({m: by_method[m] for m in methods}, survey, places)

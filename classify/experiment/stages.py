@@ -103,10 +103,12 @@ class SampleKey(NamedTuple):
 
 @dataclass(frozen=True, eq=False)
 class InstanceStage:
-    """Every instance's sample for every method (by :class:`SampleKey`), and each replicate's touch model."""
+    """Every instance's sample for every method (by :class:`SampleKey`), each replicate's touch model, and with
+    touch policies every instance's places (``classify.policies.PlaceSample`` by (replicate, object, instance))."""
 
     samples: dict
     models: tuple = ()
+    places: dict = None
 
 
 def _paper_sample(task: PaperSampleTask) -> TouchSample:
@@ -132,13 +134,15 @@ def paper_stage(objects: ObjectSet, methods, settings: Settings, runtime: Runtim
     return dict(zip(pairs, runtime.map(_paper_sample, tasks, "paper: points+imprints")))
 
 
-def instance_stage(objects: ObjectSet, methods, settings: Settings, replicates: int, runtime: Runtime) -> InstanceStage:
+def instance_stage(objects: ObjectSet, methods, settings: Settings, replicates: int, runtime: Runtime,
+                   places: bool = False) -> InstanceStage:
     """Every instance's points and imprints for every method, and each replicate's touch model.
 
     One task per instance computes all methods that need no model, sharing
-    its rendering, plus its touch survey when a model method is asked for;
-    then each replicate's model is fitted on its training instances'
-    surveys; then the model methods run on every instance.
+    its rendering, plus its touch survey when a model method is asked for
+    and its places when ``places`` (touch policies); then each replicate's
+    model is fitted on its training instances' surveys; then the model
+    methods run on every instance.
     """
     plain = tuple(m for m in methods if m not in MODEL_METHODS)
     learned = tuple(m for m in methods if m in MODEL_METHODS)
@@ -149,18 +153,19 @@ def instance_stage(objects: ObjectSet, methods, settings: Settings, replicates: 
         return SampleTask(objects.nominal[i], objects.names[i], methods, settings, r, j, cache_dir=runtime.cache_dir,
                           threads=runtime.threads, **more)
 
-    done = runtime.map(_instance_samples, [task(r, i, j, plain, survey=bool(learned)) for r, i, j in where],
-                       "instances: points+imprints")
+    done = runtime.map(_instance_samples, [task(r, i, j, plain, survey=bool(learned), places=places)
+                                           for r, i, j in where], "instances: points+imprints")
     samples = {SampleKey(r, m, i, j): out.by_method[m] for (r, i, j), out in zip(where, done) for m in plain}
+    found = {(r, i, j): out.places for (r, i, j), out in zip(where, done)} if places else None
     if not learned:
-        return InstanceStage(samples)
+        return InstanceStage(samples, (), found)
     surveys = {(r, i, j): out.survey for (r, i, j), out in zip(where, done)}
     models = runtime.map(_fit_model, [{(objects.names[i], j): surveys[r, i, j] for q, i, j in where if q == r}
                                       for r in range(replicates)], "instances: touch models")
     done = runtime.map(_instance_samples, [task(r, i, j, learned, model=models[r], surveyed=surveys[r, i, j])
                                            for r, i, j in where], "instances: learned points+imprints")
     samples.update({SampleKey(r, m, i, j): out.by_method[m] for (r, i, j), out in zip(where, done) for m in learned})
-    return InstanceStage(samples, tuple(models))
+    return InstanceStage(samples, tuple(models), found)
 
 
 @dataclass(frozen=True, eq=False)
@@ -172,7 +177,9 @@ class Measurement:
     ``touch_sets`` the fewest distinct touch sets any object offered at that
     many touches (0 for the paper protocol); ``confusion`` the single-touch
     counts; ``kept`` the mean fraction of training imprints selection kept
-    (with selection only).
+    (with selection only); ``stopping`` (correct, touches), each (replicates,
+    levels, objects): the stopping rule at each of the config's
+    ``stop_levels``, 100 where right at the stop and the touches used.
     """
 
     method: str
@@ -182,8 +189,9 @@ class Measurement:
     selection: bool
     rates: dict
     touch_sets: dict
-    confusion: ConfusionMatrix
+    confusion: ConfusionMatrix | None = None
     kept: float | None = None
+    stopping: tuple | None = None
 
 
 def _outcome_arrays(outcomes) -> dict:
@@ -270,10 +278,12 @@ def instance_recognition(method: str, n: int, stage: InstanceStage, objects: Obj
     data = [instance_data(stage, r, method, objects, order, settings) for r in range(config.replicates)]
     jobs = [(r, c, s) for r in range(config.replicates) for c, s in _recognizers(config)]
     work = [InstanceJob(data[r], Recognizer(c, s, config.params, config.threshold, config.features),
-                        settings.n_points, config.touch_sets_per_object, settings.seed, r) for r, c, s in jobs]
+                        settings.n_points, config.touch_sets_per_object, settings.seed, r, config.stop_levels)
+            for r, c, s in jobs]
     arrays = [a for d in data for a in (d.train_X, d.train_y, d.train_instance, d.train_point, *d.test)]
     key = _recognition_key("instance", arrays, [settings.key(), config.threshold, config.params, jobs,
-                                                config.touch_sets_per_object, sorted(names), config.features])
+                                                config.touch_sets_per_object, sorted(names), config.features,
+                                                config.stop_levels])
     outcomes = _run_jobs(runtime, key, InstanceOutcome, instance_job, work, f"instances: {method}, {n} objects")
     out = []
     for c, s in _recognizers(config):
@@ -283,6 +293,34 @@ def instance_recognition(method: str, n: int, stage: InstanceStage, objects: Obj
         sets = {k: int(min(o.sets[k - 1] for o in mine)) for k in range(1, settings.n_points + 1)}
         confusion = ConfusionMatrix(method, "instance", c, n, s, names,
                                     sum(o.confusion for o in mine)[np.ix_(back, back)])
+        stopping = (np.stack([o.stop_correct for o in mine])[:, :, back],
+                    np.stack([o.stop_touches for o in mine])[:, :, back])
         out.append(Measurement(method, "instance", c, n, s, rates, sets, confusion,
-                               float(np.mean([o.kept for o in mine])) if s else None))
+                               float(np.mean([o.kept for o in mine])) if s else None, stopping))
+    return out
+
+
+def policy_recognition(n: int, stage: InstanceStage, objects: ObjectSet, config: ExperimentConfig,
+                       runtime: Runtime) -> list[Measurement]:
+    """The sequential protocol on the first ``n`` objects: one :class:`Measurement` per policy and classifier."""
+    from classify.experiment.sequential import PolicyOutcome, policy_job, policy_jobs
+
+    jobs = policy_jobs(stage, objects, n, config)
+    back = np.argsort(objects.by_name(n))
+    arrays = [a for job in jobs[::len(config.classifiers)] for sample in (*job.training.values(), *job.tests)
+              for a in sample.to_arrays().values()]
+    key = _recognition_key("sequential", arrays, [config.settings.key(), config.params, config.features,
+                                                  list(config.policies), list(config.classifiers),
+                                                  config.stop_levels, config.replicates])
+    outcomes = _run_jobs(runtime, key, PolicyOutcome, policy_job, jobs, f"policies, {n} objects")
+    out = []
+    for q, policy in enumerate(config.policies):
+        for c in config.classifiers:
+            mine = [o for job, o in zip(jobs, outcomes) if job.recognizer.classifier == c]
+            stack = np.stack([o.rates[q] for o in mine])[:, :, back]                 # (replicates, k, objects)
+            K = stack.shape[1]
+            stopping = (np.stack([o.stop_correct[q] for o in mine])[:, :, back],
+                        np.stack([o.stop_touches[q] for o in mine])[:, :, back])
+            out.append(Measurement(policy, "sequential", c, n, False, {k: stack[:, k - 1, :] for k in range(1, K + 1)},
+                                   dict.fromkeys(range(1, K + 1), 1), None, None, stopping))
     return out

@@ -31,6 +31,10 @@ class Stream(IntEnum):
     TOUCH_SETS = 3
     #: Tie breaks of the fused decision.
     TIES = 4
+    #: A touch policy's own draws on a test instance.
+    EPISODE = 5
+    #: Tie breaks of the decision after each touch of an episode (policies, and fixed plans in their order).
+    EPISODE_TIES = 6
     #: The touch survey's device and rolls (learned methods).
     SURVEY = 7
 
@@ -60,6 +64,9 @@ def instance_rng(seed: int, name: str, replicate: int, index: int, stream: Strea
                                   *(int(m) for m in more)])
 
 
-def recognition_rng(seed: int, replicate: int, touches: int, name: str, stream: Stream) -> np.random.Generator:
-    """The generator of one ``stream`` of the recognition of object ``name``'s test instance after ``touches``."""
-    return np.random.default_rng([int(seed), int(replicate), int(touches), name_seed(name), int(stream)])
+def recognition_rng(seed: int, replicate: int, touches: int, name: str, stream: Stream,
+                    *more: int) -> np.random.Generator:
+    """The generator of one ``stream`` of the recognition of object ``name``'s test instance after ``touches``
+    (0 for a whole episode)."""
+    return np.random.default_rng([int(seed), int(replicate), int(touches), name_seed(name), int(stream),
+                                  *(int(m) for m in more)])

@@ -20,8 +20,7 @@ import numpy as np
 from meshsal.util.atomic import write_png, write_text
 
 __all__ = ["CSV_COLUMNS", "format_rate", "format_diff", "table_markdown", "touches_markdown", "comparison_markdown",
-           "write_csv",
-           "write_json", "confusion_image", "touches_image", "write_confusion_png", "write_touches_png"]
+           "stopping_markdown", "write_csv", "write_stopping_csv", "write_json", "confusion_image", "touches_image", "write_confusion_png", "write_touches_png"]
 
 CSV_COLUMNS = ("method", "protocol", "classifier", "n_objects", "selection", "touches",
                "mean", "std", "ci_low", "ci_high", "replicates", "touch_sets",
@@ -103,34 +102,76 @@ def touches_markdown(cells, method: str, protocol: str, classifiers, n_objects: 
 
 
 def comparison_markdown(cells, comparisons, protocol: str, classifier: str, n_objects: int, selection: bool,
-                        touches=(1, 5, 15)) -> str:
+                        touches=(1, 3, 5, 15)) -> str:
     """Point methods side by side: rate and paired difference against the baseline at a few k.
 
-    Rows are methods (the baseline first), columns the rate and the
-    difference at each k; empty when nothing was compared.
+    Rows are methods (the baseline first), then for the instance protocol the
+    touch policies compared with it (protocol "sequential"); columns the rate
+    and the difference at each k, and the fewest touches whose mean rate
+    reaches 95 %.  Empty when nothing was compared.
     """
     index = _index(cells)
-    diffs = {(d.method, d.touches): d for d in comparisons if (d.protocol, d.classifier, d.n_objects, d.selection)
-             == (protocol, classifier, n_objects, selection)}
+    protocols = (protocol, "sequential") if protocol == "instance" else (protocol,)
+    diffs = {(d.method, d.protocol, d.touches): d for d in comparisons
+             if d.protocol in protocols and (d.classifier, d.n_objects, d.selection) == (classifier, n_objects,
+                                                                                          selection)}
     if not diffs:
         return ""
     baseline = next(iter(diffs.values())).baseline
-    methods = [baseline] + list(dict.fromkeys(m for m, _ in diffs))
-    ks = [k for k in touches if (methods[0], protocol, classifier, n_objects, selection, k) in index]
-    header = ["points"]
+    rows = [(baseline, protocol)] + list(dict.fromkeys((m, p) for m, p, _ in diffs))
+    ks = [k for k in touches if (baseline, protocol, classifier, n_objects, selection, k) in index]
+    header = ["points or policy"]
     for k in ks:
         header += [f"{k} touch{'es' if k > 1 else ''}", f"diff at {k}"]
+    header.append("touches to 95 %")
     lines = ["| " + " | ".join(header) + " |", "|---|" + "|".join([":---:"] * (len(header) - 1)) + "|"]
-    for m in methods:
-        row = [m]
+    for m, p in rows:
+        row = [f"policy {m}" if p == "sequential" else m]
         for k in ks:
-            c = index.get((m, protocol, classifier, n_objects, selection, k))
-            d = diffs.get((m, k))
+            c = index.get((m, p, classifier, n_objects, selection, k))
+            d = diffs.get((m, p, k))
             row.append(format_rate(c.mean, c.ci_low, c.ci_high) if c else "-")
             row.append(format_diff(d.diff, d.ci_low, d.ci_high, d.p_value) if d else ("baseline" if m == baseline
                                                                                       else "-"))
+        reached = sorted(c.touches for key, c in index.items()
+                         if key[:5] == (m, p, classifier, n_objects, selection) and c.mean >= 95.0)
+        top = max((key[5] for key in index if key[:5] == (m, p, classifier, n_objects, selection)), default=0)
+        row.append(str(reached[0]) if reached else f"not within {top}")
         lines.append("| " + " | ".join(row) + " |")
     return "\n".join(lines)
+
+
+def stopping_markdown(stopping, classifier: str, n_objects: int) -> str:
+    """The stopping rule at each level: rows methods and policies, cells accuracy (%) / mean touches used.
+
+    The last column is the mean touches used at the lowest level whose mean accuracy reaches 95 %.
+    """
+    mine = [s for s in stopping if (s.classifier, s.n_objects) == (classifier, n_objects)]
+    levels = sorted({s.level for s in mine})
+    index = {(s.method, s.protocol, s.level): s for s in mine}
+    rows = list(dict.fromkeys((s.method, s.protocol) for s in mine))
+    lines = ["| points or policy | " + " | ".join(f"p = {p:g}" for p in levels) + " | touches at 95 % |",
+             "|---|" + "|".join([":---:"] * (len(levels) + 1)) + "|"]
+    for m, p in rows:
+        cells = [index[m, p, level] for level in levels]
+        at = next((s for s in cells if s.accuracy >= 95.0), None)
+        lines.append(f"| {'policy ' + m if p == 'sequential' else m} | "
+                     + " | ".join(f"{s.accuracy:.1f} / {s.touches:.2f}" for s in cells)
+                     + f" | {f'{at.touches:.2f} [{at.touches_low:.2f}, {at.touches_high:.2f}]' if at else 'not reached'} |")
+    return "\n".join(lines)
+
+
+def write_stopping_csv(path, stopping) -> None:
+    """One row per :class:`~classify.reporting.results.StoppingCell`, its fields as columns."""
+    import dataclasses
+
+    buffer = io.StringIO()
+    writer = csv.writer(buffer, lineterminator="\n")
+    names = [f.name for f in dataclasses.fields(stopping[0])]
+    writer.writerow(names)
+    for s in stopping:
+        writer.writerow([f"{v:.4f}" if isinstance(v, float) else v for v in (getattr(s, n) for n in names)])
+    write_text(path, buffer.getvalue())
 
 
 def write_csv(path, cells, comparisons=()) -> None:

@@ -22,7 +22,8 @@ import numpy as np
 
 from classify.reporting import report
 
-__all__ = ["CellKey", "Cell", "Comparison", "ConfusionMatrix", "ExperimentResult", "format_tables", "write_outputs"]
+__all__ = ["CellKey", "Cell", "Comparison", "ConfusionMatrix", "StoppingCell", "ExperimentResult", "format_tables",
+           "write_outputs"]
 
 
 class CellKey(NamedTuple):
@@ -61,7 +62,11 @@ class Cell:
 
 @dataclass(frozen=True)
 class Comparison:
-    """A method's rate minus the baseline method's, paired (percentage points)."""
+    """A method's rate minus the baseline method's, paired (percentage points).
+
+    A touch policy (protocol "sequential") is compared with the baseline
+    method's fixed plan on the same instances (protocol "instance").
+    """
 
     method: str
     baseline: str
@@ -91,6 +96,28 @@ class ConfusionMatrix:
 
 
 @dataclass(frozen=True)
+class StoppingCell:
+    """The stopping rule at one level: stop when the top class's calibrated posterior reaches ``level``.
+
+    ``accuracy`` (percent) and ``touches`` used, each mean and 95 % interval
+    over replicates and objects; fixed plans touch their points in order.
+    """
+
+    method: str
+    protocol: str
+    classifier: str
+    n_objects: int
+    level: float
+    accuracy: float
+    accuracy_low: float
+    accuracy_high: float
+    touches: float
+    touches_low: float
+    touches_high: float
+    replicates: int
+
+
+@dataclass(frozen=True)
 class ExperimentResult:
     """Everything one experiment measured, and every setting it used.
 
@@ -98,6 +125,7 @@ class ExperimentResult:
     classifier, n_objects, selection, touches)``) to its (replicates, objects) matrix of
     rates in percent.  ``selection_kept`` maps ``"method/protocol/n_objects"``
     to the mean fraction of training imprints similarity selection kept.
+    ``stopping`` holds the stopping rule's :class:`StoppingCell` records.
     """
 
     cells: tuple
@@ -110,6 +138,7 @@ class ExperimentResult:
     selection_kept: dict = field(default_factory=dict)
     timings: dict = field(default_factory=dict)
     rates: dict = field(default_factory=dict)
+    stopping: tuple = ()
 
     def cell(self, method, protocol, classifier, n_objects, selection, touches=1) -> Cell:
         """The cell of these coordinates (KeyError when it was not measured)."""
@@ -137,6 +166,7 @@ class ExperimentResult:
                        "selection": k[4], "touches": k[5], "replicate_by_object": np.asarray(v).tolist()}
                       for k, v in self.rates.items()],
             "selection_kept": self.selection_kept,
+            "stopping": [dataclasses.asdict(s) for s in self.stopping],
             "timings_s": self.timings,
         }
 
@@ -150,7 +180,9 @@ def _find(records, key):
 
 def _title(protocol):
     return {"paper": "paper protocol (CV grouped by point)",
-            "instance": "instance protocol (train and test on distinct instances)"}.get(protocol, protocol)
+            "instance": "instance protocol (train and test on distinct instances)",
+            "sequential": "sequential protocol (a touch policy on the instance protocol's instances)"}.get(protocol,
+                                                                                                       protocol)
 
 
 def format_tables(result: ExperimentResult, title="Table 1 layout") -> str:
@@ -163,23 +195,29 @@ def format_tables(result: ExperimentResult, title="Table 1 layout") -> str:
         for method in methods:
             if not any(c.method == method and c.protocol == protocol for c in result.cells):
                 continue
-            blocks.append(f"### {title}: {method} points, {_title(protocol)}, recognition rate (%), single "
+            what = "policy" if protocol == "sequential" else "points"
+            blocks.append(f"### {title}: {method} {what}, {_title(protocol)}, recognition rate (%), single "
                           f"touch, mean [95 % interval]\n\n" + result.table(method, protocol))
-            if protocol == "instance":
-                for selection in (False, True):
-                    blocks.append(f"### {method} points, instance protocol, {n} objects, "
+            if protocol in ("instance", "sequential"):
+                for selection in (False, True) if protocol == "instance" else (False,):
+                    blocks.append(f"### {method} {what}, {protocol} protocol, {n} objects, "
                                   f"{'with' if selection else 'no'} selection: recognition (%) after k touches\n\n"
                                   + report.touches_markdown(result.cells, method, protocol, result.classifiers,
                                                             n, selection))
+    clf = "knn" if "knn" in result.classifiers else result.classifiers[0]
     if result.comparisons:
         baseline = result.comparisons[0].baseline
-        clf = "knn" if "knn" in result.classifiers else result.classifiers[0]
-        for protocol in protocols:
+        for protocol in [p for p in protocols if p != "sequential"]:
             table = report.comparison_markdown(result.cells, result.comparisons, protocol, clf, n, False)
             if table:
-                blocks.append(f"### Point methods against {baseline}, {_title(protocol)}, {clf}, {n} objects, "
-                              f"no selection: rate (%) and paired difference (points) [95 % interval], "
+                policies = " and touch policies" if protocol == "instance" and "sequential" in protocols else ""
+                blocks.append(f"### Point methods{policies} against {baseline}, {_title(protocol)}, {clf}, {n} "
+                              f"objects, no selection: rate (%) and paired difference (points) [95 % interval], "
                               f"Wilcoxon p\n\n" + table)
+    if result.stopping:
+        blocks.append(f"### Stopping rule: stop when the top object's calibrated posterior reaches p; {clf}, {n} "
+                      f"objects, no selection: accuracy (%) / mean touches used [95 % intervals in "
+                      f"stopping.csv]\n\n" + report.stopping_markdown(result.stopping, clf, n))
     notes = [c for c in result.cells if c.protocol == "instance" and c.touches > 1
              and 0 < c.touch_sets < result.settings.get("touch_sets_per_object", 0)]
     if notes:
@@ -196,6 +234,8 @@ def write_outputs(result: ExperimentResult, out_dir) -> None:
     out.mkdir(parents=True, exist_ok=True)
     report.write_json(out / "results.json", result.to_json())
     report.write_csv(out / "results.csv", result.cells, result.comparisons)
+    if result.stopping:
+        report.write_stopping_csv(out / "stopping.csv", result.stopping)
     n = result.object_sets[-1]
     for name in result.classifiers:
         panels = [(f"{c.method} / {c.protocol} / {'sel' if c.selection else 'no sel'}", c.counts, c.object_names)
@@ -204,12 +244,12 @@ def write_outputs(result: ExperimentResult, out_dir) -> None:
             report.write_confusion_png(out / f"confusion_{name}.png", panels)
     clf = "knn" if "knn" in result.classifiers else result.classifiers[0]
     curves = {}
-    for method in dict.fromkeys(c.method for c in result.cells):
-        cells = sorted((c for c in result.cells if c.method == method and c.classifier == clf
-                        and c.n_objects == n and not c.selection and c.protocol == "instance"),
+    for method, protocol in dict.fromkeys((c.method, c.protocol) for c in result.cells):
+        cells = sorted((c for c in result.cells if (c.method, c.protocol) == (method, protocol) and c.classifier == clf
+                        and c.n_objects == n and not c.selection and c.protocol in ("instance", "sequential")),
                        key=lambda c: c.touches)
         if cells:
-            curves[method] = (np.array([c.touches for c in cells]), np.array([c.mean for c in cells]),
+            curves[f"policy {method}" if protocol == "sequential" else method] = (np.array([c.touches for c in cells]), np.array([c.mean for c in cells]),
                               np.array([c.ci_low for c in cells]), np.array([c.ci_high for c in cells]))
     if curves:
         report.write_touches_png(out / "touches.png", curves,

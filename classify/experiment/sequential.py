@@ -1,0 +1,125 @@
+"""The sequential protocol: touch policies on the instance protocol's instances, touch by touch.
+
+In each replicate the policies meet the very instances, devices and seeds
+the fixed plans meet (:mod:`classify.experiment.samples`).  The training
+instances are touched once at every candidate place (session 0, the same
+device as the fixed plans' first session); the touch knowledge is fitted on
+them (:func:`classify.policies.fit_knowledge`); then every policy touches
+every object's test instance up to ``n_points`` times
+(:func:`classify.policies.run_episode`), feeling what the test session's
+device reads there.  The rate after k touches is the share of test
+instances whose most probable object after the first k touches is right;
+the stopping rule gives accuracy against touches used.  Rows of
+``results.csv`` carry the protocol ``sequential`` and the policy's name as
+the method.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from threadpoolctl import threadpool_limits
+
+from classify.experiment.config import ExperimentConfig
+from classify.experiment.streams import Stream, name_seed, recognition_rng
+from classify.policies import POLICIES, decisions, fit_knowledge, run_episode, stopping_curve
+from classify.recognizers.touches import Recognizer
+
+__all__ = ["PolicyJob", "PolicyOutcome", "policy_job"]
+
+
+@dataclass(frozen=True, eq=False)
+class PolicyJob:
+    """One replicate of the sequential protocol for one classifier, every policy.
+
+    Attributes
+    ----------
+    training : dict (object name, instance) -> classify.policies.PlaceSample, training instances only
+    tests : tuple of PlaceSample, the test instances in the order of ``names``
+    vertices : dict object name -> (n, 3) float64, nominal mesh vertices
+    names : tuple of str, the objects sorted by name (the classes)
+    recognizer : Recognizer
+    policies : tuple of str, names in ``classify.policies.POLICIES``
+    touches : int, touches per episode at most
+    min_spacing : float, no touch closer than this to an earlier one (mm)
+    seed, replicate : int, the streams of the episodes' draws
+    stop_levels : tuple of float, the stopping rule's thresholds
+    """
+
+    training: dict
+    tests: tuple
+    vertices: dict
+    names: tuple
+    recognizer: Recognizer
+    policies: tuple
+    touches: int
+    min_spacing: float
+    seed: int
+    replicate: int
+    stop_levels: tuple = ()
+
+
+@dataclass(frozen=True)
+class PolicyOutcome:
+    """Every policy of one :class:`PolicyJob`.
+
+    ``rates`` (policies, touches, objects) 100 where the decision after k
+    touches was right, else 0; ``stop_correct``, ``stop_touches`` (policies,
+    levels, objects) the same at the stopping rule's stop and the touches it
+    used; ``touched`` (policies, objects, touches) the vertices touched (-1
+    after an episode that ran out of places); ``choice_s`` (policies,) the
+    median seconds a choice took.
+    """
+
+    rates: np.ndarray
+    stop_correct: np.ndarray
+    stop_touches: np.ndarray
+    touched: np.ndarray
+    choice_s: np.ndarray
+
+
+def policy_job(job: PolicyJob) -> PolicyOutcome:
+    """Fit the touch knowledge on the training instances, then run every policy on every test instance."""
+    n, K, L = len(job.names), job.touches, len(job.stop_levels)
+    rates = np.zeros((len(job.policies), K, n))
+    stop_correct, stop_touches = np.zeros((len(job.policies), L, n)), np.zeros((len(job.policies), L, n))
+    touched = np.full((len(job.policies), n, K), -1, np.int64)
+    choice_s = np.zeros(len(job.policies))
+    with threadpool_limits(1):
+        knowledge = fit_knowledge(job.training, job.vertices, job.recognizer)
+        for q, name in enumerate(job.policies):
+            seconds = []
+            for c, test in enumerate(job.tests):
+                rng = recognition_rng(job.seed, job.replicate, 0, job.names[c], Stream.EPISODE, name_seed(name))
+                episode = run_episode(POLICIES.get(name)(), test, knowledge, K, job.min_spacing, rng)
+                ties = recognition_rng(job.seed, job.replicate, 0, job.names[c], Stream.EPISODE_TIES)
+                picks = decisions(episode.beliefs, ties)
+                last = np.minimum(np.arange(K), len(picks) - 1)
+                rates[q, :, c] = 100.0 * (picks[last] == c)
+                ties = recognition_rng(job.seed, job.replicate, 0, job.names[c], Stream.EPISODE_TIES)
+                right, used = stopping_curve([episode.beliefs], np.array([c]), job.stop_levels, lambda e: ties)
+                stop_correct[q, :, c], stop_touches[q, :, c] = 100.0 * right[:, 0], used[:, 0]
+                touched[q, c, :len(episode.vertex_ids)] = episode.vertex_ids
+                seconds.extend(episode.choice_s)
+            choice_s[q] = float(np.median(seconds)) if seconds else 0.0
+    return PolicyOutcome(rates, stop_correct, stop_touches, touched, choice_s)
+
+
+def policy_jobs(stage, objects, n: int, config: ExperimentConfig) -> list:
+    """One :class:`PolicyJob` per replicate and classifier, for the first ``n`` objects."""
+    settings = config.settings
+    order = objects.by_name(n)
+    names = tuple(objects.names[i] for i in order)
+    vertices = {objects.names[i]: objects.nominal[i].vertices for i in order}
+    jobs = []
+    for r in range(config.replicates):
+        training = {(objects.names[i], j): stage.places[r, i, j] for i in order
+                    for j in range(1, settings.train_instances + 1)}
+        tests = tuple(stage.places[r, i, 0] for i in order)
+        for c in config.classifiers:
+            jobs.append(PolicyJob(training, tests, vertices, names, Recognizer(c, False, config.params,
+                                                                               config.threshold, config.features),
+                                  config.policies, settings.n_points, 0.5 * settings.sensor.width_mm, settings.seed,
+                                  r, config.stop_levels))
+    return jobs

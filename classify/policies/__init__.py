@@ -1,0 +1,16 @@
+"""Touch by touch: policies that choose each next touch from what the touches so far have felt.
+
+``knowledge`` (an instance's candidate places, and what touches there feel
+like on each object, fitted on training instances), ``policy`` (the policy
+API, the built-in policies and their registry) and ``episodes`` (a policy
+touching a test instance, and the stopping rule).
+"""
+
+from classify.policies.episodes import Episode, decisions, run_episode, stopping_curve
+from classify.policies.knowledge import Forecast, Places, PlaceSample, TouchKnowledge, fit_knowledge
+from classify.policies.policy import (POLICIES, InfoGainPolicy, LookaheadPolicy, PlanPolicy, RandomPolicy,
+                                      TouchPolicy, TouchState, expected_entropy)
+
+__all__ = ["Places", "PlaceSample", "Forecast", "TouchKnowledge", "fit_knowledge", "TouchState", "TouchPolicy",
+           "RandomPolicy", "InfoGainPolicy", "LookaheadPolicy", "PlanPolicy", "POLICIES", "expected_entropy",
+           "Episode", "run_episode", "decisions", "stopping_curve"]

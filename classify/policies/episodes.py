@@ -1,0 +1,139 @@
+"""Episodes: a policy touches a test instance, touch by touch; what it decided, and when it could have stopped.
+
+The runner (:func:`run_episode`) holds the test instance's imprints at every
+place and the label; the policy sees only a
+:class:`~classify.policies.policy.TouchState`.  After each touch the belief
+is the product of the calibrated posteriors of the touches so far, as the
+fusion multiplies them (``classify.recognizers.fusion``); the decision after
+k touches is its most probable class, ties broken by the episode's tie
+stream.  :func:`stopping_curve` applies a stopping rule afterwards: stop when
+the top class's belief reaches p, or after the last touch.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from classify.policies.knowledge import PlaceSample, TouchKnowledge
+from classify.policies.policy import TouchPolicy, TouchState
+
+__all__ = ["Episode", "run_episode", "decisions", "stopping_curve"]
+
+
+@dataclass(frozen=True, eq=False)
+class Episode:
+    """One test instance touched by one policy.
+
+    ``touched`` (k,) int64 place indices in order; ``vertex_ids`` (k,) their
+    vertices; ``beliefs`` (k, C) float64, the belief after each touch
+    (classes as the knowledge's names); ``choice_s`` (k,) seconds each choice took.
+    """
+
+    touched: np.ndarray
+    vertex_ids: np.ndarray
+    beliefs: np.ndarray
+    choice_s: np.ndarray
+
+
+def _available(sample: PlaceSample, touched: list, min_spacing: float) -> np.ndarray:
+    ok = sample.places.touchable.copy()
+    if touched:
+        P = sample.places.positions
+        near = np.linalg.norm(P[:, None, :] - P[touched][None, :, :], axis=2).min(axis=1)
+        ok &= near >= min_spacing
+        ok[touched] = False
+    return ok
+
+
+def run_episode(policy: TouchPolicy, sample: PlaceSample, knowledge: TouchKnowledge, touches: int,
+                min_spacing: float, rng: np.random.Generator, session: int = 0) -> Episode:
+    """Let ``policy`` touch the test instance ``sample`` up to ``touches`` times.
+
+    Parameters
+    ----------
+    policy : TouchPolicy
+    sample : PlaceSample
+        The test instance: its places and the imprints of ``session`` at each.
+    knowledge : TouchKnowledge
+        Fitted on training instances only.
+    touches : int
+        At most this many touches (fewer when no place is left).
+    min_spacing : float
+        No touch closer than this to an earlier one (mesh units), as for fixed plans.
+    rng : numpy Generator
+        The policy's own draws.
+    session : int
+        Which of the sample's acquisition sessions the touches feel.
+
+    Returns
+    -------
+    Episode
+    """
+    import time
+
+    places = sample.places
+    forecast = knowledge.forecast(places.vertex_ids)
+    felt = knowledge.posterior(sample.imprints[session])           # what each place would feel; the policy never sees it
+    belief = np.full(knowledge.n_classes, 1.0 / knowledge.n_classes)
+    touched, beliefs, seconds = [], [], []
+    for _ in range(touches):
+        available = _available(sample, touched, min_spacing)
+        if not available.any():
+            break
+        state = TouchState(places, tuple(touched), sample.imprints[session, touched], belief, available, forecast,
+                           knowledge)
+        started = time.perf_counter()
+        p = int(policy.choose(state, rng))
+        seconds.append(time.perf_counter() - started)
+        if not (0 <= p < len(places) and available[p]):
+            raise ValueError(f"policy {type(policy).__name__} chose place {p}, which is not available")
+        touched.append(p)
+        belief = belief * np.maximum(felt[p], 1e-300)
+        belief = belief / belief.sum()
+        beliefs.append(belief)
+    C = knowledge.n_classes
+    return Episode(np.asarray(touched, np.int64), places.vertex_ids[touched].astype(np.int64),
+                   np.asarray(beliefs, np.float64).reshape(-1, C), np.asarray(seconds))
+
+
+def decisions(beliefs: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+    """The most probable class after each touch, (k,) int64; equal beliefs (within 1e-9) drawn at random.
+
+    Examples
+    --------
+    >>> decisions(np.array([[0.2, 0.8], [0.6, 0.4]]), np.random.default_rng(0)).tolist()
+    [1, 0]
+    """
+    B = np.asarray(beliefs, dtype=np.float64)
+    top = B.max(axis=1, keepdims=True)
+    keys = np.where(B >= top - 1e-9 * np.maximum(1.0, top), rng.random(B.shape), -1.0)
+    return np.argmax(keys, axis=1).astype(np.int64)
+
+
+def stopping_curve(beliefs: list, truth: np.ndarray, levels, rng_of) -> tuple[np.ndarray, np.ndarray]:
+    """Accuracy and touches used when stopping as soon as the top belief reaches each level.
+
+    Parameters
+    ----------
+    beliefs : list of (k_e, C) arrays, one episode each (k_e >= 1)
+    truth : (E,) int, each episode's class
+    levels : (L,) float, the stopping thresholds p
+    rng_of : callable, episode index -> Generator for its tie breaks
+
+    Returns
+    -------
+    correct : (L, E) float64, 1 where the decision at the stop was right
+    touches : (L, E) float64, touches used
+    """
+    levels = np.asarray(levels, dtype=np.float64)
+    correct = np.zeros((levels.size, len(beliefs)))
+    used = np.zeros((levels.size, len(beliefs)))
+    for e, B in enumerate(beliefs):
+        picks = decisions(B, rng_of(e))
+        reached = B.max(axis=1)[None, :] >= levels[:, None]          # (L, k)
+        stop = np.where(reached.any(axis=1), np.argmax(reached, axis=1), len(B) - 1)
+        correct[:, e] = picks[stop] == truth[e]
+        used[:, e] = stop + 1
+    return correct, used

@@ -1,0 +1,207 @@
+"""Touch policies: where to touch next, from what vision gives and what the touches so far have felt.
+
+A policy sees a :class:`TouchState`: the test instance's candidate places
+(vision), the places touched so far and the imprints they gave, the belief
+(the calibrated posteriors of those touches multiplied, as the fusion
+multiplies them), which places may still be touched, the forecast of every
+place under every hypothesis, and the touch knowledge fitted on training
+instances.  It never sees the label, or an imprint of a place it has not
+touched: the episode runner (:mod:`classify.policies.episodes`) holds those.
+
+To add a policy, subclass :class:`TouchPolicy`, implement
+:meth:`~TouchPolicy.choose` and register a factory in :data:`POLICIES`::
+
+    class Greediest(TouchPolicy):
+        def choose(self, state, rng):
+            return int(np.flatnonzero(state.available)[0])
+
+    POLICIES.register("greediest", Greediest, "the first place in line")
+
+Built in: ``random``; ``info_gain``, the greedy expected information gain
+over the belief; ``lookahead``, the expected information of the best pair of
+touches; and fixed plans over the same places (``plan_uniform``: the
+farthest-point order of the pool; ``plan_mesh_saliency``: the places by
+mesh saliency), which never look at what they felt.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from classify.policies.knowledge import Forecast, Places, TouchKnowledge
+from meshsal.util.registry import Registry
+
+__all__ = ["TouchState", "TouchPolicy", "RandomPolicy", "InfoGainPolicy", "LookaheadPolicy", "PlanPolicy",
+           "POLICIES", "expected_entropy"]
+
+
+@dataclass(frozen=True, eq=False)
+class TouchState:
+    """What a policy may see before choosing the next touch.
+
+    Attributes
+    ----------
+    places : Places
+        The test instance's candidate places and what vision says of each.
+    touched : tuple of int
+        Indices into ``places`` touched so far, in order.
+    imprints : (k, rows, cols) float32
+        What those touches felt.
+    belief : (C,) float64
+        Calibrated posteriors of those touches multiplied and normalized
+        (uniform before the first touch), classes as ``knowledge.names``.
+    available : (P,) bool
+        Places that may be touched next: touchable, untouched and at least
+        the minimum spacing from every touched place.
+    forecast : Forecast
+        ``knowledge.forecast(places.vertex_ids)``.
+    knowledge : TouchKnowledge
+        Fitted on training instances only.
+    """
+
+    places: Places
+    touched: tuple
+    imprints: np.ndarray
+    belief: np.ndarray
+    available: np.ndarray
+    forecast: Forecast
+    knowledge: TouchKnowledge
+
+
+class TouchPolicy:
+    """Chooses the next place to touch.  Subclasses implement :meth:`choose`."""
+
+    def choose(self, state: TouchState, rng: np.random.Generator) -> int:
+        """The index into ``state.places`` of the next touch; one of ``state.available``."""
+        raise NotImplementedError
+
+
+class RandomPolicy(TouchPolicy):
+    """Any available place, uniformly at random."""
+
+    def choose(self, state: TouchState, rng: np.random.Generator) -> int:
+        return int(rng.choice(np.flatnonzero(state.available)))
+
+
+@dataclass(frozen=True)
+class PlanPolicy(TouchPolicy):
+    """A fixed plan over the places: the best available place by a ranking made before the first touch.
+
+    ``order`` is "pool" (the candidate pool's farthest-point order, then the
+    peaks) or the name of a visual feature (``meshsal.points.learned.FEATURES``),
+    highest first.
+    """
+
+    order: str = "pool"
+
+    def choose(self, state: TouchState, rng: np.random.Generator) -> int:
+        from meshsal.points.learned import FEATURES
+
+        if self.order == "pool":
+            score = -np.arange(len(state.places), dtype=np.float64)
+        else:
+            score = state.places.features[:, FEATURES.index(self.order)]
+        ranked = np.lexsort((np.arange(score.size), -score))
+        return int(ranked[state.available[ranked]][0])
+
+
+def _entropy(P: np.ndarray) -> np.ndarray:
+    return -np.sum(P * np.log(np.maximum(P, 1e-300)), axis=-1)
+
+
+def expected_entropy(belief: np.ndarray, forecast: Forecast, places: np.ndarray | None = None) -> np.ndarray:
+    """Expected entropy of the belief after one more touch at each place.
+
+    Under hypothesis j (probability ``belief[j]``) a touch at place p feels
+    like one of object j's training touches there, s with weight
+    ``forecast.weights[j, p, s]``, whose calibrated posterior multiplies
+    the belief.  Where a hypothesis has no forecast for a place, the touch
+    says nothing under it.
+
+    Parameters
+    ----------
+    belief : (C,) float64, normalized
+    forecast : Forecast
+    places : (m,) int, optional
+        Only these places (default all).
+
+    Returns
+    -------
+    (m,) float64 nats
+
+    Examples
+    --------
+    >>> from classify.policies.knowledge import Forecast
+    >>> sure = np.array([[[[0.9, 0.1]], [[0.5, 0.5]]], [[[0.1, 0.9]], [[0.5, 0.5]]]])   # (J=2, P=2, S=1, C=2)
+    >>> h = expected_entropy(np.array([0.5, 0.5]), Forecast(sure, np.ones((2, 2, 1))))
+    >>> bool(h[0] < h[1]), round(float(h[1]), 4)           # place 0 tells the objects apart, place 1 does not
+    (True, 0.6931)
+    """
+    P = forecast.posteriors if places is None else forecast.posteriors[:, places]
+    W = forecast.weights if places is None else forecast.weights[:, places]
+    known = W.sum(axis=2)                                           # (J, m): 1, or 0 without a forecast
+    after = np.asarray(belief)[None, None, None, :] * P
+    after /= after.sum(axis=-1, keepdims=True)
+    h = (W * _entropy(after)).sum(axis=2) + (1.0 - known) * _entropy(np.asarray(belief))
+    return np.asarray(belief) @ h
+
+
+class InfoGainPolicy(TouchPolicy):
+    """Greedy expected information gain: the available place whose touch is expected to leave the least entropy.
+
+    Ties go to the earlier place.  The forecast is the per-object touch models
+    of :class:`~classify.policies.knowledge.TouchKnowledge`, scored with the
+    calibrated posteriors the fusion multiplies.
+    """
+
+    def choose(self, state: TouchState, rng: np.random.Generator) -> int:
+        candidates = np.flatnonzero(state.available)
+        return int(candidates[np.argmin(expected_entropy(state.belief, state.forecast, candidates))])
+
+
+@dataclass(frozen=True)
+class LookaheadPolicy(TouchPolicy):
+    """The first touch of the best pair: expected entropy after two touches, the second chosen greedily.
+
+    The ``first`` places of least one-step expected entropy are tried; after
+    each of their possible outcomes (hypothesis j, training touch s) the
+    second touch is the best of the ``second`` places of least one-step
+    expected entropy now (a greedy second step).  Ties go to the earlier place.
+    """
+
+    first: int = 8
+    second: int = 32
+
+    def choose(self, state: TouchState, rng: np.random.Generator) -> int:
+        candidates = np.flatnonzero(state.available)
+        one = expected_entropy(state.belief, state.forecast, candidates)
+        order = candidates[np.lexsort((candidates, one))]
+        tries, seconds = order[:self.first], order[:self.second]
+        b, F = state.belief, state.forecast
+        best, best_value = int(order[0]), np.inf
+        for p in tries:
+            value = 0.0
+            rest = seconds[seconds != p]
+            for j in np.flatnonzero(b > 1e-9):
+                for s in np.flatnonzero(F.weights[j, p] > 0):
+                    after = b * F.posteriors[j, p, s]
+                    after /= after.sum()
+                    value += b[j] * F.weights[j, p, s] * (expected_entropy(after, F, rest).min() if rest.size else
+                                                          _entropy(after))
+                unknown = 1.0 - F.weights[j, p].sum()
+                if unknown > 0:
+                    value += b[j] * unknown * (expected_entropy(b, F, rest).min() if rest.size else _entropy(b))
+            if value < best_value - 1e-12:
+                best, best_value = int(p), value
+        return best
+
+
+#: The touch policies, each a factory of a :class:`TouchPolicy`.
+POLICIES = Registry("touch policy")
+POLICIES.register("random", RandomPolicy, "any available place, uniformly at random")
+POLICIES.register("info_gain", InfoGainPolicy, "greedy expected information gain over the objects' posterior")
+POLICIES.register("lookahead", LookaheadPolicy, "the first touch of the pair with the most expected information")
+POLICIES.register("plan_uniform", PlanPolicy, "fixed plan: the places in farthest-point order")
+POLICIES.register("plan_mesh_saliency", lambda: PlanPolicy("mesh_saliency"), "fixed plan: the places by mesh saliency")

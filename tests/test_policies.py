@@ -1,0 +1,117 @@
+"""Touch by touch: the policies see what they may, choose where objects differ, and places carry across instances."""
+
+import numpy as np
+import pytest
+import shapes
+
+from classify.experiment.config import Settings
+from classify.experiment.samples import SampleTask, instance_samples, instance_spec, nominal_mesh
+from classify.policies import (POLICIES, Forecast, InfoGainPolicy, LookaheadPolicy, PlanPolicy, TouchPolicy,
+                               expected_entropy, fit_knowledge, run_episode, stopping_curve)
+from classify.recognizers.touches import Recognizer
+from meshsal.mesh import Mesh, Similarity
+from meshsal.points.places import POOL_FACTOR
+
+SETTINGS = Settings(n_points=3, view_size=32, train_instances=2, train_sessions=1)
+APEX = np.array([0.6, 0.64, 0.48]) / np.linalg.norm([0.6, 0.64, 0.48])
+
+
+def _ball_and_domed():
+    """Two objects that differ in one place only: a ball, and the same ball with a dome on it."""
+    ball = shapes.sphere(radius=50.0, n=24).replace(name="ball")
+    angle = np.arccos(np.clip(ball.vertices @ APEX / 50.0, -1.0, 1.0))
+    domed = Mesh(ball.vertices * (1.0 + 0.25 * np.exp(-(angle / 0.25) ** 2))[:, None], ball.faces, name="domed")
+    return ball, domed
+
+
+@pytest.fixture(scope="module")
+def world():
+    """Both objects' instances 0 (test), 1, 2 (training) of replicate 0 with their places, and the knowledge."""
+    nominal = {m.name: nominal_mesh(m, SETTINGS) for m in _ball_and_domed()}
+    samples = {(name, j): instance_samples(SampleTask(mesh, name, (), SETTINGS, 0, j, places=True)).places
+               for name, mesh in nominal.items() for j in range(3)}
+    knowledge = fit_knowledge({k: v for k, v in samples.items() if k[1] >= 1},
+                              {name: mesh.vertices for name, mesh in nominal.items()},
+                              Recognizer("knn", features="polar"))
+    return nominal, samples, knowledge
+
+
+def test_info_gain_touches_where_the_objects_differ_within_two_touches(world):
+    nominal, samples, knowledge = world
+    apex = nominal["domed"].vertices[np.argmax(nominal["domed"].vertices @ APEX)]
+    for name in knowledge.names:
+        episode = run_episode(InfoGainPolicy(), samples[name, 0], knowledge, 2, 8.0, np.random.default_rng(0))
+        # Vertex ids name the same place on both objects (one mesh, one dome): distances in the domed frame.
+        distance = np.linalg.norm(nominal["domed"].vertices[episode.vertex_ids] - apex, axis=1)
+        assert distance.min() < 25.0, (name, distance)                  # on the dome (about 25 mm across)
+    planned = run_episode(PlanPolicy("pool"), samples["ball", 0], knowledge, 2, 8.0, np.random.default_rng(0))
+    assert np.linalg.norm(nominal["domed"].vertices[planned.vertex_ids] - apex, axis=1).min() > 25.0
+
+
+def test_a_place_on_a_turned_resized_copy_matches_the_same_place_of_the_object(world):
+    nominal, samples, knowledge = world
+    for j, name in enumerate(knowledge.names):
+        test = samples[name, 0].places
+        spec = instance_spec(SETTINGS, name, 0, 0)
+        assert not np.allclose(spec.rotation, np.eye(3)) and spec.scale != 1.0        # a turned, resized copy
+        back = Similarity(spec.scale, np.zeros(3), spec.rotation).inverse().apply(test.positions)
+        matched = nominal[name].vertices[knowledge.place_ids[j][knowledge.match(j, test.vertex_ids)]]
+        distance = np.linalg.norm(matched - back, axis=1)
+        assert distance.max() < 0.5 * SETTINGS.sensor.width_mm, name   # never further than the pads overlap
+        if name == "domed":
+            # A shape without symmetry offers the very same pool on every instance: exact matches (the peaks come
+            # from each instance's own mesh saliency and match within the bound above).
+            assert distance[:POOL_FACTOR * SETTINGS.n_points].max() < 1e-6
+        else:
+            # A ball's farthest-point pool starts anywhere: its places shift, each to a near one.
+            assert np.median(distance) < 0.25 * SETTINGS.sensor.width_mm
+
+
+def test_a_policy_never_sees_the_label_or_an_imprint_it_did_not_touch(world):
+    _, samples, knowledge = world
+    seen = []
+
+    class Spy(TouchPolicy):
+        def choose(self, state, rng):
+            seen.append(state)
+            return int(np.flatnonzero(state.available)[-1])
+
+    test = samples["domed", 0]
+    episode = run_episode(Spy(), test, knowledge, 4, 16.0, np.random.default_rng(0))
+    assert len(seen) == len(episode.touched) == 4
+    for k, state in enumerate(seen):
+        assert state.touched == tuple(episode.touched[:k])
+        np.testing.assert_array_equal(state.imprints, test.imprints[0, list(state.touched)])
+        assert not state.available[list(state.touched)].any()
+        assert not any("label" in f or "name" == f for f in vars(state))
+        positions = test.places.positions
+        if state.touched:
+            near = np.linalg.norm(positions[:, None] - positions[list(state.touched)][None], axis=2).min(axis=1)
+            assert np.all(near[state.available] >= 16.0)
+    assert np.allclose(seen[0].belief, 0.5) and np.isclose(episode.beliefs.sum(axis=1), 1.0).all()
+
+
+def test_every_built_in_policy_runs_an_episode_and_lookahead_agrees_with_info_gain_at_depth_one(world):
+    _, samples, knowledge = world
+    for name in POLICIES.names():
+        episode = run_episode(POLICIES.get(name)(), samples["ball", 0], knowledge, 3, 16.0, np.random.default_rng(2))
+        assert len(episode.touched) == 3 and len(set(episode.touched.tolist())) == 3, name
+    greedy = run_episode(InfoGainPolicy(), samples["ball", 0], knowledge, 1, 16.0, np.random.default_rng(2))
+    one = run_episode(LookaheadPolicy(first=1), samples["ball", 0], knowledge, 1, 16.0, np.random.default_rng(2))
+    assert greedy.touched.tolist() == one.touched.tolist()
+
+
+def test_expected_entropy_is_the_belief_entropy_where_no_hypothesis_knows_the_place():
+    posteriors = np.full((2, 3, 1, 2), 0.5)
+    posteriors[0, 0, 0], posteriors[1, 0, 0] = [0.99, 0.01], [0.01, 0.99]
+    weights = np.ones((2, 3, 1))
+    weights[:, 2] = 0.0                                                 # place 2: nothing known
+    h = expected_entropy(np.array([0.5, 0.5]), Forecast(posteriors, weights))
+    assert h[0] < 0.1 and h[1] == pytest.approx(np.log(2)) and h[2] == pytest.approx(np.log(2))
+
+
+def test_the_stopping_rule_stops_at_the_first_touch_whose_belief_reaches_the_level():
+    beliefs = [np.array([[0.6, 0.4], [0.9, 0.1], [0.99, 0.01]]), np.array([[0.3, 0.7], [0.96, 0.04]])]
+    correct, used = stopping_curve(beliefs, np.array([0, 0]), (0.5, 0.95, 0.999), lambda e: np.random.default_rng(e))
+    assert used.tolist() == [[1, 1], [3, 2], [3, 2]]
+    assert correct.tolist() == [[1, 0], [1, 1], [1, 1]]
