@@ -273,35 +273,45 @@ def run_batch(directory, store, settings: BatchSettings | None = None, executor=
 
 
 def load_entry(store, name: str) -> MeshEntry:
-    """One mesh's points and imprints per method, from a store written by :func:`run_batch`."""
+    """One mesh's points and imprints per method, from a store written by :func:`run_batch`.
+
+    A damaged, truncated or foreign entry, or one declaring arrays beyond
+    the caps of :func:`meshsal.util.npzfile.read_npz`, raises a ValueError
+    naming its file.
+    """
     import tactile
     from meshsal.mesh import Similarity
     from meshsal.points import InterestPoints
+    from meshsal.util.jsonfile import parse_json
+    from meshsal.util.npzfile import read_npz
 
     path = _entry_path(Path(store), name)
     try:
-        with np.load(path, allow_pickle=False) as archive:
-            meta = json.loads(str(archive["meta"]))
-            arrays = {k: archive[k] for k in archive.files if k != "meta"}
+        arrays = read_npz(path, "batch entry")
     except FileNotFoundError:
         raise FileNotFoundError(f"{path}: no such entry in the store") from None
-    except (ValueError, KeyError, OSError) as exc:
-        raise ValueError(f"{path}: not a batch entry ({exc})") from None
-    if meta.get("format") != ENTRY_FORMAT or meta.get("version") != VERSION:
-        raise ValueError(f"{path}: not a version {VERSION} batch entry (format {meta.get('format')!r}, "
-                         f"version {meta.get('version')!r})")
-    frame = meta["to_source"]
-    transform = Similarity(frame["scale"], frame["offset"], frame["rotation"])
-    points, imprints = {}, {}
-    for method, info in meta["methods"].items():
-        mine = {key.split("/", 1)[1]: value for key, value in arrays.items() if key.startswith(f"{method}/")}
-        points[method] = InterestPoints.from_arrays(mine, info, arrays["vertex_saliency"], method)
-        k = len(mine["positions"])
-        imprints[method] = tactile.ImprintSet(imprints=mine["imprints"], labels=np.zeros(k, np.int64),
-                                              object_names=(name,), point_ids=np.arange(k),
-                                              positions=mine["positions"], normals=mine["normals"],
-                                              sensor=tactile.Sensor(), source=f"{meta['source']} ({method} points)")
-    return MeshEntry(name, meta["source"], points, imprints, transform, meta.get("timings_s", {}))
+    if "meta" not in arrays:
+        raise ValueError(f"{path}: not a batch entry (no 'meta' array)")
+    meta = parse_json(str(arrays.pop("meta")), path, "batch entry")
+    if not isinstance(meta, dict) or meta.get("format") != ENTRY_FORMAT or meta.get("version") != VERSION:
+        found = meta if isinstance(meta, dict) else {}
+        raise ValueError(f"{path}: not a version {VERSION} batch entry (format {found.get('format')!r}, "
+                         f"version {found.get('version')!r})")
+    try:
+        source, frame = str(meta["source"]), meta["to_source"]
+        transform = Similarity(frame["scale"], frame["offset"], frame["rotation"])
+        points, imprints = {}, {}
+        for method, info in meta["methods"].items():
+            mine = {key.split("/", 1)[1]: value for key, value in arrays.items() if key.startswith(f"{method}/")}
+            points[method] = InterestPoints.from_arrays(mine, info, arrays["vertex_saliency"], method)
+            k = len(mine["positions"])
+            imprints[method] = tactile.ImprintSet(imprints=mine["imprints"], labels=np.zeros(k, np.int64),
+                                                  object_names=(name,), point_ids=np.arange(k),
+                                                  positions=mine["positions"], normals=mine["normals"],
+                                                  sensor=tactile.Sensor(), source=f"{source} ({method} points)")
+    except (KeyError, TypeError, ValueError, AttributeError) as exc:
+        raise ValueError(f"{path}: damaged batch entry ({type(exc).__name__}: {exc})") from None
+    return MeshEntry(name, source, points, imprints, transform, meta.get("timings_s", {}))
 
 
 def load_store(store) -> dict:

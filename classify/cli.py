@@ -197,7 +197,14 @@ def main(argv: list[str] | None = None) -> int:
     try:
         return int(args.func(args) or 0)
     except (ValueError, OSError) as exc:
+        # Every reader's error (MeshError, NpzError, a JSON file's ValueError) names its file.
         print(f"visuotactile {args.command}: error: {exc}", file=sys.stderr)
+        return 1
+    except (RecursionError, MemoryError) as exc:
+        # The readers' caps keep damaged files from getting here; this is the last guard against a traceback.
+        problem = "out of memory" if isinstance(exc, MemoryError) else "recursion too deep"
+        detail = f": {exc}" if str(exc) else ""
+        print(f"visuotactile {args.command}: error: {problem} ({type(exc).__name__}{detail})", file=sys.stderr)
         return 1
     except KeyboardInterrupt:
         print(f"visuotactile {args.command}: interrupted", file=sys.stderr)

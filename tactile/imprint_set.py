@@ -9,8 +9,6 @@ The file is a NumPy ``.npz`` archive (no pickles) holding the arrays and a
 from __future__ import annotations
 
 import json
-import zipfile
-import zlib
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -140,40 +138,34 @@ class ImprintSet:
     @classmethod
     def load(cls, path) -> ImprintSet:
         """Read a set written by :meth:`save`; a clear ``ValueError`` naming the file if it is
-        damaged, truncated, foreign or of another version."""
+        damaged, truncated, foreign, of another version, or larger than the caps of
+        :func:`meshsal.util.npzfile.read_npz` (512 MiB in all, 256 MiB an array)."""
+        from meshsal.util.jsonfile import parse_json
+        from meshsal.util.npzfile import read_npz
+
         path = Path(path)
         try:
-            archive = np.load(path, allow_pickle=False)
-            # A bare .npy file loads as an array, which is no context manager.
-            if not hasattr(archive, "files"):
-                raise ValueError(f"{path}: not an imprint set (a bare .npy array, not an .npz archive)")
-            with archive:
-                if "meta" not in archive.files:
-                    raise ValueError(f"{path}: not an imprint set (no 'meta' entry; "
-                                     f"arrays found: {', '.join(archive.files) or 'none'})")
-                meta = json.loads(str(archive["meta"]))
-                if not isinstance(meta, dict) or meta.get("format") != FORMAT:
-                    raise ValueError(f"{path}: not an imprint set (format {meta.get('format') if isinstance(meta, dict) else meta!r})")
-                if meta.get("version") != VERSION:
-                    raise ValueError(f"{path}: imprint set version {meta.get('version')!r} is not supported "
-                                     f"(this toolkit reads version {VERSION})")
-                missing = [name for name in _ARRAYS if name not in archive.files]
-                if missing:
-                    raise ValueError(f"{path}: damaged imprint set, missing {', '.join(missing)}")
-                arrays = {name: archive[name] for name in _ARRAYS}
+            arrays = read_npz(path, "imprint set")
         except FileNotFoundError:
             raise FileNotFoundError(f"{path}: no such imprint set file") from None
-        except (zipfile.BadZipFile, zlib.error, EOFError, OSError, KeyError, json.JSONDecodeError) as exc:
-            raise ValueError(f"{path}: damaged or truncated imprint set ({exc})") from None
-        except ValueError as exc:
-            if str(exc).startswith(str(path)):
-                raise
-            raise ValueError(f"{path}: damaged or truncated imprint set ({exc})") from None
+        if "meta" not in arrays:
+            raise ValueError(f"{path}: not an imprint set (no 'meta' entry; "
+                             f"arrays found: {', '.join(arrays) or 'none'})")
+        meta = parse_json(str(arrays["meta"]), path, "imprint set")
+        if not isinstance(meta, dict) or meta.get("format") != FORMAT:
+            raise ValueError(f"{path}: not an imprint set "
+                             f"(format {meta.get('format') if isinstance(meta, dict) else meta!r})")
+        if meta.get("version") != VERSION:
+            raise ValueError(f"{path}: imprint set version {meta.get('version')!r} is not supported "
+                             f"(this toolkit reads version {VERSION})")
+        missing = [name for name in _ARRAYS if name not in arrays]
+        if missing:
+            raise ValueError(f"{path}: damaged imprint set, missing {', '.join(missing)}")
         try:
             perturbation = meta.get("perturbation")
             return cls(sensor=Sensor(**meta["sensor"]),
                        perturbation=None if perturbation is None else Perturbation(**perturbation),
                        object_names=tuple(meta["object_names"]), seed=meta.get("seed"),
-                       source=meta.get("source", ""), **arrays)
+                       source=meta.get("source", ""), **{name: arrays[name] for name in _ARRAYS})
         except (KeyError, TypeError, ValueError) as exc:
             raise ValueError(f"{path}: inconsistent imprint set ({exc})") from None

@@ -7,7 +7,10 @@ canonical JSON), the source files of the packages that compute it and the
 versions of the libraries they call (:func:`library_versions`).  Editing the
 mesh, a setting or that code, or upgrading a library, gives a new key; stale
 entries are never read.  Entries are ``.npz`` files written atomically, so an
-interrupted run leaves no half-written entry; a damaged entry is recomputed.
+interrupted run leaves no half-written entry (only a temporary file, which is
+never read); an entry that :func:`meshsal.util.npzfile.read_npz` refuses
+(truncated, corrupt, foreign, or declaring arrays beyond its caps) is
+recomputed and overwritten.
 
 The default directory is ``$XDG_CACHE_HOME/visuotactile`` when that variable
 is set, else ``.cache/visuotactile`` in the working directory.
@@ -18,13 +21,13 @@ from __future__ import annotations
 import hashlib
 import json
 import os
-import zipfile
 from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
 
 from meshsal.util.atomic import atomic_path
+from meshsal.util.npzfile import NpzError, read_npz
 
 __all__ = ["default_dir", "hash_arrays", "code_fingerprint", "file_fingerprint", "library_versions", "cache_key",
            "cached", "load", "store"]
@@ -137,17 +140,21 @@ def cached(directory, key: str, compute: Callable[[], dict[str, np.ndarray]]) ->
 
 
 def load(directory, key: str) -> dict[str, np.ndarray] | None:
-    """The arrays stored under ``key``, or None when absent, damaged or ``directory`` is None."""
+    """The arrays stored under ``key``, or None when absent, damaged or ``directory`` is None.
+
+    Damaged means anything :func:`meshsal.util.npzfile.read_npz` refuses: a
+    truncated or foreign file, a corrupt deflate stream or CRC, Python
+    objects, or arrays declaring more than its caps (512 MiB in all, 256 MiB
+    each; nothing is allocated first).  The caller then recomputes the entry
+    and :func:`store` overwrites it.
+    """
     if directory is None:
         return None
     path = Path(directory) / f"{key}.npz"
-    if not path.exists():
-        return None
     try:
-        with np.load(path, allow_pickle=False) as data:
-            return {name: data[name] for name in data.files}
-    except (OSError, ValueError, zipfile.BadZipFile, EOFError):
-        return None  # a damaged entry (disk full, foreign file): the caller recomputes and overwrites it
+        return read_npz(path, "cache entry")
+    except (NpzError, OSError):
+        return None  # absent, damaged or unreadable: the caller recomputes and overwrites it
 
 
 def store(directory, key: str, arrays: dict[str, np.ndarray]) -> None:
