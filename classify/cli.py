@@ -38,8 +38,12 @@ def register(subparsers) -> None:
     p.add_argument("--objects", nargs="+", metavar="OBJECTS",
                    help="object sets (toys, ycb), object names or mesh files (OBJ/PLY/OFF/STL), separated by "
                         "spaces or commas, e.g. 'toys,ycb'; default: toys")
-    p.add_argument("--size-mm", type=float, default=150.0,
-                   help="nominal size: every object is scaled to this principal-frame box diagonal (mm)")
+    size = p.add_mutually_exclusive_group()
+    size.add_argument("--size-mm", type=float, default=150.0,
+                      help="nominal size: every object is scaled to this principal-frame box diagonal (mm)")
+    size.add_argument("--real-size", action="store_true",
+                      help="keep the real size of objects with real units (the toys in mm, the YCB scans in metres), "
+                           "each instance still resized by +-5 %%, instead of --size-mm")
     p.add_argument("--methods", type=_csv_list, default=("attention",),
                    help=f"comma-separated interest-point methods: {POINT_METHODS.help_text()}")
     p.add_argument("--policies", type=_csv_list, default=(),
@@ -150,7 +154,8 @@ def _experiment(args) -> int:
     if args.full and args.replicates is not None:
         raise ValueError("give --full or --replicates, not both")
     sensor = tactile.Sensor() if args.mode is None else tactile.Sensor(mode=args.mode)
-    settings = Settings(n_points=args.n_points, size_mm=args.size_mm, view_size=args.view_size, sensor=sensor,
+    settings = Settings(n_points=args.n_points, size_mm=None if args.real_size else args.size_mm,
+                        view_size=args.view_size, sensor=sensor,
                         train_instances=args.train_instances, train_sessions=args.train_sessions, seed=args.seed)
     config = ExperimentConfig(methods=args.methods, protocols=args.protocols, classifiers=args.classifiers or NAMES,
                               settings=settings, folds=args.folds, repeats=args.repeats, features=args.features,

@@ -182,3 +182,20 @@ def test_results_csv_is_identical_in_process_on_a_local_cluster_and_on_a_tcp_clu
         experiment.run_experiment(_objects(), executor=executor, out_dir=tmp_path / "tcp", **kwargs)
     serial = (tmp_path / "serial" / "results.csv").read_text()
     assert serial == (tmp_path / "local" / "results.csv").read_text() == (tmp_path / "tcp" / "results.csv").read_text()
+
+
+def test_real_size_keeps_the_objects_own_millimetres_and_refuses_a_file_without_units(tmp_path):
+    from classify.experiment.stages import load_objects
+    from meshsal.mesh.transform import principal_diagonal
+    from meshsal.objects import ycb
+
+    real = load_objects(["banana", "cup"], Settings(size_mm=None))
+    banana = ycb.load("banana")
+    metres = principal_diagonal(banana.vertices, banana.faces)[1]
+    assert principal_diagonal(real.nominal[0].vertices, real.nominal[0].faces)[1] == pytest.approx(1000.0 * metres)
+    cup = meshsal.objects.toys.make("cup")
+    assert np.ptp(real.nominal[1].vertices, axis=0) == pytest.approx(np.ptp(cup.vertices, axis=0))
+    path = tmp_path / "unitless.obj"
+    shapes.write_obj(path, shapes.box(half=2.0, n=4))
+    with pytest.raises(ValueError, match="unitless.*units are not known"):
+        load_objects(["cup", str(path)], Settings(size_mm=None))

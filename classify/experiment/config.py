@@ -37,8 +37,10 @@ class Settings:
     ----------
     n_points : int
         Interest points per instance.
-    size_mm : float
-        Nominal principal-frame box diagonal.
+    size_mm : float or None
+        Nominal principal-frame box diagonal; None keeps the real size of
+        objects whose units are known (the toys in millimetres, the YCB
+        scans in metres), each instance still resized by ``scale_spread``.
     view_size : int or None
         Rendered view size for the attention method (None: its default).
     sensor : tactile.Sensor
@@ -55,7 +57,7 @@ class Settings:
     """
 
     n_points: int = 15
-    size_mm: float = 150.0
+    size_mm: float | None = 150.0
     view_size: int | None = None
     sensor: object = field(default_factory=_sensor)
     perturbation: object = field(default_factory=_typical)
@@ -74,12 +76,12 @@ class Settings:
                              f"got {self.train_instances}")
         if self.train_sessions < 1:
             raise ValueError(f"train_sessions must be at least 1, got {self.train_sessions}")
-        if not self.size_mm > 0:
-            raise ValueError(f"size_mm must be positive, got {self.size_mm}")
+        if self.size_mm is not None and not self.size_mm > 0:
+            raise ValueError(f"size_mm must be positive (or None: real sizes), got {self.size_mm}")
 
     def key(self) -> str:
         """A canonical text of every field, for cache keys."""
-        return repr([self.n_points, float(self.size_mm), self.view_size, self.sensor, self.perturbation,
+        return repr([self.n_points, None if self.size_mm is None else float(self.size_mm), self.view_size, self.sensor, self.perturbation,
                      self.train_instances, self.train_sessions, float(self.scale_spread), float(self.hue_deg),
                      float(self.brightness_spread), int(self.seed)])
 

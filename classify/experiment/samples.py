@@ -125,11 +125,20 @@ class InstanceSamples:
     places: PlaceSample | None = None
 
 
-def nominal_mesh(mesh, settings: Settings):
-    """The object at its nominal size, centroid at the origin, as loaded otherwise."""
-    from meshsal.mesh.transform import scale_to_principal
+def nominal_mesh(mesh, settings: Settings, units_mm: float | None = None):
+    """The object at its nominal size, centroid at the origin, as loaded otherwise.
 
-    return scale_to_principal(mesh, settings.size_mm)
+    With ``settings.size_mm`` None, the object keeps its real size:
+    ``units_mm`` (millimetres per unit of its coordinates) must be known.
+    """
+    from meshsal.mesh.transform import scale_to_principal, to_millimetres
+
+    if settings.size_mm is not None:
+        return scale_to_principal(mesh, settings.size_mm)
+    if units_mm is None:
+        raise ValueError(f"{mesh.name or 'mesh'}: its units are not known, so it has no real size; give a size "
+                         f"(--size-mm) instead")
+    return to_millimetres(mesh, units_mm)
 
 
 def mesh_hash(mesh) -> str:

@@ -54,7 +54,9 @@ def load_objects(objects, settings: Settings) -> ObjectSet:
 
     ``objects``: None (the toys), strings for ``meshsal.objects.resolve_objects``
     (set names, object names, mesh files, comma-separated or not) or
-    ``meshsal.Mesh`` objects with distinct names.
+    ``meshsal.Mesh`` objects with distinct names.  With ``settings.size_mm``
+    None the objects keep their real sizes (named objects only: the units of
+    a file or an in-memory mesh are not known).
     """
     import meshsal
     from meshsal import objects as objects_mod
@@ -63,14 +65,17 @@ def load_objects(objects, settings: Settings) -> ObjectSet:
     meshes = [m for m in items if isinstance(m, meshsal.Mesh)]
     if meshes and len(meshes) != len(items):
         raise ValueError("objects must be all meshes or all names and paths, not a mix")
+    units = [None] * len(meshes)
     if not meshes:
-        meshes = [objects_mod.load_ref(ref) for ref in objects_mod.resolve_objects(items)]
+        refs = objects_mod.resolve_objects(items)
+        meshes = [objects_mod.load_ref(ref) for ref in refs]
+        units = [ref.units_mm for ref in refs]
     names = tuple(m.name for m in meshes)
     if any(not n for n in names) or len(set(names)) != len(names):
         raise ValueError(f"objects must have distinct, non-empty names, got {list(names)}")
     if len(meshes) < 2:
         raise ValueError(f"recognition needs at least two objects, got {len(meshes)}")
-    return ObjectSet(names, tuple(nominal_mesh(m, settings) for m in meshes))
+    return ObjectSet(names, tuple(nominal_mesh(m, settings, u) for m, u in zip(meshes, units)))
 
 
 @dataclass(frozen=True)

@@ -13,7 +13,7 @@ import numpy as np
 
 from meshsal.mesh import Mesh, MeshError, Similarity, bounding_sphere
 
-__all__ = ["scale_to", "normalize", "principal_diagonal", "scale_to_principal"]
+__all__ = ["scale_to", "normalize", "principal_diagonal", "scale_to_principal", "to_millimetres"]
 
 
 def _label(mesh: Mesh) -> str:
@@ -183,3 +183,28 @@ def scale_to_principal(mesh: Mesh, diagonal_mm: float = 150.0) -> Mesh:
         raise MeshError(f"{_label(mesh)}: cannot scale a mesh of zero extent (all vertices coincide)")
     scale = diagonal_mm / diagonal
     return _apply(mesh, Similarity(scale, -scale * centroid))
+
+
+def to_millimetres(mesh: Mesh, units_mm: float) -> Mesh:
+    """The object at its real size in millimetres, area-weighted centroid at the origin.
+
+    The counterpart of :func:`scale_to_principal` for objects whose files
+    have real units (``units_mm``: millimetres per file unit, 1000 for
+    metres), so a pad of 2 mm taxels meets the curvature the object has.
+
+    Examples
+    --------
+    >>> m = Mesh(vertices=[[0, 0, 0], [0.04, 0, 0], [0.04, 0.03, 0], [0, 0.03, 0]], faces=[[0, 1, 2], [0, 2, 3]])
+    >>> s = to_millimetres(m, 1000.0)
+    >>> np.round(s.vertices.max(axis=0) - s.vertices.min(axis=0), 6).tolist()
+    [40.0, 30.0, 0.0]
+    """
+    if not (math.isfinite(units_mm) and units_mm > 0):
+        raise ValueError(f"units_mm must be positive and finite, got {units_mm}")
+    if mesh.n_faces == 0:
+        raise MeshError(f"{_label(mesh)}: cannot place a mesh without faces")
+    try:
+        centroid, _ = principal_diagonal(mesh.vertices, mesh.faces)
+    except MeshError as exc:
+        raise MeshError(f"{_label(mesh)}: {exc}") from None
+    return _apply(mesh, Similarity(float(units_mm), -float(units_mm) * centroid))

@@ -32,20 +32,25 @@ class ObjectRef:
         ``"toy"``, ``"ycb"`` or ``"file"``.
     path : str or None
         The file for ``"ycb"`` (embedded) and ``"file"``; None for toys.
+    units_mm : float or None
+        Millimetres per unit of the object's coordinates where they are real
+        (the toys are in millimetres, the YCB scans in metres); None for a
+        file, whose units are not known.
     """
 
     name: str
     kind: str
     path: str | None = None
+    units_mm: float | None = None
 
 
 def _ref(item: str) -> ObjectRef:
     if Path(item).is_file():
         return ObjectRef(Path(item).stem, "file", str(item))
     if item in toys.NAMES:
-        return ObjectRef(item, "toy")
+        return ObjectRef(item, "toy", units_mm=1.0)
     if item in ycb.NAMES:
-        return ObjectRef(item, "ycb", str(ycb.path(item)))
+        return ObjectRef(item, "ycb", str(ycb.path(item)), units_mm=1000.0)
     raise ValueError(f"object {item!r} is neither a set ({', '.join(OBJECT_SETS)}), a known object "
                      f"({', '.join(toys.NAMES + ycb.NAMES)}) nor an existing mesh file")
 
