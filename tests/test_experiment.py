@@ -199,3 +199,25 @@ def test_real_size_keeps_the_objects_own_millimetres_and_refuses_a_file_without_
     shapes.write_obj(path, shapes.box(half=2.0, n=4))
     with pytest.raises(ValueError, match="unitless.*units are not known"):
         load_objects(["cup", str(path)], Settings(size_mm=None))
+
+
+def test_touch_policies_run_paired_with_the_fixed_plans_and_write_their_rows(tmp_path):
+    r = experiment.run_experiment(_objects()[:2], methods=("uniform", "mesh_saliency"), policies=("info_gain", "random"),
+                                  protocols=("instance",), classifiers=("knn",), features="polar", settings=SMALL,
+                                  replicates=2, cache_dir=None, quiet=True, n_jobs=1, out_dir=tmp_path)
+    with open(tmp_path / "results.csv") as fh:
+        rows = list(csv.DictReader(fh))
+    sequential = [row for row in rows if row["protocol"] == "sequential"]
+    assert {row["method"] for row in sequential} == {"info_gain", "random"}
+    assert {int(row["touches"]) for row in sequential} == set(range(1, SMALL.n_points + 1))
+    assert all(row["baseline"] == "uniform" and row["diff"] != "" for row in sequential)
+    # Paired: the same replicates and objects as the baseline's fixed plan.
+    for key, R in r.rates.items():
+        if key[1] == "sequential":
+            assert R.shape == r.rates[("uniform", "instance") + key[2:]].shape
+    with open(tmp_path / "stopping.csv") as fh:
+        stops = list(csv.DictReader(fh))
+    assert {(s["method"], s["protocol"]) for s in stops} >= {("info_gain", "sequential"), ("uniform", "instance")}
+    for s in stops:
+        assert 1.0 <= float(s["touches"]) <= SMALL.n_points and 0.0 <= float(s["accuracy"]) <= 100.0
+    assert "policy info_gain" in experiment.format_tables(r) and "touches at 95 %" in experiment.format_tables(r)

@@ -89,6 +89,11 @@ class Forecast:
 
     posteriors: np.ndarray
     weights: np.ndarray
+    #: ``posteriors * log(posteriors)``: the part of an entropy that does not depend on the belief (derived).
+    plogp: np.ndarray = None
+
+    def __post_init__(self):
+        object.__setattr__(self, "plogp", self.posteriors * np.log(self.posteriors))
 
 
 @dataclass(frozen=True, eq=False)

@@ -116,20 +116,22 @@ def expected_entropy(belief: np.ndarray, forecast: Forecast, places: np.ndarray 
 
     Under hypothesis j (probability ``belief[j]``) a touch at place p feels
     like one of object j's training touches there, s with weight
-    ``forecast.weights[j, p, s]``, whose calibrated posterior multiplies
-    the belief.  Where a hypothesis has no forecast for a place, the touch
-    says nothing under it.
+    ``forecast.weights[j, p, s]``, whose calibrated posterior q multiplies
+    the belief b.  The entropy of ``b q / Z`` (``Z = b . q``) is
+    ``log Z - (b . (q log q) + q . (b log b)) / Z``, so one pass over the
+    forecast per belief does.  Where a hypothesis has no forecast for a
+    place, the touch says nothing under it.
 
     Parameters
     ----------
-    belief : (C,) float64, normalized
+    belief : (C,) or (B, C) float64, normalized (several beliefs at once)
     forecast : Forecast
     places : (m,) int, optional
         Only these places (default all).
 
     Returns
     -------
-    (m,) float64 nats
+    (m,) or (B, m) float64 nats
 
     Examples
     --------
@@ -139,13 +141,19 @@ def expected_entropy(belief: np.ndarray, forecast: Forecast, places: np.ndarray 
     >>> bool(h[0] < h[1]), round(float(h[1]), 4)           # place 0 tells the objects apart, place 1 does not
     (True, 0.6931)
     """
-    P = forecast.posteriors if places is None else forecast.posteriors[:, places]
-    W = forecast.weights if places is None else forecast.weights[:, places]
-    known = W.sum(axis=2)                                           # (J, m): 1, or 0 without a forecast
-    after = np.asarray(belief)[None, None, None, :] * P
-    after /= after.sum(axis=-1, keepdims=True)
-    h = (W * _entropy(after)).sum(axis=2) + (1.0 - known) * _entropy(np.asarray(belief))
-    return np.asarray(belief) @ h
+    b = np.atleast_2d(np.asarray(belief, dtype=np.float64))                  # (B, C)
+    P, Q, W = forecast.posteriors, forecast.plogp, forecast.weights
+    if places is not None:
+        P, Q, W = P[:, places], Q[:, places], W[:, places]
+    J, m, S, C = P.shape
+    blogb = np.where(b > 0, b * np.log(np.where(b > 0, b, 1.0)), 0.0)
+    P2, Q2 = P.reshape(-1, C), Q.reshape(-1, C)
+    Z = P2 @ b.T                                                             # (J m S, B)
+    h = np.log(Z) - (Q2 @ b.T + P2 @ blogb.T) / Z
+    h = (W.reshape(-1, 1) * h).reshape(J, m, S, -1).sum(axis=2)              # (J, m, B)
+    h += (1.0 - W.sum(axis=2))[:, :, None] * (-blogb.sum(axis=1))[None, None, :]
+    out = np.einsum("bj,jmb->bm", b, h)
+    return out[0] if np.ndim(belief) == 1 else out
 
 
 class InfoGainPolicy(TouchPolicy):
@@ -158,7 +166,7 @@ class InfoGainPolicy(TouchPolicy):
 
     def choose(self, state: TouchState, rng: np.random.Generator) -> int:
         candidates = np.flatnonzero(state.available)
-        return int(candidates[np.argmin(expected_entropy(state.belief, state.forecast, candidates))])
+        return int(candidates[np.argmin(expected_entropy(state.belief, state.forecast)[candidates])])
 
 
 @dataclass(frozen=True)
@@ -176,23 +184,22 @@ class LookaheadPolicy(TouchPolicy):
 
     def choose(self, state: TouchState, rng: np.random.Generator) -> int:
         candidates = np.flatnonzero(state.available)
-        one = expected_entropy(state.belief, state.forecast, candidates)
+        F, b = state.forecast, state.belief
+        one = expected_entropy(b, F, candidates)
         order = candidates[np.lexsort((candidates, one))]
         tries, seconds = order[:self.first], order[:self.second]
-        b, F = state.belief, state.forecast
         best, best_value = int(order[0]), np.inf
         for p in tries:
-            value = 0.0
             rest = seconds[seconds != p]
-            for j in np.flatnonzero(b > 1e-9):
-                for s in np.flatnonzero(F.weights[j, p] > 0):
-                    after = b * F.posteriors[j, p, s]
-                    after /= after.sum()
-                    value += b[j] * F.weights[j, p, s] * (expected_entropy(after, F, rest).min() if rest.size else
-                                                          _entropy(after))
-                unknown = 1.0 - F.weights[j, p].sum()
-                if unknown > 0:
-                    value += b[j] * unknown * (expected_entropy(b, F, rest).min() if rest.size else _entropy(b))
+            # Every outcome of touching p: hypothesis j, training touch s (and "nothing known" where j has no forecast).
+            outcomes = [(j, s) for j in np.flatnonzero(b > 1e-9) for s in np.flatnonzero(F.weights[j, p] > 0)]
+            after = np.array([b * F.posteriors[j, p, s] for j, s in outcomes] + [b])
+            after /= after.sum(axis=1, keepdims=True)
+            chance = np.array([b[j] * F.weights[j, p, s] for j, s in outcomes]
+                              + [float(b @ (1.0 - F.weights[:, p].sum(axis=1)))])
+            second = (expected_entropy(after, F, rest).min(axis=1) if rest.size
+                      else -np.sum(after * np.log(np.maximum(after, 1e-300)), axis=1))
+            value = float(chance @ second)
             if value < best_value - 1e-12:
                 best, best_value = int(p), value
         return best
