@@ -25,6 +25,13 @@ def load_clean(path):
         return load_mesh(path)
 
 
+def load_clean_report(path):
+    """Load with the repair report and fail on any warning."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        return load_mesh(path, report=True)
+
+
 def write(path, text):
     path.write_text(text)
     return path
@@ -80,9 +87,9 @@ def test_obj_vertex_colors(tmp_path):
 
 
 def test_obj_negative_indices_and_slashes(tmp_path):
-    text = "v 0 0 0\nv 1 0 0\nv 0 1 0\nvn 0 0 1\nf -3//1 -2//1 -1//1\nv 0 0 1\nf 1 2 -1\n"
+    text = "v 0 0 0\nv 1 0 0\nv 0 1 0\nvn 0 0 1\nf -3//1 -2//1 -1//1\nv 0 0 1\nf 2 1 -1\n"
     m = load_clean(write(tmp_path / "neg.obj", text))
-    np.testing.assert_array_equal(m.faces, [[0, 1, 2], [0, 1, 3]])
+    np.testing.assert_array_equal(m.faces, [[0, 1, 2], [1, 0, 3]])
 
 
 def textured_obj(tmp_path, image=True, extra_faces=""):
@@ -208,9 +215,10 @@ def test_unreferenced_vertices_removed_colors_kept(tmp_path):
 def test_duplicates_with_different_colors_are_kept_apart(tmp_path):
     V = np.vstack([TETRA_V, TETRA_V[:1]])
     colors = np.array([[1, 0, 0], [0, 1, 0], [0, 0, 1], [1, 1, 1], [0, 0, 0]])
-    F = np.vstack([TETRA_F, [[4, 1, 3]]])  # face on vertex 0's black twin
-    m = load_clean(write(tmp_path / "twin.obj", obj_text(V, F, colors)))
+    F = np.where(np.arange(4)[:, None] == 2, np.where(TETRA_F == 0, 4, TETRA_F), TETRA_F)  # a colour seam at vertex 0
+    m, report = load_clean_report(write(tmp_path / "twin.obj", obj_text(V, F, colors)))
     assert m.n_vertices == 5
+    assert report.boundary_loops == 1 and report.closed_components == 0  # the seam opens the surface
 
 
 def test_repeated_index_face_dropped_and_counted(tmp_path):
@@ -518,3 +526,4 @@ def test_shared_meshes_load(shared_mesh, name):
     assert np.isfinite(m.vertices).all()
     assert m.faces.min() == 0 and m.faces.max() == m.n_vertices - 1  # every vertex referenced
     assert (face_areas(m.vertices, m.faces) > 0).all()
+

@@ -1,18 +1,19 @@
 """Read triangle meshes from OBJ, PLY, OFF and STL files; write PLY.
 
-``load_mesh`` loads through pymeshlab, but first scans the file itself
-(:mod:`meshsal.mesh.formats`): pymeshlab silently drops faces that point at
-missing or non-finite vertices and can crash the interpreter on malformed
-input, so every file is checked against what it declares (vertex and face
-counts, index ranges, finite coordinates) before and after pymeshlab sees it.  Anything that cannot be
-loaded in full raises :class:`meshsal.MeshError` naming the file and the
-problem; safe repairs (merging duplicate vertices, removing unreferenced
-vertices, dropping zero-area faces) are made and reported with a
-:class:`MeshRepairWarning`.
+``load_mesh`` loads through pymeshlab, after :mod:`meshsal.mesh.formats` has
+checked the file against what it declares (vertex and face counts, index
+ranges, finite coordinates), and checks pymeshlab's result against that too.
+Then :mod:`meshsal.mesh.repair` finds and repairs what real meshes get wrong
+(duplicate, degenerate and double-sided faces, inconsistent orientation,
+non-manifold edges and vertices...) and the one :class:`MeshRepairWarning`
+names the file and every repair.  Anything that cannot be loaded in full,
+or repaired without changing the shape, raises :class:`meshsal.MeshError`
+naming the file and the problem, before any work.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import warnings
 from pathlib import Path
 
@@ -21,25 +22,9 @@ import numpy as np
 from meshsal.util.atomic import atomic_path
 from meshsal.mesh import Mesh
 from meshsal.mesh.formats import SUPPORTED_EXTENSIONS, Declared, fail, read_ply, scan
+from meshsal.mesh.repair import MeshRepairWarning, MeshReport, repair_arrays
 
-__all__ = ["MeshRepairWarning", "load_mesh", "save_ply", "load_vertex_quality"]
-
-# Faces whose area is below this fraction of the squared bounding-box
-# diagonal are zero up to rounding (collinear or coincident corners).
-_ZERO_AREA = 1e-14
-
-
-class MeshRepairWarning(UserWarning):
-    """A mesh file was repaired, or part of it (a texture) left out, while loading.
-
-    The message names the file and gives the counts of each repair.
-    """
-
-
-
-
-# ---------------------------------------------------------------------------
-# loading
+__all__ = ["MeshRepairWarning", "MeshReport", "load_mesh", "save_ply", "load_vertex_quality", "SUPPORTED_EXTENSIONS"]
 
 
 def _read_checked(path: Path) -> bytes:
@@ -87,57 +72,31 @@ def _load_texture(declared: Declared, notes: list):
     return cv2.cvtColor(image, cv2.COLOR_BGR2RGB)
 
 
-def _repair(V, F, C, UV):
-    """Merge duplicate vertices, drop zero-area faces, remove unreferenced vertices.
-
-    Returns the repaired arrays and the counts (merged, dropped faces, removed vertices).
-    """
-    # + 0.0 turns -0.0 into 0.0 so both merge.
-    key = V + 0.0 if C is None else np.hstack([V + 0.0, C.astype(np.float64)])
-    _, first, inverse = np.unique(key, axis=0, return_index=True, return_inverse=True)
-    merged = len(V) - len(first)
-    if merged:
-        order = np.argsort(first)  # keep vertices in file order
-        rank = np.empty_like(order)
-        rank[order] = np.arange(len(order))
-        keep = first[order]
-        F = rank[inverse.reshape(-1)][F]
-        V, C = V[keep], None if C is None else C[keep]
-    diagonal = np.linalg.norm(V.max(axis=0) - V.min(axis=0)) if len(V) else 0.0
-    a, b, c = V[F[:, 0]], V[F[:, 1]], V[F[:, 2]]
-    area = 0.5 * np.linalg.norm(np.cross(b - a, c - a), axis=1)
-    good = area > _ZERO_AREA * diagonal**2
-    dropped = int(np.count_nonzero(~good))
-    F, UV = F[good], None if UV is None else UV[good]
-    used = np.zeros(len(V), dtype=bool)
-    used[F.reshape(-1)] = True
-    removed = int(np.count_nonzero(~used))
-    if removed:
-        rank = np.cumsum(used) - 1
-        F = rank[F]
-        V, C = V[used], None if C is None else C[used]
-    return V, F, C, UV, (merged, dropped, removed)
-
-
-def load_mesh(path) -> Mesh:
-    """Load a triangle mesh from an OBJ, PLY, OFF or STL file.
+def load_mesh(path, *, report: bool = False):
+    """Load a triangle mesh from an OBJ, PLY, OFF or STL file, repaired.
 
     Polygons are triangulated.  OBJ files bring their MTL texture image
     (``uv`` per face corner and ``texture``) and ``v x y z r g b`` vertex
-    colors; PLY and OFF files bring vertex colors.  Duplicate vertices are
-    merged (STL stores every corner separately), zero-area faces dropped
-    and unreferenced vertices removed, each reported in one
-    :class:`MeshRepairWarning`.  A texture image that is missing or
-    unreadable is reported the same way and the geometry loads without it.
+    colors; PLY and OFF files bring vertex colors.  The mesh is then
+    repaired (:func:`meshsal.mesh.repair.repair_arrays`: duplicate vertices
+    merged, zero-area, sliver, duplicate and double-sided faces dropped,
+    components oriented consistently and closed ones outward, non-manifold
+    vertices split, unreferenced vertices removed); every repair is reported
+    in one :class:`MeshRepairWarning` naming the file.  A mesh that needs
+    none loads exactly as the file has it.  A texture image that is
+    missing or unreadable is reported the same way and the geometry loads
+    without it.
 
     Parameters
     ----------
     path : str or os.PathLike
         A ``.obj``, ``.ply`` (ASCII or binary), ``.off`` or ``.stl`` (ASCII or binary) file.
+    report : bool
+        Also return the :class:`~meshsal.mesh.repair.MeshReport` of what was found and done.
 
     Returns
     -------
-    Mesh
+    Mesh, or (Mesh, MeshReport) with ``report=True``
         ``vertices`` (n, 3) float64 in the file's units, ``faces`` (m, 3)
         int32, ``name`` the file's stem, ``transform`` the identity.
 
@@ -146,17 +105,18 @@ def load_mesh(path) -> Mesh:
     MeshError
         The message names the file and the problem: missing file, a
         directory, unknown extension, empty file, unparseable content, face
-        index out of range, non-finite coordinates, no faces (a point cloud),
-        no non-degenerate face left, or fewer faces loaded than the file holds.
+        index out of range, non-finite coordinates, no faces (a point
+        cloud), no non-degenerate face left, or fewer faces loaded than the
+        file holds.
 
     Examples
     --------
     >>> import pathlib, tempfile
     >>> p = pathlib.Path(tempfile.mkdtemp()) / "quad.obj"
-    >>> _ = p.write_text("v 0 0 0\\nv 1 0 0\\nv 1 1 0\\nv 0 1 0\\nf 1 2 3 4\\n")
-    >>> m = load_mesh(p)
-    >>> m.name, m.vertices.shape, m.faces.shape
-    ('quad', (4, 3), (2, 3))
+    >>> _ = p.write_text("v 0 0 0\\nv 1 0 0\\nv 1 1 0\\nv 0 1 0\\nf 1 2 3 4\\nf 1 3 2\\n")
+    >>> m, found = load_mesh(p, report=True)     # the last face is the first's flipped twin
+    >>> m.name, m.vertices.shape, m.faces.shape, found.double_sided_faces, found.boundary_loops
+    ('quad', (4, 3), (2, 3), 1, 1)
     """
     path = Path(path)
     data = _read_checked(path)
@@ -189,22 +149,14 @@ def load_mesh(path) -> Mesh:
             UV = np.asarray(pm.wedge_tex_coord_matrix(), dtype=np.float32).reshape(-1, 3, 2)
         else:
             texture = None
-    V, F, C, UV, (merged, dropped, removed) = _repair(V, F, C, UV)
-    dropped += declared.n_repeated
-    if len(F) == 0:
-        fail(path, f"no non-degenerate face left (all {dropped} faces have zero area)")
-    repairs = [
-        f"{what} {count} {noun}"
-        for what, count, noun in (
-            ("merged", merged, "duplicate vertices"),
-            ("removed", removed, "unreferenced vertices"),
-            ("dropped", dropped, "zero-area faces"),
-        )
-        if count
-    ]
-    for note in notes + ([", ".join(repairs)] if repairs else []):
-        warnings.warn(f"{path}: {note}", MeshRepairWarning, stacklevel=2)
-    return Mesh(vertices=V, faces=F, vertex_colors=C, uv=UV, texture=texture, name=path.stem)
+    del ms, pm
+    V, F, C, UV, found = repair_arrays(V, F, C, UV, source=str(path))
+    found = dataclasses.replace(found, faces=found.faces + declared.n_repeated,
+                                zero_area_faces=found.zero_area_faces + declared.n_repeated, notes=tuple(notes))
+    if found.repaired or found.findings():
+        warnings.warn(found.message(), MeshRepairWarning, stacklevel=2)
+    mesh = Mesh(vertices=V, faces=F, vertex_colors=C, uv=UV, texture=texture, name=path.stem)
+    return (mesh, found) if report else mesh
 
 
 # ---------------------------------------------------------------------------
