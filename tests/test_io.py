@@ -10,7 +10,8 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from meshsal.mesh.io import MeshRepairWarning, load_mesh, load_vertex_quality, save_ply
+from meshsal.mesh.io import MAX_MESH_BYTES, MeshRepairWarning, load_mesh, load_vertex_quality, save_ply
+from meshsal.mesh.texture import image_size, read_texture
 from meshsal.mesh import Mesh, MeshError, face_areas
 
 SQUARE = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], dtype=np.float64)
@@ -527,3 +528,63 @@ def test_shared_meshes_load(shared_mesh, name):
     assert m.faces.min() == 0 and m.faces.max() == m.n_vertices - 1  # every vertex referenced
     assert (face_areas(m.vertices, m.faces) > 0).all()
 
+
+# --------------------------------------------------------------------------- caps on file and texture sizes
+
+
+def test_a_mesh_file_over_the_cap_is_refused_before_it_is_read(tmp_path, monkeypatch):
+    path = write(tmp_path / "big.obj", obj_text(TETRA_V, TETRA_F))
+    size = path.stat().st_size
+    monkeypatch.setattr(type(path), "read_bytes", lambda self: pytest.fail(f"{self} was read"))
+    with pytest.raises(MeshError, match=rf"big\.obj: {size:,} bytes, over the cap of 40 bytes"):
+        load_mesh(path, max_bytes=40)
+
+
+def test_the_mesh_cap_can_be_raised_or_lifted(tmp_path):
+    path = write(tmp_path / "t.obj", obj_text(TETRA_V, TETRA_F))
+    assert MAX_MESH_BYTES == 256 * 2**20
+    assert load_mesh(path, max_bytes=path.stat().st_size).n_faces == 4
+    assert load_mesh(path, max_bytes=None).n_faces == 4
+
+
+def png_header(width, height):
+    """The first bytes of a PNG that declares its size (the rest does not matter: it is never decoded)."""
+    ihdr = np.array([width, height], ">u4").tobytes() + bytes([8, 2, 0, 0, 0])
+    return b"\x89PNG\r\n\x1a\n" + np.uint32(13).astype(">u4").tobytes() + b"IHDR" + ihdr + b"\0" * 4 + b"garbage"
+
+
+def test_a_texture_over_the_pixel_cap_is_dropped_before_it_is_decoded(tmp_path, monkeypatch):
+    path = textured_obj(tmp_path, image=False)
+    (tmp_path / "tex.png").write_bytes(png_header(100_000, 50_000))
+    monkeypatch.setattr(cv2, "imread", lambda *a, **k: pytest.fail("the texture was decoded"))
+    with pytest.warns(MeshRepairWarning, match=r"t\.obj: texture image 'tex\.png' has 100000 x 50000 = "
+                                               r"5,000,000,000 pixels, over the cap of 67,108,864"):
+        m = load_mesh(path)
+    assert m.texture is None and m.uv is None and m.n_faces == 2
+
+
+@pytest.mark.parametrize("suffix", [".png", ".jpg", ".bmp", ".tiff"])
+def test_texture_sizes_from_headers_or_after_decoding(tmp_path, suffix):
+    image = np.random.default_rng(0).integers(0, 255, (30, 50, 3), dtype=np.uint8)
+    cv2.imwrite(str(tmp_path / f"im{suffix}"), image)
+    assert image_size(tmp_path / f"im{suffix}") == (None if suffix == ".tiff" else (50, 30))
+    assert read_texture(tmp_path / f"im{suffix}", max_pixels=1500)[0].shape == (30, 50, 3)
+    texture, note = read_texture(tmp_path / f"im{suffix}", max_pixels=1499)
+    assert texture is None and note == (f"texture image 'im{suffix}' has 50 x 30 = 1,500 pixels, over the cap of "
+                                        "1,499; loaded without texture")
+
+
+def test_load_mesh_passes_its_texture_cap_on(tmp_path):
+    path = textured_obj(tmp_path)                       # a 4 x 2 texture
+    assert load_mesh(path, max_texture_pixels=8).texture.shape == (2, 4, 3)
+    with pytest.warns(MeshRepairWarning, match="8 pixels, over the cap of 7"):
+        assert load_mesh(path, max_texture_pixels=7).texture is None
+
+
+def test_a_material_library_over_its_cap_is_not_read(tmp_path, monkeypatch):
+    from meshsal.mesh import formats
+
+    path = textured_obj(tmp_path)
+    monkeypatch.setattr(formats, "MAX_MATERIAL_BYTES", 10)
+    with pytest.warns(MeshRepairWarning, match=r"t\.obj: material library 't\.mtl' has \d+ bytes, over the cap of 10"):
+        assert load_mesh(path).texture is None

@@ -24,6 +24,10 @@ __all__ = ["SUPPORTED_EXTENSIONS", "Declared", "scan", "read_ply", "fail"]
 
 SUPPORTED_EXTENSIONS = (".obj", ".off", ".ply", ".stl")
 
+#: A material library larger than this is not read (its textures are left out, with a note): MTL files
+#: hold a few lines per material, so anything near this size is not one.
+MAX_MATERIAL_BYTES = 16 * 2**20
+
 
 @dataclass
 class Declared:
@@ -179,8 +183,18 @@ def _obj_textures(path: Path, libraries, materials_used, declared: Declared):
         if not lib.is_file():
             declared.notes.append(f"material library {name!r} not found")
             continue
+        try:
+            size = lib.stat().st_size
+            text = lib.read_bytes().decode("utf-8", errors="replace") if size <= MAX_MATERIAL_BYTES else None
+        except OSError as e:
+            declared.notes.append(f"material library {name!r} cannot be read ({e.strerror or e})")
+            continue
+        if text is None:
+            declared.notes.append(f"material library {name!r} has {size} bytes, over the cap of "
+                                  f"{MAX_MATERIAL_BYTES}; loaded without its textures")
+            continue
         current = None
-        for line in lib.read_bytes().decode("utf-8", errors="replace").splitlines():
+        for line in text.splitlines():
             parts = line.split()
             if len(parts) >= 2 and parts[0] == "newmtl":
                 current = " ".join(parts[1:])

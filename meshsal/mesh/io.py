@@ -8,7 +8,9 @@ Then :mod:`meshsal.mesh.repair` finds and repairs what real meshes get wrong
 non-manifold edges and vertices...) and the one :class:`MeshRepairWarning`
 names the file and every repair.  Anything that cannot be loaded in full,
 or repaired without changing the shape, raises :class:`meshsal.MeshError`
-naming the file and the problem, before any work.
+naming the file and the problem, before any work.  Files over
+``MAX_MESH_BYTES`` are refused before they are read; textures over
+``MAX_TEXTURE_PIXELS`` are left out (:mod:`meshsal.mesh.texture`).
 """
 
 from __future__ import annotations
@@ -23,11 +25,17 @@ from meshsal.util.atomic import atomic_path
 from meshsal.mesh import Mesh
 from meshsal.mesh.formats import SUPPORTED_EXTENSIONS, Declared, fail, read_ply, scan
 from meshsal.mesh.repair import MeshRepairWarning, MeshReport, repair_arrays
+from meshsal.mesh.texture import MAX_TEXTURE_PIXELS, read_texture
 
-__all__ = ["MeshRepairWarning", "MeshReport", "load_mesh", "save_ply", "load_vertex_quality", "SUPPORTED_EXTENSIONS"]
+__all__ = ["MeshRepairWarning", "MeshReport", "load_mesh", "save_ply", "load_vertex_quality", "MAX_MESH_BYTES",
+           "MAX_TEXTURE_PIXELS", "SUPPORTED_EXTENSIONS"]
+
+#: Largest mesh file read, in bytes (256 MiB).  Scanning an OBJ takes about 30 times its size in
+#: memory (nefertiti: 3.7 MB of OBJ, 100 MB), so this admits a 7-million-face OBJ in about 7 GB.
+MAX_MESH_BYTES = 256 * 2**20
 
 
-def _read_checked(path: Path) -> bytes:
+def _read_checked(path: Path, max_bytes: int | None) -> bytes:
     if not path.exists():
         fail(path, "no such file")
     if path.is_dir():
@@ -35,6 +43,10 @@ def _read_checked(path: Path) -> bytes:
     if path.suffix.lower() not in SUPPORTED_EXTENSIONS:
         fail(path, f"unknown extension {path.suffix!r} (supported: {', '.join(SUPPORTED_EXTENSIONS)})")
     try:
+        size = path.stat().st_size
+        if max_bytes is not None and size > max_bytes:
+            fail(path, f"{size:,} bytes, over the cap of {max_bytes:,} bytes for a mesh file "
+                       "(load_mesh's max_bytes raises it)")
         data = path.read_bytes()
     except OSError as e:
         fail(path, f"cannot be read ({e.strerror or e})")
@@ -55,24 +67,20 @@ def _pymeshlab_load(path: Path):
     return ms  # the caller keeps the MeshSet alive: its meshes die with it
 
 
-def _load_texture(declared: Declared, notes: list):
+def _load_texture(declared: Declared, notes: list, max_pixels: int | None):
     """The (H,W,3) uint8 RGB texture the OBJ's faces use, or None (with a note why)."""
-    import cv2
-
     if len(declared.textures) > 1:
         names = ", ".join(t.name for t in declared.textures)
         notes.append(f"faces use {len(declared.textures)} texture images ({names}); only one is supported, texture dropped")
         return None
-    image_path = declared.textures[0]
-    image = cv2.imread(str(image_path), cv2.IMREAD_COLOR) if image_path.is_file() else None
-    if image is None:
-        reason = "cannot be read" if image_path.is_file() else "is missing"
-        notes.append(f"texture image {image_path.name!r} {reason}; loaded without texture")
-        return None
-    return cv2.cvtColor(image, cv2.COLOR_BGR2RGB)
+    image, note = read_texture(declared.textures[0], max_pixels)
+    if note:
+        notes.append(note)
+    return image
 
 
-def load_mesh(path, *, report: bool = False):
+def load_mesh(path, *, report: bool = False, max_bytes: int | None = MAX_MESH_BYTES,
+              max_texture_pixels: int | None = MAX_TEXTURE_PIXELS):
     """Load a triangle mesh from an OBJ, PLY, OFF or STL file, repaired.
 
     Polygons are triangulated.  OBJ files bring their MTL texture image
@@ -84,8 +92,8 @@ def load_mesh(path, *, report: bool = False):
     vertices split, unreferenced vertices removed); every repair is reported
     in one :class:`MeshRepairWarning` naming the file.  A mesh that needs
     none loads exactly as the file has it.  A texture image that is
-    missing or unreadable is reported the same way and the geometry loads
-    without it.
+    missing, unreadable or over ``max_texture_pixels`` is reported the same
+    way and the geometry loads without it.
 
     Parameters
     ----------
@@ -93,6 +101,13 @@ def load_mesh(path, *, report: bool = False):
         A ``.obj``, ``.ply`` (ASCII or binary), ``.off`` or ``.stl`` (ASCII or binary) file.
     report : bool
         Also return the :class:`~meshsal.mesh.repair.MeshReport` of what was found and done.
+    max_bytes : int or None
+        Files larger than this are refused before they are read (default
+        :data:`MAX_MESH_BYTES`, 256 MiB; None: no cap).
+    max_texture_pixels : int or None
+        Textures with more pixels are left out, before they are decoded when
+        the format's header says their size (default
+        :data:`~meshsal.mesh.texture.MAX_TEXTURE_PIXELS`, 8192 x 8192; None: no cap).
 
     Returns
     -------
@@ -104,10 +119,10 @@ def load_mesh(path, *, report: bool = False):
     ------
     MeshError
         The message names the file and the problem: missing file, a
-        directory, unknown extension, empty file, unparseable content, face
-        index out of range, non-finite coordinates, no faces (a point
-        cloud), no non-degenerate face left, or fewer faces loaded than the
-        file holds.
+        directory, unknown extension, a file over ``max_bytes`` (its size
+        and the cap), empty file, unparseable content, face index out of
+        range, non-finite coordinates, no faces (a point cloud), no
+        non-degenerate face left, or fewer faces loaded than the file holds.
 
     Examples
     --------
@@ -119,7 +134,7 @@ def load_mesh(path, *, report: bool = False):
     ('quad', (4, 3), (2, 3), 1, 1)
     """
     path = Path(path)
-    data = _read_checked(path)
+    data = _read_checked(path, max_bytes)
     declared = scan(path, data)
     if declared.n_triangles + declared.n_repeated == 0:
         if declared.n_vertices == 0:
@@ -144,7 +159,7 @@ def load_mesh(path, *, report: bool = False):
     notes = list(declared.notes)
     texture = UV = None
     if declared.textures:
-        texture = _load_texture(declared, notes)
+        texture = _load_texture(declared, notes, max_texture_pixels)
         if texture is not None and pm.has_wedge_tex_coord():
             UV = np.asarray(pm.wedge_tex_coord_matrix(), dtype=np.float32).reshape(-1, 3, 2)
         else:
@@ -232,7 +247,7 @@ def load_vertex_quality(path) -> np.ndarray:
         The file is missing, not a PLY, damaged, or has no vertex quality.
     """
     path = Path(path)
-    data = _read_checked(path)
+    data = _read_checked(path, MAX_MESH_BYTES)
     if path.suffix.lower() != ".ply":
         fail(path, "vertex quality is only stored in PLY files")
     vertex = read_ply(path, data).get("vertex", {})
