@@ -269,7 +269,21 @@ def cases() -> list[Case]:
 
     out.append(everything_on_one_box(V, F))
     out.append(everything_apart())
-    return out
+    return out + normalless_cases()
+
+
+def normalless_cases() -> list[Case]:
+    """Meshes whose repair leaves vertices without a normal, where point methods meet them: a flat fold
+    alone, and nine folds beside a box."""
+    Vf, Ff = fold()
+    alone = Case("fold_alone", Vf, Ff, {"components": 1, "closed_components": 0, "boundary_edges": 4,
+                                         "boundary_loops": 1, "normalless_vertices": 2}, normalless=Vf[[0, 2]])
+    folds = [fold((40 + 20 * i, 20 * j, 0)) for i in range(3) for j in range(3)]
+    Vg, Fg = union(box(), *folds)
+    grid = Case("folds_beside_a_box", Vg, Fg,
+                {"components": 10, "closed_components": 1, "boundary_edges": 36, "boundary_loops": 9,
+                 "normalless_vertices": 18}, normalless=np.concatenate([f[0][[0, 2]] for f in folds]))
+    return [alone, grid]
 
 
 def everything_on_one_box(V, F) -> Case:
