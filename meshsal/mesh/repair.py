@@ -355,9 +355,9 @@ def _drop_degenerate(V, F, UV):
     area = 0.5 * np.sqrt(nx * nx + ny * ny + nz * nz)
     zero = ~(area > ZERO_AREA * diagonal**2)
     # Squared length of edge k, the one opposite corner k.
-    squared = np.stack([(xc - xb) ** 2 + (yc - yb) ** 2 + (zc - zb) ** 2, vx * vx + vy * vy + vz * vz,
-                        ux * ux + uy * uy + uz * uz], axis=1)
-    longest = np.maximum(np.maximum(squared[:, 0], squared[:, 1]), squared[:, 2])
+    squared = ((xc - xb) ** 2 + (yc - yb) ** 2 + (zc - zb) ** 2, vx * vx + vy * vy + vz * vz,
+               ux * ux + uy * uy + uz * uz)
+    longest = np.maximum(np.maximum(squared[0], squared[1]), squared[2])
     sliver = ~zero & ((2.0 * area) ** 2 < (SLIVER * diagonal) ** 2 * longest)
     bad = zero | sliver
     counts["zero_area_faces"] = int(np.count_nonzero(zero))
@@ -366,7 +366,7 @@ def _drop_degenerate(V, F, UV):
         return F, UV, counts
     tolerance = SLIVER * diagonal
     F = F.copy()
-    lengths = np.sqrt(squared)
+    lengths = np.sqrt(np.stack(squared, axis=1))
     F, counts["collapsed_vertices"] = _collapse(F, np.flatnonzero(bad), lengths, tolerance, len(V))
     distinct = (F[:, 0] != F[:, 1]) & (F[:, 1] != F[:, 2]) & (F[:, 2] != F[:, 0])
     # A face that only a chain of collapses made degenerate is a sliver too.
