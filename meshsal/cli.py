@@ -56,6 +56,7 @@ def _to_uint8(image: np.ndarray) -> np.ndarray:
 
 def _cmd_render(args) -> int:
     from meshsal.util.atomic import write_png
+    from meshsal.util.errors import naming
     from meshsal.views.overlay import tile
     from meshsal.util.progress import progress
     from meshsal.views.cameras import view_rig
@@ -64,26 +65,27 @@ def _cmd_render(args) -> int:
 
     if args.size < 16:
         raise ValueError(f"--size must be at least 16 pixels, got {args.size}")
-    mesh = load_object(args.mesh)
-    cameras = [c for s in view_rig() for c in s]
-    views = render_views(mesh, cameras, size=args.size)
-    results = [None] * len(views)
-    if args.saliency:
-        from meshsal.attention import saliency_views
+    with naming(args.mesh):
+        mesh = load_object(args.mesh)
+        cameras = [c for s in view_rig() for c in s]
+        views = render_views(mesh, cameras, size=args.size)
+        results = [None] * len(views)
+        if args.saliency:
+            from meshsal.attention import saliency_views
 
-        results = saliency_views(views, mesh)
-    maps = []
-    for view, result in progress(zip(views, results), total=len(views), desc="render", quiet=args.quiet):
-        stem = f"view_{view.camera.set_index:02d}_{view.camera.view_index % 4}"
-        write_png(args.out / f"{stem}.png", _to_uint8(view.rgb))
-        if result is not None:
-            maps.append(_to_uint8(result.map))
-            write_png(args.out / f"{stem}_saliency.png", maps[-1])
-            for name, channel in result.channels.items():
-                write_png(args.out / f"{stem}_{name}.png", _to_uint8(channel))
-    write_png(args.out / "contact_sheet.png", tile([_to_uint8(v.rgb) for v in views], columns=12))
-    if maps:
-        write_png(args.out / "saliency_sheet.png", tile(maps, columns=12))
+            results = saliency_views(views, mesh)
+        maps = []
+        for view, result in progress(zip(views, results), total=len(views), desc="render", quiet=args.quiet):
+            stem = f"view_{view.camera.set_index:02d}_{view.camera.view_index % 4}"
+            write_png(args.out / f"{stem}.png", _to_uint8(view.rgb))
+            if result is not None:
+                maps.append(_to_uint8(result.map))
+                write_png(args.out / f"{stem}_saliency.png", maps[-1])
+                for name, channel in result.channels.items():
+                    write_png(args.out / f"{stem}_{name}.png", _to_uint8(channel))
+        write_png(args.out / "contact_sheet.png", tile([_to_uint8(v.rgb) for v in views], columns=12))
+        if maps:
+            write_png(args.out / "saliency_sheet.png", tile(maps, columns=12))
     print(f"wrote {len(views)} views of {args.mesh} to {args.out}")
     return 0
 
@@ -130,6 +132,7 @@ def _add_points(subparsers) -> None:
 def _cmd_points(args) -> int:
     from meshsal.views import overlay
     from meshsal.util.atomic import write_png
+    from meshsal.util.errors import naming
     from meshsal.mesh.curvature import mesh_saliency
     from meshsal.mesh.io import save_ply
     from meshsal.mesh import Similarity
@@ -147,35 +150,36 @@ def _cmd_points(args) -> int:
         raise ValueError(f"--method {args.method} --combination {args.combination} needs --model FILE, a touch "
                          f"model written by 'visuotactile experiment' (its touch_models/ folder)")
     model = None if args.model is None else TouchModel.load(args.model)
-    mesh = scale_to_principal(load_object(args.mesh), args.size_mm)
-    vertex_saliency = mesh_saliency(mesh)
-    seen = view_channels(mesh, size=args.size, vertex_saliency=vertex_saliency, quiet=args.quiet)
-    weights = model.channel_weights if combination == "learned" else None
-    rule = {"min_spacing": args.min_spacing_mm, "threshold": args.threshold, "pad_width": args.pad_mm,
-            "touch": args.touch}
-    pts = points_by_method(mesh, [args.method], n=args.n, seed=args.seed, vertex_saliency=vertex_saliency,
-                           seen=seen, combination=args.combination, weights=weights, model=model,
-                           **rule)[args.method]
-    views, maps = seen.views, attention_maps(seen, combination, weights)
+    with naming(args.mesh):
+        mesh = scale_to_principal(load_object(args.mesh), args.size_mm)
+        vertex_saliency = mesh_saliency(mesh)
+        seen = view_channels(mesh, size=args.size, vertex_saliency=vertex_saliency, quiet=args.quiet)
+        weights = model.channel_weights if combination == "learned" else None
+        rule = {"min_spacing": args.min_spacing_mm, "threshold": args.threshold, "pad_width": args.pad_mm,
+                "touch": args.touch}
+        pts = points_by_method(mesh, [args.method], n=args.n, seed=args.seed, vertex_saliency=vertex_saliency,
+                               seen=seen, combination=args.combination, weights=weights, model=model,
+                               **rule)[args.method]
+        views, maps = seen.views, attention_maps(seen, combination, weights)
 
-    to_source = mesh.transform.to_source
-    top = float(vertex_saliency.max())
-    colors = overlay.colormap(vertex_saliency / top if top > 0 else vertex_saliency) / np.float32(255.0)
-    source_mesh = mesh.replace(vertices=to_source(mesh.vertices), vertex_colors=colors, transform=Similarity())
-    save_ply(args.out / "saliency.ply", source_mesh, quality=vertex_saliency)
+        to_source = mesh.transform.to_source
+        top = float(vertex_saliency.max())
+        colors = overlay.colormap(vertex_saliency / top if top > 0 else vertex_saliency) / np.float32(255.0)
+        source_mesh = mesh.replace(vertices=to_source(mesh.vertices), vertex_colors=colors, transform=Similarity())
+        save_ply(args.out / "saliency.ply", source_mesh, quality=vertex_saliency)
 
-    settings = {"n": args.n, "method": args.method, "size_mm": args.size_mm, "view_size": args.size,
-                "threshold": args.threshold, "seed": args.seed, "combination": combination,
-                "pad_mm": args.pad_mm, "touch_check": args.touch,
-                "model": None if args.model is None else str(args.model), "channel_weights": weights}
-    pts.save(args.out / "points.json", frame=mesh.transform, source=str(args.mesh), settings=settings)
-    pts.save_csv(args.out / "points.csv", frame=mesh.transform)
+        settings = {"n": args.n, "method": args.method, "size_mm": args.size_mm, "view_size": args.size,
+                    "threshold": args.threshold, "seed": args.seed, "combination": combination,
+                    "pad_mm": args.pad_mm, "touch_check": args.touch,
+                    "model": None if args.model is None else str(args.model), "channel_weights": weights}
+        pts.save(args.out / "points.json", frame=mesh.transform, source=str(args.mesh), settings=settings)
+        pts.save_csv(args.out / "points.csv", frame=mesh.transform)
 
-    best = pts.best_set if pts.best_set >= 0 else best_view_set(maps)
-    write_png(args.out / "views.png", overlay.views_picture(views, maps, range(4 * best, 4 * best + 4),
-                                                            pts.positions))
-    write_png(args.out / "contact_sheet.png", overlay.contact_sheet(maps, [v.mask for v in views]))
-    plateau = np.median([plateau_fraction(m, v.mask) for m, v in zip(maps, views)])
+        best = pts.best_set if pts.best_set >= 0 else best_view_set(maps)
+        write_png(args.out / "views.png", overlay.views_picture(views, maps, range(4 * best, 4 * best + 4),
+                                                                pts.positions))
+        write_png(args.out / "contact_sheet.png", overlay.contact_sheet(maps, [v.mask for v in views]))
+        plateau = np.median([plateau_fraction(m, v.mask) for m, v in zip(maps, views)])
     lost = f", {pts.untouchable} candidates the pad could not touch first skipped" if pts.untouchable > 0 else ""
     print(f"wrote {len(pts)} {args.method} points of {args.mesh} to {args.out}{lost}; "
           f"saliency maps ({combination}): median {100 * plateau:.0f} % of the silhouette above half "

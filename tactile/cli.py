@@ -51,6 +51,7 @@ def _cmd_imprints(args) -> int:
     from meshsal.mesh.transform import scale_to_principal
     from meshsal.objects import load_object
     from meshsal.util.atomic import write_png
+    from meshsal.util.errors import naming
     from tactile.imprint_set import ImprintSet
     from tactile.picture import imprint_grid
     from tactile.raycast import imprints
@@ -61,15 +62,16 @@ def _cmd_imprints(args) -> int:
     sensor = Sensor(pitch_mm=args.pitch_mm, depth_mm=args.depth_mm, mode=args.mode,
                     supersample=args.supersample, plane=args.plane)
     source_positions, normals, ids = read_points(args.points)
-    mesh = scale_to_principal(load_object(args.mesh), args.size_mm)
-    positions = mesh.transform.apply(source_positions)
-    normals = mesh.transform.apply_direction(normals)
-    images = imprints(mesh, positions, normals, sensor)
-    result = ImprintSet(imprints=images, labels=[0] * len(images), object_names=(mesh.name or args.mesh.stem,),
-                        point_ids=ids, positions=positions, normals=normals, sensor=sensor,
-                        source=f"{args.mesh} at {args.points}, scaled to {args.size_mm:g} mm")
-    result.save(args.out)
-    picture = args.out.parent / "imprints.png"
-    write_png(picture, imprint_grid(images, [f"#{i}" for i in ids]))
+    with naming(args.mesh):
+        mesh = scale_to_principal(load_object(args.mesh), args.size_mm)
+        positions = mesh.transform.apply(source_positions)
+        normals = mesh.transform.apply_direction(normals)
+        images = imprints(mesh, positions, normals, sensor)
+        result = ImprintSet(imprints=images, labels=[0] * len(images), object_names=(mesh.name or args.mesh.stem,),
+                            point_ids=ids, positions=positions, normals=normals, sensor=sensor,
+                            source=f"{args.mesh} at {args.points}, scaled to {args.size_mm:g} mm")
+        result.save(args.out)
+        picture = args.out.parent / "imprints.png"
+        write_png(picture, imprint_grid(images, [f"#{i}" for i in ids]))
     print(f"wrote {len(images)} {sensor.mode} imprints of {args.mesh} to {args.out} and {picture}")
     return 0

@@ -10,7 +10,8 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from meshsal.mesh.io import MeshRepairWarning, load_mesh, load_vertex_quality, save_ply
+from meshsal.mesh.io import MAX_MESH_BYTES, MeshRepairWarning, load_mesh, load_vertex_quality, save_ply
+from meshsal.mesh.texture import image_size, read_texture
 from meshsal.mesh import Mesh, MeshError, face_areas
 
 SQUARE = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], dtype=np.float64)
@@ -23,6 +24,13 @@ def load_clean(path):
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         return load_mesh(path)
+
+
+def load_clean_report(path):
+    """Load with the repair report and fail on any warning."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        return load_mesh(path, report=True)
 
 
 def write(path, text):
@@ -80,9 +88,9 @@ def test_obj_vertex_colors(tmp_path):
 
 
 def test_obj_negative_indices_and_slashes(tmp_path):
-    text = "v 0 0 0\nv 1 0 0\nv 0 1 0\nvn 0 0 1\nf -3//1 -2//1 -1//1\nv 0 0 1\nf 1 2 -1\n"
+    text = "v 0 0 0\nv 1 0 0\nv 0 1 0\nvn 0 0 1\nf -3//1 -2//1 -1//1\nv 0 0 1\nf 2 1 -1\n"
     m = load_clean(write(tmp_path / "neg.obj", text))
-    np.testing.assert_array_equal(m.faces, [[0, 1, 2], [0, 1, 3]])
+    np.testing.assert_array_equal(m.faces, [[0, 1, 2], [1, 0, 3]])
 
 
 def textured_obj(tmp_path, image=True, extra_faces=""):
@@ -208,9 +216,10 @@ def test_unreferenced_vertices_removed_colors_kept(tmp_path):
 def test_duplicates_with_different_colors_are_kept_apart(tmp_path):
     V = np.vstack([TETRA_V, TETRA_V[:1]])
     colors = np.array([[1, 0, 0], [0, 1, 0], [0, 0, 1], [1, 1, 1], [0, 0, 0]])
-    F = np.vstack([TETRA_F, [[4, 1, 3]]])  # face on vertex 0's black twin
-    m = load_clean(write(tmp_path / "twin.obj", obj_text(V, F, colors)))
+    F = np.where(np.arange(4)[:, None] == 2, np.where(TETRA_F == 0, 4, TETRA_F), TETRA_F)  # a colour seam at vertex 0
+    m, report = load_clean_report(write(tmp_path / "twin.obj", obj_text(V, F, colors)))
     assert m.n_vertices == 5
+    assert report.boundary_loops == 1 and report.closed_components == 0  # the seam opens the surface
 
 
 def test_repeated_index_face_dropped_and_counted(tmp_path):
@@ -518,3 +527,64 @@ def test_shared_meshes_load(shared_mesh, name):
     assert np.isfinite(m.vertices).all()
     assert m.faces.min() == 0 and m.faces.max() == m.n_vertices - 1  # every vertex referenced
     assert (face_areas(m.vertices, m.faces) > 0).all()
+
+
+# --------------------------------------------------------------------------- caps on file and texture sizes
+
+
+def test_a_mesh_file_over_the_cap_is_refused_before_it_is_read(tmp_path, monkeypatch):
+    path = write(tmp_path / "big.obj", obj_text(TETRA_V, TETRA_F))
+    size = path.stat().st_size
+    monkeypatch.setattr(type(path), "read_bytes", lambda self: pytest.fail(f"{self} was read"))
+    with pytest.raises(MeshError, match=rf"big\.obj: {size:,} bytes, over the cap of 40 bytes"):
+        load_mesh(path, max_bytes=40)
+
+
+def test_the_mesh_cap_can_be_raised_or_lifted(tmp_path):
+    path = write(tmp_path / "t.obj", obj_text(TETRA_V, TETRA_F))
+    assert MAX_MESH_BYTES == 256 * 2**20
+    assert load_mesh(path, max_bytes=path.stat().st_size).n_faces == 4
+    assert load_mesh(path, max_bytes=None).n_faces == 4
+
+
+def png_header(width, height):
+    """The first bytes of a PNG that declares its size (the rest does not matter: it is never decoded)."""
+    ihdr = np.array([width, height], ">u4").tobytes() + bytes([8, 2, 0, 0, 0])
+    return b"\x89PNG\r\n\x1a\n" + np.uint32(13).astype(">u4").tobytes() + b"IHDR" + ihdr + b"\0" * 4 + b"garbage"
+
+
+def test_a_texture_over_the_pixel_cap_is_dropped_before_it_is_decoded(tmp_path, monkeypatch):
+    path = textured_obj(tmp_path, image=False)
+    (tmp_path / "tex.png").write_bytes(png_header(100_000, 50_000))
+    monkeypatch.setattr(cv2, "imread", lambda *a, **k: pytest.fail("the texture was decoded"))
+    with pytest.warns(MeshRepairWarning, match=r"t\.obj: texture image 'tex\.png' has 100000 x 50000 = "
+                                               r"5,000,000,000 pixels, over the cap of 67,108,864"):
+        m = load_mesh(path)
+    assert m.texture is None and m.uv is None and m.n_faces == 2
+
+
+@pytest.mark.parametrize("suffix", [".png", ".jpg", ".bmp", ".tiff"])
+def test_texture_sizes_from_headers_or_after_decoding(tmp_path, suffix):
+    image = np.random.default_rng(0).integers(0, 255, (30, 50, 3), dtype=np.uint8)
+    cv2.imwrite(str(tmp_path / f"im{suffix}"), image)
+    assert image_size(tmp_path / f"im{suffix}") == (None if suffix == ".tiff" else (50, 30))
+    assert read_texture(tmp_path / f"im{suffix}", max_pixels=1500)[0].shape == (30, 50, 3)
+    texture, note = read_texture(tmp_path / f"im{suffix}", max_pixels=1499)
+    assert texture is None and note == (f"texture image 'im{suffix}' has 50 x 30 = 1,500 pixels, over the cap of "
+                                        "1,499; loaded without texture")
+
+
+def test_load_mesh_passes_its_texture_cap_on(tmp_path):
+    path = textured_obj(tmp_path)                       # a 4 x 2 texture
+    assert load_mesh(path, max_texture_pixels=8).texture.shape == (2, 4, 3)
+    with pytest.warns(MeshRepairWarning, match="8 pixels, over the cap of 7"):
+        assert load_mesh(path, max_texture_pixels=7).texture is None
+
+
+def test_a_material_library_over_its_cap_is_not_read(tmp_path, monkeypatch):
+    from meshsal.mesh import formats
+
+    path = textured_obj(tmp_path)
+    monkeypatch.setattr(formats, "MAX_MATERIAL_BYTES", 10)
+    with pytest.warns(MeshRepairWarning, match=r"t\.obj: material library 't\.mtl' has \d+ bytes, over the cap of 10"):
+        assert load_mesh(path).texture is None

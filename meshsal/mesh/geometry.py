@@ -7,8 +7,14 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["face_normals", "face_areas", "vertex_normals", "bounding_sphere", "closed_orientation", "half_edges",
-           "vertex_adjacency", "edge_graph", "ring_max", "tangent_frames"]
+__all__ = ["face_normals", "face_areas", "area_vectors", "vertex_normals", "normal_defined", "NORMAL_TOLERANCE",
+           "bounding_sphere", "closed_orientation", "half_edges", "vertex_adjacency", "edge_graph", "ring_max",
+           "tangent_frames"]
+
+#: A vertex has a normal when the area vectors of its faces sum to more than this fraction of their
+#: total length: far above rounding (1e-16), so a face and its flipped twin, whose vectors cancel up
+#: to rounding in whatever corner order they are written, leave their vertices without one.
+NORMAL_TOLERANCE = 1e-9
 
 
 def face_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
@@ -27,6 +33,25 @@ def face_areas(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
     return 0.5 * np.linalg.norm(np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]]), axis=1)
 
 
+def area_vectors(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """Each face's ``(b - a) x (c - a)``: its normal times twice its area, (m, 3) float64.
+
+    The same numbers as ``np.cross`` on the gathered corners, computed one
+    coordinate at a time on contiguous arrays: four times faster.
+
+    Examples
+    --------
+    >>> area_vectors(np.eye(3), [[0, 1, 2]]).tolist()
+    [[1.0, 1.0, 1.0]]
+    """
+    X = np.ascontiguousarray(np.asarray(vertices, dtype=np.float64).T)
+    corners = np.ascontiguousarray(np.asarray(faces, dtype=np.int64).reshape(-1, 3).T)
+    (xa, xb, xc), (ya, yb, yc), (za, zb, zc) = (X[d][corners] for d in range(3))
+    ux, uy, uz = xb - xa, yb - ya, zb - za
+    vx, vy, vz = xc - xa, yc - ya, zc - za
+    return np.stack([uy * vz - uz * vy, uz * vx - ux * vz, ux * vy - uy * vx], axis=1)
+
+
 def vertex_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
     """Area-weighted unit vertex normals, (n, 3) float64; zero at isolated vertices."""
     import igl
@@ -36,6 +61,45 @@ def vertex_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
     # libigl sums in C++, three times faster than NumPy's bincount; it leaves NaN where no face adds.
     N = igl.per_vertex_normals(V, F, igl.PER_VERTEX_NORMALS_WEIGHTING_TYPE_AREA)
     return np.nan_to_num(N, copy=False, nan=0.0)
+
+
+def normal_defined(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """Whether each vertex has an area-weighted normal, (n,) bool.
+
+    A vertex has none when no face uses it, or when the area vectors of its
+    faces cancel: their sum is at most :data:`NORMAL_TOLERANCE` times the
+    sum of their lengths.  That happens at the corners of a face and its
+    flipped twin when no other face meets them (a double-sided triangle),
+    and along a flat fold, where a surface turns back onto itself.  There
+    :func:`vertex_normals` is zero or a direction made of rounding errors,
+    so no pad can be pressed along it: such a vertex must not be an
+    interest point.
+
+    Parameters
+    ----------
+    vertices : (n, 3) float64
+    faces : (m, 3) int
+
+    Returns
+    -------
+    (n,) bool
+
+    Examples
+    --------
+    >>> V = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1], [5, 5, 5]], float)
+    >>> normal_defined(V, [[0, 1, 2], [0, 2, 1], [0, 1, 3]]).tolist()  # 2 meets a face and its twin only
+    [True, True, False, True, False]
+    """
+    V = np.asarray(vertices, dtype=np.float64)
+    F = np.asarray(faces, dtype=np.int64).reshape(-1, 3)
+    n = V.shape[0]
+    if F.size == 0:
+        return np.zeros(n, dtype=bool)
+    N = area_vectors(V, F)
+    length = np.sqrt(np.einsum("ij,ij->i", N, N))
+    total = sum(np.bincount(F[:, k], length, minlength=n) for k in range(3))
+    summed = np.stack([sum(np.bincount(F[:, k], N[:, d], minlength=n) for k in range(3)) for d in range(3)], axis=1)
+    return np.sqrt(np.einsum("ij,ij->i", summed, summed)) > NORMAL_TOLERANCE * total
 
 
 def closed_orientation(vertices: np.ndarray, faces: np.ndarray) -> int:
