@@ -1,12 +1,9 @@
 """The whole toolkit on messy meshes (tests/messy.py): every point method, imprints, the batch, the experiment,
 and errors that name the object, in the API and on the command line.
 
-Tests marked ``LEAD`` fail until the interest-point rules leave out vertices
-without a normal (``meshsal.mesh.normal_defined``).  Vertex candidates with
-a zero normal are already dropped (``meshsal.points.select``); what is left:
-the surface-point methods (attention, random) report the nearest corner as
-a point's vertex, and it may have no normal.  They are strict expected
-failures, so the change that fixes them must turn them on.
+No point is ever on a vertex without a normal (``meshsal.mesh.normal_defined``):
+neither a vertex candidate nor a surface point (attention, random) whose
+nearest corner has none.
 """
 
 import json
@@ -17,11 +14,12 @@ import pytest
 
 import meshsal
 import messy
+import shapes
 import tactile
 from classify import batch, experiment
 from classify.cli import main
 from classify.experiment.samples import Settings
-from meshsal.mesh import normal_defined
+from meshsal.mesh import Mesh, normal_defined
 from meshsal.mesh.io import MeshRepairWarning, load_mesh
 
 METHODS = ("attention", "attention_itti", "random", "uniform", "mesh_saliency", "curvature")
@@ -29,13 +27,7 @@ CASES = {c.name: c for c in messy.cases()}
 # The other shapes are parts of "everything_apart", which every method meets one by one.
 COMPOSITES = ("composite_double_sided", "double_sided_fin", "nonmanifold_edges", "box_with_sphere",
               "everything_on_one_box")
-LEAD = pytest.mark.xfail(strict=True, reason="lead: vertices without a normal must not be interest-point candidates "
-                                             "(meshsal/points, meshsal.mesh.normal_defined)")
-# Where a method picks a vertex without a normal today.
-PICKED = {("fold_alone", "attention"), ("fold_alone", "attention_itti"), ("fold_alone", "random"),
-          ("folds_beside_a_box", "random")}
-NORMALLESS = [(name, m, LEAD if (name, m) in PICKED else ()) for name in ("fold_alone", "folds_beside_a_box")
-              for m in METHODS]
+NORMALLESS = [(name, m) for name in ("fold_alone", "folds_beside_a_box") for m in METHODS]
 
 
 @pytest.fixture(scope="module")
@@ -72,7 +64,7 @@ def test_all_point_methods_and_imprints_on_composite_meshes(files, name):
         check(mesh, pts)
 
 
-@pytest.mark.parametrize("name, method", [pytest.param(n, m, marks=mark, id=f"{n}-{m}") for n, m, mark in NORMALLESS])
+@pytest.mark.parametrize("name, method", [pytest.param(n, m, id=f"{n}-{m}") for n, m in NORMALLESS])
 def test_point_methods_never_choose_a_vertex_without_a_normal(files, name, method):
     mesh = loaded(files[name])
     check(mesh, meshsal.interest_points(mesh, n=6, method=method, size=32))
@@ -125,6 +117,17 @@ def test_the_experiment_runs_on_messy_objects(files, tmp_path):
     assert (tmp_path / "results.csv").exists()
 
 
+def test_meshes_built_in_memory_are_repaired_as_files_are(tmp_path):
+    composite = CASES["composite_double_sided"]
+    mesh = Mesh(vertices=composite.vertices, faces=composite.faces, name="composite")
+    small = Settings(n_points=4, train_instances=2, train_sessions=1, view_size=32)
+    with pytest.warns(MeshRepairWarning, match="composite: .*double-sided"):
+        r = experiment.run_experiment([mesh, shapes.box(half=30.0, n=12).replace(name="box")], methods=("uniform",),
+                                      protocols=("instance",), classifiers=("knn",), settings=small, replicates=2,
+                                      cache_dir=None, quiet=True, n_jobs=1)
+    assert 0.0 <= r.cell("uniform", "instance", "knn", 2, False, 1).mean <= 100.0
+
+
 def fail_in_curvature(monkeypatch, error):
     """Make every object fail deep in a per-object stage (the Gaussian averages of mesh saliency)."""
     import meshsal.mesh.curvature as curvature
@@ -169,8 +172,6 @@ def test_a_bug_deep_in_a_command_keeps_its_traceback_and_names_the_mesh(files, t
     assert f"while processing {files['cup']}" in info.value.__notes__
 
 
-@pytest.mark.xfail(strict=True, reason="lead: the experiment's per-object tasks (classify/experiment/stages.py "
-                                       "_paper_sample, _instance_samples) must name the object")
 def test_an_error_in_the_experiment_names_the_object(files, monkeypatch):
     fail_in_curvature(monkeypatch, ValueError("curvature went wrong"))
     with pytest.raises(ValueError, match=r"(composite_double_sided|cup)"):

@@ -235,8 +235,7 @@ def _sessions(mesh, pts, task: SampleTask, scene) -> TouchSample:
 def place_sample(mesh, seen, vertex_saliency, task: SampleTask, scene) -> PlaceSample:
     """An instance's candidate places, what vision sees there, and the imprints its sessions give there.
 
-    The places are ``meshsal.points.places.candidate_places`` (vertices with a
-    defined normal).  The test instance has its one session, a training
+    The places are ``meshsal.points.places.candidate_places``.  The test instance has its one session, a training
     instance one session too (every place, instead of a method's n points):
     session 0 of the same streams as the methods' sessions, so the same
     devices.
@@ -251,7 +250,6 @@ def place_sample(mesh, seen, vertex_saliency, task: SampleTask, scene) -> PlaceS
     settings = task.settings
     vn = vertex_normals(mesh.vertices, mesh.faces)
     ids = candidate_places(mesh, vertex_saliency, settings.n_points)
-    ids = ids[np.linalg.norm(vn[ids], axis=1) > 1e-12]
     positions, normals = mesh.vertices[ids], vn[ids]
     pad = settings.sensor.width_mm
     places = Places(ids, positions, normals,

@@ -27,6 +27,7 @@ from classify.experiment.survey import fit_replicate_model
 from classify.reporting.results import ConfusionMatrix
 from classify.runtime import cache as cache_mod
 from meshsal.points import MODEL_METHODS
+from meshsal.util.errors import naming
 from meshsal.util.progress import progress
 
 __all__ = ["ObjectSet", "load_objects", "Runtime", "SampleKey", "InstanceStage", "paper_stage", "instance_stage",
@@ -54,7 +55,8 @@ def load_objects(objects, settings: Settings) -> ObjectSet:
 
     ``objects``: None (the toys), strings for ``meshsal.objects.resolve_objects``
     (set names, object names, mesh files, comma-separated or not) or
-    ``meshsal.Mesh`` objects with distinct names.  With ``settings.size_mm``
+    ``meshsal.Mesh`` objects with distinct names (repaired as the loader
+    repairs files: ``meshsal.repair_mesh``).  With ``settings.size_mm``
     None the objects keep their real sizes (named objects only: the units of
     a file or an in-memory mesh are not known).
     """
@@ -66,7 +68,10 @@ def load_objects(objects, settings: Settings) -> ObjectSet:
     if meshes and len(meshes) != len(items):
         raise ValueError("objects must be all meshes or all names and paths, not a mix")
     units = [None] * len(meshes)
-    if not meshes:
+    if meshes:
+        # Meshes built in memory did not pass the loader's repairs: they get them here.
+        meshes = [_repaired(m) for m in meshes]
+    else:
         refs = objects_mod.resolve_objects(items)
         meshes = [objects_mod.load_ref(ref) for ref in refs]
         units = [ref.units_mm for ref in refs]
@@ -76,6 +81,18 @@ def load_objects(objects, settings: Settings) -> ObjectSet:
     if len(meshes) < 2:
         raise ValueError(f"recognition needs at least two objects, got {len(meshes)}")
     return ObjectSet(names, tuple(nominal_mesh(m, settings, u) for m, u in zip(meshes, units)))
+
+
+def _repaired(mesh):
+    import warnings
+
+    from meshsal.mesh.io import MeshRepairWarning
+    from meshsal.mesh.repair import repair_mesh
+
+    fixed, report = repair_mesh(mesh)
+    if report.repairs() or report.findings():
+        warnings.warn(report.message(), MeshRepairWarning, stacklevel=3)
+    return fixed
 
 
 @dataclass(frozen=True)
@@ -117,12 +134,12 @@ class InstanceStage:
 
 
 def _paper_sample(task: PaperSampleTask) -> TouchSample:
-    with threadpool_limits(1):
+    with threadpool_limits(1), naming(task.name):
         return paper_sample(task)
 
 
 def _instance_samples(task: SampleTask):
-    with threadpool_limits(1):
+    with threadpool_limits(1), naming(task.name):
         return instance_samples(task)
 
 

@@ -24,7 +24,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from meshsal.mesh import Mesh, vertex_normals
+from meshsal.mesh import Mesh, normal_defined, vertex_normals
 from meshsal.mesh.geometry import edge_graph
 from meshsal.points.record import InterestPoints
 from meshsal.points.rules import PointOptions, Rules
@@ -197,7 +197,8 @@ def attention_points(mesh: Mesh, views, maps: np.ndarray, vertex_saliency: np.nd
     peaks = found.take(np.lexsort((np.arange(len(found)), -scores, -votes)))
     seen = _best_set_values(mesh, views, maps, set_views)
     checker = TouchFilter(mesh, rules) if rules.touch else None
-    chosen, lost = select(peaks, saliency_fill(mesh, vn, vertex_saliency, lambda i: seen[i]), rules, checker)
+    chosen, lost = select(peaks, saliency_fill(mesh, vn, vertex_saliency, lambda i: seen[i]), rules, checker,
+                          normal_defined(mesh.vertices, mesh.faces))
     votes, voters = view_votes(graph, salient, chosen.vertex_ids, spacing)
     return InterestPoints(vertex_ids=chosen.vertex_ids, positions=chosen.positions, normals=chosen.normals,
                           scores=chosen.scores, votes=votes, vertex_saliency=vertex_saliency, views=voters,

@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from meshsal.mesh import Mesh
+from meshsal.mesh import Mesh, normal_defined
 from meshsal.points.sampling import farthest_points, field_peaks
 
 __all__ = ["POOL_FACTOR", "PEAK_FACTOR", "candidate_pool", "candidate_places"]
@@ -43,7 +43,8 @@ def candidate_pool(mesh: Mesh, n: int = 15) -> np.ndarray:
     >>> candidate_pool(meshsal.objects.toys.make("cup"), n=2).shape
     (40,)
     """
-    used = np.unique(mesh.faces)
+    # Only vertices a pad can be pressed along (with a normal): the same set on every instance.
+    used = np.flatnonzero(normal_defined(mesh.vertices, mesh.faces))
     points = mesh.vertices[used]
     start = int(np.argmax(np.linalg.norm(points - points.mean(axis=0), axis=1)))
     return used[farthest_points(points, min(POOL_FACTOR * int(n), used.size), start=start)]
@@ -73,4 +74,5 @@ def candidate_places(mesh: Mesh, vertex_saliency: np.ndarray, n: int = 15) -> np
     """
     pool = candidate_pool(mesh, n)
     peaks = field_peaks(np.asarray(vertex_saliency, dtype=np.float64), mesh.faces)
+    peaks = peaks[normal_defined(mesh.vertices, mesh.faces)[peaks]]
     return np.concatenate([pool, peaks[~np.isin(peaks, pool)][:PEAK_FACTOR * int(n)]]).astype(np.int64)

@@ -19,7 +19,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from meshsal.mesh import Mesh, face_normals
+from meshsal.mesh import Mesh, face_normals, normal_defined
 from meshsal.mesh.embree import embree_scene
 from meshsal.points.record import InterestPoints
 from meshsal.points.rules import Rules
@@ -94,7 +94,8 @@ class TouchFilter:
         return touchable(self.mesh, c.positions, c.normals, self.pad_width, self.tolerance, scene=self.scene)
 
 
-def select(first: Candidates, fill: list, rules: Rules, touch: TouchFilter | None = None) -> tuple[Candidates, int]:
+def select(first: Candidates, fill: list, rules: Rules, touch: TouchFilter | None = None,
+           usable: np.ndarray | None = None) -> tuple[Candidates, int]:
     """Up to ``rules.n`` candidates from ``first``, then from each fill source in turn.
 
     Parameters
@@ -103,6 +104,9 @@ def select(first: Candidates, fill: list, rules: Rules, touch: TouchFilter | Non
     fill : list of callables returning Candidates, asked in order only while points are missing
     rules : Rules
     touch : TouchFilter, optional
+    usable : (n_vertices,) bool, optional
+        Vertices a point may be on (``meshsal.mesh.normal_defined``): a
+        candidate whose nearest vertex has no normal is never chosen.
 
     Returns
     -------
@@ -110,18 +114,21 @@ def select(first: Candidates, fill: list, rules: Rules, touch: TouchFilter | Non
     untouchable : int
         Candidates skipped because the pad could not touch them first (-1 without ``touch``).
     """
-    chosen, refused = _suppress(first, Candidates.empty(), rules, touch)
+    chosen, refused = _suppress(first, Candidates.empty(), rules, touch, usable)
     for make in fill:
         if len(chosen) >= rules.n:
             break
-        more, lost = _suppress(make(), chosen, rules, touch)
+        more, lost = _suppress(make(), chosen, rules, touch, usable)
         chosen, refused = Candidates.concat([chosen, more]), refused + lost
     return chosen, (refused if touch is not None else -1)
 
 
-def _suppress(more: Candidates, chosen: Candidates, rules: Rules, touch) -> tuple[Candidates, int]:
-    # A vertex without a normal cannot be pressed along it.
-    more = more.take(np.linalg.norm(more.normals, axis=1) > 1e-12)
+def _suppress(more: Candidates, chosen: Candidates, rules: Rules, touch, usable) -> tuple[Candidates, int]:
+    # A point without a normal, or on a vertex without one, cannot be pressed along it.
+    keep = np.linalg.norm(more.normals, axis=1) > 1e-12
+    if usable is not None:
+        keep &= usable[more.vertex_ids]
+    more = more.take(keep)
     need = rules.n - len(chosen)
     if need <= 0 or len(more) == 0:
         return more.take(np.empty(0, np.int64)), 0
@@ -150,7 +157,8 @@ def choose_without_views(mesh: Mesh, vn: np.ndarray, vertex_saliency: np.ndarray
                          fill_score: Callable, rules: Rules, method: str) -> InterestPoints:
     """A method that needs no view of its own: ``first``, then the mesh-saliency fill scored by ``fill_score``."""
     checker = TouchFilter(mesh, rules) if rules.touch else None
-    chosen, lost = select(first, saliency_fill(mesh, vn, vertex_saliency, fill_score), rules, checker)
+    chosen, lost = select(first, saliency_fill(mesh, vn, vertex_saliency, fill_score), rules, checker,
+                          normal_defined(mesh.vertices, mesh.faces))
     return InterestPoints(vertex_ids=chosen.vertex_ids, positions=chosen.positions, normals=chosen.normals,
                           scores=chosen.scores, votes=np.zeros(len(chosen), np.int64),
                           vertex_saliency=vertex_saliency, views=tuple(() for _ in range(len(chosen))),
