@@ -221,3 +221,45 @@ def test_touch_policies_run_paired_with_the_fixed_plans_and_write_their_rows(tmp
     for s in stops:
         assert 1.0 <= float(s["touches"]) <= SMALL.n_points and 0.0 <= float(s["accuracy"]) <= 100.0
     assert "policy info_gain" in experiment.format_tables(r) and "touches at 95 %" in experiment.format_tables(r)
+
+
+def test_every_method_and_classifier_of_a_replicate_meets_the_same_instances_devices_and_touch_sets(monkeypatch):
+    from collections import Counter, defaultdict
+
+    from classify.experiment import protocols, run as run_module, stages
+    from classify.runtime import cache as cache_module
+
+    acquired, touch_sets, current = Counter(), defaultdict(list), {}
+    real_acquire, real_recognition = tactile.acquire, run_module.instance_recognition
+    real_job, real_sets = stages.instance_job, protocols.touch_sets
+
+    def spy_acquire(mesh, positions, normals, sensor, perturbation, rng, **kwargs):
+        # The instance (its mesh) and the session's stream (hence its device), before any draw.
+        acquired[cache_module.hash_arrays(mesh.vertices), repr(rng.bit_generator.state)] += 1
+        return real_acquire(mesh, positions, normals, sensor, perturbation, rng, **kwargs)
+
+    def spy_recognition(method, *args):
+        current["method"] = method
+        return real_recognition(method, *args)
+
+    def spy_job(job):
+        current["classifier"], current["replicate"] = job.recognizer.classifier, job.replicate
+        return real_job(job)
+
+    def spy_sets(n, k, count, rng):
+        out = real_sets(n, k, count, rng)
+        touch_sets[current["method"], current["classifier"]].append((current["replicate"], k, n, out.tobytes()))
+        return out
+
+    monkeypatch.setattr(tactile, "acquire", spy_acquire)
+    monkeypatch.setattr(run_module, "instance_recognition", spy_recognition)
+    monkeypatch.setattr(stages, "instance_job", spy_job)
+    monkeypatch.setattr(protocols, "touch_sets", spy_sets)
+    methods = ("uniform", "mesh_saliency")
+    experiment.run_experiment(_objects()[:2], methods=methods, protocols=("instance",),
+                              classifiers=("knn", "naive_bayes"), settings=SMALL, replicates=2, cache_dir=None,
+                              quiet=True, n_jobs=1)
+    # 2 objects x 2 replicates x (1 test + 2 training sessions) session streams, each met once by every method.
+    assert len(acquired) == 2 * 2 * 3 and set(acquired.values()) == {len(methods)}
+    runs = list(touch_sets.values())
+    assert len(runs) == 4 and all(sorted(run) == sorted(runs[0]) for run in runs)

@@ -161,3 +161,22 @@ def test_fused_rate_after_all_touches_is_not_below_a_single_touch_for_every_clas
     for name in classify.NAMES:
         out = protocols.instance_job(InstanceJob(data, Recognizer(name, False, {}, 0.85), k, 20, 0, 0))
         assert out.rates[-1].mean() >= out.rates[0].mean(), name
+
+
+def test_folds_grouped_by_point_keep_a_points_twins_out_of_its_test_fold():
+    # Three identical imprints per point, each point's pattern unrelated to its object: only a twin in training
+    # could recognize a test imprint.
+    rng = np.random.default_rng(8)
+    points = rng.uniform(0, 1, (40, 16, 16)).astype(np.float32)
+    y = np.repeat(np.arange(2), 60)
+    point = np.repeat(np.arange(40), 3)
+    X = points[point]
+    rec = Recognizer("knn", False, {}, 0.85)
+
+    def rate(groups):
+        splits = protocols.paper_splits(y, groups, folds=5, repeats=1, seed=0)
+        return protocols.paper_job(PaperJob(X, y, groups, tuple(splits), rec, 2)).rates.mean()
+
+    grouped = rate(touches.point_groups(y, point))
+    assert 25.0 <= grouped <= 75.0                                   # chance: no twin ever trains
+    assert rate(np.arange(len(y))) > 90.0                            # imprints on their own: the twins leak
