@@ -76,7 +76,7 @@ def main(argv=None) -> int:
     rng = np.random.default_rng(1)
     with threadpool_limits(1):
         forecast = knowledge.forecast(places.vertex_ids)                     # warm: imports, first allocations
-        forecast_s = [timed(lambda: knowledge.forecast(places.vertex_ids)) for _ in range(5)]
+        forecast_s = [timed(knowledge.forecast, places.vertex_ids) for _ in range(5)]
         states = []
         for r in range(args.repeats):
             touched = tuple(int(t) for t in rng.choice(args.places, r % 4, replace=False))
@@ -89,7 +89,7 @@ def main(argv=None) -> int:
         times = {name: [] for name in policies}
         for state in states:
             for name, policy in policies.items():
-                times[name].append(timed(lambda: policy.choose(state, np.random.default_rng(0))))
+                times[name].append(timed(policy.choose, state, np.random.default_rng(0)))
     print(f"| what ({args.objects} objects, {args.places} places, {args.touches} training touches each) "
           f"| median wall | median CPU | target |")
     print("|---|---:|---:|---:|")
@@ -102,10 +102,10 @@ def main(argv=None) -> int:
     return 0
 
 
-def timed(fn) -> tuple[float, float]:
+def timed(fn, *args) -> tuple[float, float]:
     """(wall, CPU) seconds of one call."""
     wall, cpu = time.perf_counter(), time.process_time()
-    fn()
+    fn(*args)
     return time.perf_counter() - wall, time.process_time() - cpu
 
 

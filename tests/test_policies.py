@@ -112,6 +112,7 @@ def test_expected_entropy_is_the_belief_entropy_where_no_hypothesis_knows_the_pl
 
 def test_the_stopping_rule_stops_at_the_first_touch_whose_belief_reaches_the_level():
     beliefs = [np.array([[0.6, 0.4], [0.9, 0.1], [0.99, 0.01]]), np.array([[0.3, 0.7], [0.96, 0.04]])]
-    correct, used = stopping_curve(beliefs, np.array([0, 0]), (0.5, 0.95, 0.999), lambda e: np.random.default_rng(e))
+    correct, used = stopping_curve(beliefs, np.array([0, 0]), (0.5, 0.95, 0.999), [np.random.default_rng(e)
+                                                                                  for e in range(2)])
     assert used.tolist() == [[1, 1], [3, 2], [3, 2]]
     assert correct.tolist() == [[1, 0], [1, 1], [1, 1]]

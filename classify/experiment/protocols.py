@@ -288,6 +288,6 @@ def _plan_stops(job: InstanceJob, proba: list) -> tuple[np.ndarray, np.ndarray]:
         beliefs = np.cumprod(np.maximum(p[:job.n_touches], 1e-300), axis=0)
         beliefs /= beliefs.sum(axis=1, keepdims=True)
         rng = recognition_rng(job.seed, job.replicate, 0, job.data.names[c], Stream.EPISODE_TIES)
-        right, touches_used = stopping_curve([beliefs], np.array([c]), job.stop_levels, lambda e: rng)
+        right, touches_used = stopping_curve([beliefs], np.array([c]), job.stop_levels, [rng])
         correct[:, c], used[:, c] = 100.0 * right[:, 0], touches_used[:, 0]
     return correct, used

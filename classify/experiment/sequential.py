@@ -98,7 +98,7 @@ def policy_job(job: PolicyJob) -> PolicyOutcome:
                 last = np.minimum(np.arange(K), len(picks) - 1)
                 rates[q, :, c] = 100.0 * (picks[last] == c)
                 ties = recognition_rng(job.seed, job.replicate, 0, job.names[c], Stream.EPISODE_TIES)
-                right, used = stopping_curve([episode.beliefs], np.array([c]), job.stop_levels, lambda e: ties)
+                right, used = stopping_curve([episode.beliefs], np.array([c]), job.stop_levels, [ties])
                 stop_correct[q, :, c], stop_touches[q, :, c] = 100.0 * right[:, 0], used[:, 0]
                 touched[q, c, :len(episode.vertex_ids)] = episode.vertex_ids
                 seconds.extend(episode.choice_s)

@@ -112,7 +112,7 @@ def decisions(beliefs: np.ndarray, rng: np.random.Generator) -> np.ndarray:
     return np.argmax(keys, axis=1).astype(np.int64)
 
 
-def stopping_curve(beliefs: list, truth: np.ndarray, levels, rng_of) -> tuple[np.ndarray, np.ndarray]:
+def stopping_curve(beliefs: list, truth: np.ndarray, levels, rngs: list) -> tuple[np.ndarray, np.ndarray]:
     """Accuracy and touches used when stopping as soon as the top belief reaches each level.
 
     Parameters
@@ -120,7 +120,7 @@ def stopping_curve(beliefs: list, truth: np.ndarray, levels, rng_of) -> tuple[np
     beliefs : list of (k_e, C) arrays, one episode each (k_e >= 1)
     truth : (E,) int, each episode's class
     levels : (L,) float, the stopping thresholds p
-    rng_of : callable, episode index -> Generator for its tie breaks
+    rngs : list of Generators, each episode's tie breaks
 
     Returns
     -------
@@ -131,7 +131,7 @@ def stopping_curve(beliefs: list, truth: np.ndarray, levels, rng_of) -> tuple[np
     correct = np.zeros((levels.size, len(beliefs)))
     used = np.zeros((levels.size, len(beliefs)))
     for e, B in enumerate(beliefs):
-        picks = decisions(B, rng_of(e))
+        picks = decisions(B, rngs[e])
         reached = B.max(axis=1)[None, :] >= levels[:, None]          # (L, k)
         stop = np.where(reached.any(axis=1), np.argmax(reached, axis=1), len(B) - 1)
         correct[:, e] = picks[stop] == truth[e]

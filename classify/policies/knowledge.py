@@ -219,7 +219,7 @@ def fit_knowledge(training: dict, nominal_vertices: dict, recognizer) -> TouchKn
     held = calibrate(held, calibration)
     model = recognizer.fit(F, y, groups)
     place_ids, posteriors, weights = [], [], []
-    for c, name in enumerate(names):
+    for c in range(len(names)):
         mine = y == c
         ids, where = np.unique(vertex[mine], return_inverse=True)
         counts = np.bincount(where, minlength=ids.size)
