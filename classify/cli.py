@@ -114,7 +114,29 @@ def _add_cluster_options(p, default_workers):
                        help="run on a new Dask LocalCluster of N single-threaded worker processes"
                             + (" (default: one per core; 1 runs in this process)" if default_workers == 0 else ""))
     where.add_argument("--scheduler", metavar="ADDRESS",
-                       help="run on an existing Dask cluster, e.g. tcp://127.0.0.1:8786 (see 'dask scheduler')")
+                       help="run on an existing Dask cluster: tls://HOST:8786 with the --tls-* certificates, or "
+                            "tcp://127.0.0.1:8786 through an SSH tunnel (see 'Many meshes' in the README); a "
+                            "plain tcp:// scheduler runs the code of anyone who reaches it")
+    tls = p.add_argument_group("TLS (mutual; as 'dask scheduler' and 'dask worker' take them)")
+    tls.add_argument("--tls-ca-file", metavar="PEM", help="certificate authority that signed the cluster's "
+                                                          "certificates")
+    tls.add_argument("--tls-cert", metavar="PEM", help="this client's certificate (with --workers: every role's)")
+    tls.add_argument("--tls-key", metavar="PEM", help="its private key, unless the certificate file holds it")
+    p.add_argument("--dashboard", metavar="ADDRESS",
+                   help="with --workers: serve the Dask dashboard at ADDRESS, e.g. 127.0.0.1:8787 (default: none)")
+
+
+def _cluster(args) -> dict:
+    """``open_executor``'s security and dashboard from the cluster options."""
+    from classify.runtime.cluster import tls_security
+
+    given = [o for o, v in (("--tls-ca-file", args.tls_ca_file), ("--tls-cert", args.tls_cert)) if v]
+    if args.tls_key and not args.tls_cert:
+        raise ValueError("--tls-key needs --tls-cert")
+    if len(given) == 1:
+        raise ValueError(f"TLS needs both --tls-ca-file and --tls-cert; only {given[0]} was given")
+    security = tls_security(args.tls_ca_file, args.tls_cert, args.tls_key) if given else None
+    return {"security": security, "dashboard": args.dashboard}
 
 
 def _batch(args) -> int:
@@ -129,7 +151,7 @@ def _batch(args) -> int:
     if not args.scheduler:
         workers = args.workers if args.workers is not None else (os.cpu_count() or 1)
         workers = workers if workers > 1 else None     # one worker: this process, no cluster
-    with open_executor(workers=workers, scheduler=args.scheduler) as executor:
+    with open_executor(workers=workers, scheduler=args.scheduler, **_cluster(args)) as executor:
         summary = run_batch(args.directory, args.out, settings, executor, args.quiet)
     print(summary.markdown())
     if summary.failed:
@@ -167,7 +189,8 @@ def _experiment(args) -> int:
         return 0
     cache_dir = "default" if args.cache_dir is None else (None if args.cache_dir.lower() == "none"
                                                           else args.cache_dir)
-    with open_executor(workers=args.workers, scheduler=args.scheduler, n_jobs=args.jobs) as executor:
+    with open_executor(workers=args.workers, scheduler=args.scheduler, n_jobs=args.jobs,
+                       **_cluster(args)) as executor:
         result = run_experiment(args.objects, config, executor=executor, cache_dir=cache_dir, out_dir=args.out,
                                 quiet=args.quiet)
     print(format_tables(result))

@@ -102,7 +102,9 @@ def capture(port: str, session: Session, object_name: str, *, baud: int = 115200
         and approach direction.
     first_point : int
         Without a plan: id of the first press; ids count up from it, or from
-        one past the last id recorded for this object when that is larger.
+        one past the largest id recorded for this object when that is larger.
+        Either way the id is chosen as the press is committed, so captures
+        running into one session and object at once never share an id.
     presses : int, optional
         Stop after this many presses; otherwise run until Ctrl-C.
     garbage_timeout : float
@@ -129,16 +131,16 @@ def capture(port: str, session: Session, object_name: str, *, baud: int = 115200
             print(f"capture: {text}", file=stream, flush=True)
 
     recorded = session.point_ids(object_name)
+    planned = None
     if plan is not None:
-        done = set(recorded)
-        queue = [p for p in plan.points if p.id not in done]
-        planned_mm = dict(zip((p.id for p in plan.points), plan.positions_mm()))
-        if not queue:
+        planned = [(p.id, position, p.approach) for p, position in zip(plan.points, plan.positions_mm())]
+        if session.next_point(object_name, planned=planned) is None:
             say(f"all {len(plan.points)} planned points of {object_name!r} are already in {session.path}")
             return CaptureResult((), "plan", 0, 0, 0, 0, 0)
-    else:
-        queue = None
-        next_id = max(first_point, max(recorded) + 1) if recorded else first_point
+
+    def upcoming():
+        return session.next_point(object_name, first_point, planned)
+
     if recorded:
         say(f"resuming {session.path}: {len(recorded)} presses of {object_name!r} already stored")
 
@@ -180,26 +182,26 @@ def capture(port: str, session: Session, object_name: str, *, baud: int = 115200
                 if run_id is None and detector.baseline is not None:
                     b = detector.baseline
                     run_id = session.start_run(port, baud, protocol, object_name, b)
-                    target = queue[0].id if queue is not None else next_id
                     say(f"baseline from {b.frames} frames (summed noise {b.noise:.1f}, press above {b.on:.0f}); "
-                        f"ready for point {target}")
+                        f"ready for point {upcoming()}")
                 if press is None:
                     continue
-                point = queue.pop(0) if queue is not None else None
-                point_id = point.id if point is not None else next_id
                 counters = {"frames": parser.frames, "crc_errors": parser.crc_errors + parser.bad_lines,
                             "gaps": parser.gaps, "bytes_skipped": parser.bytes_skipped}
-                session.add_press(run_id, object_name, point_id, press, counters,
-                                  position=None if point is None else planned_mm[point.id],
-                                  approach=None if point is None else point.approach)
+                # The id is chosen as the press is committed: another capture into this session may have
+                # taken the one announced.
+                added = session.add_next_press(run_id, object_name, press, counters, first_point=first_point,
+                                               planned=planned)
+                if added is None:
+                    say(f"press not stored: another capture recorded the last planned points of {object_name!r}")
+                    return _result(stored, "plan", parser)
+                point_id = added[1]
                 stored.append(point_id)
-                if queue is None:
-                    next_id = point_id + 1
-                upcoming = f"; next point {queue[0].id if queue else next_id}" if queue or queue is None else ""
+                following = upcoming()
                 say(f"press {len(stored)}: point {point_id} stored (peak {press.peak_sum:.0f}, "
                     f"{press.frames} frames; {parser.frames} frames received, {parser.crc_errors} CRC errors, "
-                    f"{parser.gaps} missing){upcoming}")
-                if queue is not None and not queue:
+                    f"{parser.gaps} missing)" + ("" if following is None else f"; next point {following}"))
+                if following is None:
                     return _result(stored, "plan", parser)
                 if presses is not None and len(stored) >= presses:
                     return _result(stored, "presses", parser)

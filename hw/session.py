@@ -1,9 +1,17 @@
 """Capture sessions in SQLite, and their export to a ``tactile.ImprintSet``.
 
 One session file holds the presses of any number of objects made with one
-sensor.  The database runs in WAL mode with full sync and every press is its
-own transaction, so a killed process or a pulled cable loses nothing already
-pressed; opening the same file again resumes the session.
+sensor, at most one press per object and point id (a UNIQUE index).  The
+database runs in WAL mode with full sync and every press is its own
+transaction, so a killed process or a pulled cable loses nothing already
+pressed; opening the same file again resumes the session.  Several captures
+may write to one session at once, from any number of processes: the point id
+of a press is chosen inside its own insert transaction (``BEGIN IMMEDIATE``),
+and a new file's schema is created inside one, so processes creating the same
+file together all get one schema.  SQLite's write-ahead log needs shared
+memory and working file locks, which network filesystems may not give: a
+session the log cannot be switched on for is refused (keep sessions on a local
+disk).
 """
 
 from __future__ import annotations
@@ -20,7 +28,8 @@ from hw.press import Baseline, Press
 __all__ = ["FORMAT", "SCHEMA_VERSION", "Session", "PressRecord", "export_imprints", "resample"]
 
 FORMAT = "visuotactile-capture-session"
-SCHEMA_VERSION = 1
+# 2: a UNIQUE (object, point_id) index in place of version 1's plain one; version 1 files are migrated on opening.
+SCHEMA_VERSION = 2
 
 _SCHEMA = """
 CREATE TABLE meta (key TEXT PRIMARY KEY, value TEXT NOT NULL);
@@ -55,7 +64,7 @@ CREATE TABLE presses (
     px REAL, py REAL, pz REAL,
     ax REAL, ay REAL, az REAL
 );
-CREATE INDEX presses_object ON presses(object, point_id);
+CREATE UNIQUE INDEX presses_point ON presses(object, point_id);
 """
 
 
@@ -132,26 +141,55 @@ class Session:
 
     def _init(self) -> None:
         con = self._con
-        tables = {r[0] for r in con.execute("SELECT name FROM sqlite_master WHERE type='table'")}
-        if not tables:
+        # Read first, so a foreign or read-only file is never written; create or migrate inside one
+        # BEGIN IMMEDIATE, looking again there: another process may have done it meanwhile.
+        if not self._tables() or self._meta().get("version") == "1":
             with self._transaction():
-                for statement in _SCHEMA.split(";"):
-                    if statement.strip():
-                        con.execute(statement)
-                con.executemany("INSERT INTO meta VALUES (?, ?)",
-                                [("format", FORMAT), ("version", str(SCHEMA_VERSION)),
-                                 ("created", repr(time.time()))])
-        elif "meta" not in tables:
-            raise sqlite3.DatabaseError("it holds no visuotactile capture session")
+                if not self._tables():
+                    for statement in _SCHEMA.split(";"):
+                        if statement.strip():
+                            con.execute(statement)
+                    con.executemany("INSERT INTO meta VALUES (?, ?)",
+                                    [("format", FORMAT), ("version", str(SCHEMA_VERSION)),
+                                     ("created", repr(time.time()))])
+                elif self._meta().get("format") == FORMAT and self._meta().get("version") == "1":
+                    self._migrate_from_1()
         meta = self._meta()
         if meta.get("format") != FORMAT:
             raise sqlite3.DatabaseError("it holds no visuotactile capture session")
         if meta.get("version") != str(SCHEMA_VERSION):
             raise sqlite3.DatabaseError(f"session version {meta.get('version')} is not the supported "
                                         f"{SCHEMA_VERSION}")
-        con.execute("PRAGMA journal_mode=WAL")
+        mode = con.execute("PRAGMA journal_mode=WAL").fetchone()[0]
+        if mode.lower() != "wal":
+            raise OSError(f"{self.path}: SQLite cannot keep a write-ahead log here (journal mode stays {mode!r}): "
+                          f"the filesystem lacks the shared memory or file locks it needs, as network "
+                          f"filesystems may; keep the session on a local disk")
         # FULL: a press is on disk before the next one starts.
         con.execute("PRAGMA synchronous=FULL")
+
+    def _tables(self) -> set[str]:
+        tables = {r[0] for r in self._con.execute("SELECT name FROM sqlite_master WHERE type='table'")}
+        if tables and "meta" not in tables:
+            raise sqlite3.DatabaseError("it holds no visuotactile capture session")
+        return tables
+
+    def _migrate_from_1(self) -> None:
+        """Version 1 to 2, inside the caller's transaction: the UNIQUE (object, point_id) index."""
+        con = self._con
+        shared = con.execute("SELECT object, point_id, group_concat(id, ', ') FROM presses"
+                             " GROUP BY object, point_id HAVING count(*) > 1 ORDER BY min(id)").fetchall()
+        if shared:
+            listed = "; ".join(f"{obj!r} point {pid} (presses {ids})" for obj, pid, ids in shared[:10])
+            more = f" and {len(shared) - 10} more" if len(shared) > 10 else ""
+            raise ValueError(f"{self.path}: presses share a point id: {listed}{more}.  A version 1 session "
+                             f"cannot take the index that keeps point ids unique until each (object, point) "
+                             f"has one press: delete the extra presses or give them free point ids (sqlite3 "
+                             f"{self.path} \"UPDATE presses SET point_id = ... WHERE id = ...\"), then open it "
+                             f"again")
+        con.execute("DROP INDEX IF EXISTS presses_object")
+        con.execute("CREATE UNIQUE INDEX presses_point ON presses(object, point_id)")
+        con.execute("UPDATE meta SET value = ? WHERE key = 'version'", (str(SCHEMA_VERSION),))
 
     def _meta(self) -> dict[str, str]:
         return dict(self._con.execute("SELECT key, value FROM meta"))
@@ -175,12 +213,12 @@ class Session:
 
     def ensure_sensor(self, rows: int, cols: int) -> None:
         """Record the sensor size on first use; afterwards insist on the same size."""
-        known = self.sensor
-        if known is None:
-            with self._transaction():
-                self._con.executemany("INSERT OR REPLACE INTO meta VALUES (?, ?)",
+        with self._transaction():
+            known = self.sensor
+            if known is None:
+                self._con.executemany("INSERT INTO meta VALUES (?, ?)",
                                       [("rows", str(int(rows))), ("cols", str(int(cols)))])
-        elif known != (rows, cols):
+        if known is not None and known != (rows, cols):
             raise ValueError(f"{self.path}: the session was recorded with a {known[0]} x {known[1]} sensor "
                              f"but the port sends {rows} x {cols} frames; use another --session for this sensor")
 
@@ -197,30 +235,87 @@ class Session:
 
     def add_press(self, run_id: int, object_name: str, point_id: int, press: Press, counters: dict,
                   position=None, approach=None) -> int:
-        """Commit one press in its own transaction; returns its row id.
+        """Commit one press under ``point_id`` in its own transaction; returns its row id.
 
         ``counters`` holds the parser's ``frames``, ``crc_errors`` (failed
         CRCs and unreadable text lines), ``gaps`` and ``bytes_skipped`` at the
-        time of the press.
+        time of the press.  A point id already recorded for the object is a
+        ``ValueError``; :meth:`add_next_press` chooses a free one.
         """
+        self._check_size(press)
+        with self._transaction():
+            return self._insert(run_id, object_name, int(point_id), press, counters, position, approach)
+
+    def add_next_press(self, run_id: int, object_name: str, press: Press, counters: dict, *, first_point: int = 0,
+                       planned=None) -> tuple[int, int] | None:
+        """Commit one press under the next free point id, chosen inside the insert's own transaction.
+
+        Two captures into one session and object, in one process or several,
+        never take the same id: each sees the other's committed presses.
+
+        Parameters
+        ----------
+        run_id, object_name, press, counters
+            As for :meth:`add_press`.
+        first_point : int
+            Without ``planned``: the id is one past the largest recorded for
+            the object, and at least this.
+        planned : sequence of (point_id, position, approach), optional
+            A probe plan in order: the press takes its first point not yet
+            recorded for the object, with that point's position and approach.
+
+        Returns
+        -------
+        (row id, point id), or None when every planned point is recorded
+        (nothing is stored then).
+        """
+        self._check_size(press)
+        with self._transaction():
+            choice = self._next_point(object_name, first_point, planned)
+            if choice is None:
+                return None
+            point_id, position, approach = choice
+            return self._insert(run_id, object_name, point_id, press, counters, position, approach), point_id
+
+    def next_point(self, object_name: str, first_point: int = 0, planned=None) -> int | None:
+        """The point id :meth:`add_next_press` would take now (None: the plan is done).
+
+        Only a forecast while other captures write to the session too.
+        """
+        choice = self._next_point(object_name, first_point, planned)
+        return None if choice is None else choice[0]
+
+    def _next_point(self, object_name: str, first_point: int, planned):
+        if planned is None:
+            (largest,) = self._con.execute("SELECT max(point_id) FROM presses WHERE object = ?",
+                                           (object_name,)).fetchone()
+            return int(first_point) if largest is None else max(int(first_point), largest + 1), None, None
+        done = set(self.point_ids(object_name))
+        return next(((int(i), p, a) for i, p, a in planned if int(i) not in done), None)
+
+    def _check_size(self, press: Press) -> None:
         rows, cols = press.raw.shape
         if self.sensor != (rows, cols):
             raise ValueError(f"{self.path}: a {rows} x {cols} press does not fit the session's sensor {self.sensor}")
+
+    def _insert(self, run_id, object_name, point_id, press, counters, position, approach) -> int:
         p = [None] * 3 if position is None else [float(x) for x in position]
         a = [None] * 3 if approach is None else [float(x) for x in approach]
-        with self._transaction():
+        try:
             cur = self._con.execute(
                 "INSERT INTO presses (run_id, object, point_id, imprint, raw, peak_sum, seq_start, seq_peak,"
                 " seq_end, t_start_us, t_peak_us, t_end_us, frames, host_time, frames_received, crc_errors,"
                 " gaps, bytes_skipped, px, py, pz, ax, ay, az)"
                 " VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
-                (run_id, object_name, int(point_id),
+                (run_id, object_name, point_id,
                  np.ascontiguousarray(press.imprint, np.float32).tobytes(),
                  np.ascontiguousarray(press.raw, "<u2").tobytes(), float(press.peak_sum),
                  press.seq_start, press.seq_peak, press.seq_end, press.t_start_us, press.t_peak_us,
                  press.t_end_us, press.frames, time.time(), int(counters["frames"]),
                  int(counters["crc_errors"]), int(counters["gaps"]), int(counters["bytes_skipped"]), *p, *a))
-            return int(cur.lastrowid)
+        except sqlite3.IntegrityError:
+            raise ValueError(f"{self.path}: point {point_id} of {object_name!r} is already recorded") from None
+        return int(cur.lastrowid)
 
     def _transaction(self):
         return _Transaction(self._con)

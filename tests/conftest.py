@@ -77,3 +77,20 @@ def dask_cluster(tmp_path):
     cluster = DaskCluster(tmp_path)
     yield cluster
     cluster.close()
+
+
+@pytest.fixture(scope="module")
+def tls_dask_cluster(tmp_path_factory):
+    """A scheduler and two workers as :func:`dask_cluster`, over TLS with certificates made for the test (by the
+    ``openssl`` command) and started in a folder of their own, so relative paths would resolve elsewhere."""
+    import shutil
+
+    from dask_cluster import DaskCluster, make_certificates
+
+    if shutil.which("openssl") is None:
+        missing("the openssl command, which makes the test certificates, is not installed")
+    folder = tmp_path_factory.mktemp("tls-cluster")
+    (folder / "workers-cwd").mkdir()
+    cluster = DaskCluster(folder, make_certificates(folder / "certs"), cwd=folder / "workers-cwd")
+    yield cluster
+    cluster.close()

@@ -1,9 +1,13 @@
-"""Batches of meshes: the same entries in process, on a LocalCluster and on a tcp:// Dask cluster of real
-``dask scheduler`` / ``dask worker`` processes; resumable; broken meshes recorded; a killed worker or a
-killed run loses nothing."""
+"""Batches of meshes: the same entries in process, on a LocalCluster and on a TLS Dask cluster of real
+``dask scheduler`` / ``dask worker`` processes started elsewhere; resumable; broken meshes recorded; a killed
+worker or a killed run loses nothing; an edited mesh is computed again; an entry the client cannot read is a
+failure; one batch per store."""
 
 import json
+import os
 import signal
+import socket
+import ssl
 import subprocess
 import sys
 import threading
@@ -16,7 +20,7 @@ import shapes
 
 from classify import batch
 from classify.cli import main
-from classify.runtime.cluster import open_executor
+from classify.runtime.cluster import open_executor, tls_security
 
 SETTINGS = batch.BatchSettings(methods=("attention", "uniform"), n_points=6, view_size=32)
 
@@ -78,66 +82,235 @@ def serial_store(corpus, tmp_path_factory):
     return store
 
 
-def test_entries_are_the_same_in_process_on_a_local_cluster_and_on_a_tcp_cluster(corpus, serial_store, tmp_path,
-                                                                                  dask_cluster):
+# Runs 'visuotactile batch' in a process of its own and stops it at the rename of entry number AFTER + 1 (tasks
+# run in order in that process): 'kill' SIGKILLs the process there, a run killed mid-write (AFTER entries whole,
+# the next one's temporary file written but never renamed); 'pause' prints 'paused' and waits for stdin to
+# close, holding the store meanwhile, then finishes the batch.
+DRIVER = """
+import os, signal, sys
+from classify.cli import main
+
+after, action, argv = int(sys.argv[1]), sys.argv[2], sys.argv[3:]
+rename, renamed = os.replace, []
+
+
+def replace(src, dst):
+    if str(dst).endswith(".npz") and f"{os.sep}meshes{os.sep}" in str(dst):
+        if len(renamed) == after:
+            if action == "kill":
+                os.kill(os.getpid(), signal.SIGKILL)
+            print("paused", flush=True)
+            sys.stdin.read()
+        renamed.append(dst)
+    return rename(src, dst)
+
+
+os.replace = replace
+sys.exit(main(argv))
+"""
+
+
+def _driver(after: int, action: str, corpus: Path, store: Path, *options: str) -> subprocess.Popen:
+    options = options or ("--methods", "attention,uniform", "--n-points", "6", "--view-size", "32")
+    return subprocess.Popen([sys.executable, "-c", DRIVER, str(after), action, "batch", str(corpus), "--out",
+                             str(store), "--workers", "1", "--quiet", *options],
+                            stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+
+
+def _in_flight(store: Path) -> list[Path]:
+    """Temporary files of entries being written (hidden names)."""
+    return sorted(p for p in (store / "meshes").rglob(".*") if p.is_file())
+
+
+def test_entries_are_the_same_in_process_on_a_local_cluster_and_on_a_tls_cluster_started_elsewhere(
+        corpus, serial_store, tmp_path, tls_dask_cluster, monkeypatch):
     local = tmp_path / "local"
     with open_executor(workers=2) as executor:
         summary = batch.run_batch(corpus, local, SETTINGS, executor, quiet=True)
     assert summary.done == 8
-    remote = tmp_path / "remote"
-    with open_executor(scheduler=dask_cluster.address) as executor:
-        assert batch.run_batch(corpus, remote, SETTINGS, executor, quiet=True).done == 8
+    # The workers run in a folder of their own; the client gives paths relative to its own.
+    client_cwd = tmp_path / "client"
+    client_cwd.mkdir()
+    monkeypatch.chdir(client_cwd)
+    assert tls_dask_cluster.address.startswith("tls://")
+    with open_executor(scheduler=tls_dask_cluster.address, security=tls_dask_cluster.security()) as executor:
+        summary = batch.run_batch(os.path.relpath(corpus), "remote", SETTINGS, executor, quiet=True)
+    assert (summary.done, summary.failed) == (8, 0)
+    remote = client_cwd / "remote"
+    assert not list(tls_dask_cluster.cwd.rglob("*"))                 # nothing written beside the workers
     reference = _entries(serial_store)
     assert len(reference) == 8 and "meshes/sub/m03.npz" in reference
     _assert_same(reference, _entries(local))
     _assert_same(reference, _entries(remote))
+    entry = batch.load_entry(remote, "sub/m03")
+    assert entry.source == str(corpus.resolve() / "sub" / "m03.obj")
 
 
-def test_a_killed_worker_loses_nothing_and_every_mesh_is_stored_once(tmp_path, dask_cluster):
-    corpus = _corpus(tmp_path / "corpus", 12)
+def test_a_tls_cluster_refuses_clients_without_its_certificates(tls_dask_cluster, tmp_path):
+    from dask_cluster import make_certificates
+
+    address = tls_dask_cluster.address
+    with pytest.raises(ValueError, match=f"{address}: a tls:// scheduler needs a CA file and a client certificate"):
+        with open_executor(scheduler=address):
+            pass
+    with pytest.raises(OSError, match="cannot reach the Dask scheduler"):
+        with open_executor(scheduler=address.replace("tls://", "tcp://")):
+            pass
+    intruder = make_certificates(tmp_path, "intruder")              # a certificate another authority signed
+    with pytest.raises(OSError, match="cannot reach the Dask scheduler"):
+        with open_executor(scheduler=address, security=tls_security(intruder.ca_file, intruder.cert, intruder.key)):
+            pass
+    # Trusting the cluster's authority without a certificate of one's own: the scheduler ends the handshake.
+    host, port = address.removeprefix("tls://").rsplit(":", 1)
+    context = ssl.create_default_context(cafile=str(tls_dask_cluster.certificates.ca_file))
+    context.check_hostname = False
+    with socket.create_connection((host, int(port)), timeout=10) as raw:
+        with pytest.raises(ssl.SSLError, match="CERTIFICATE_REQUIRED"):
+            with context.wrap_socket(raw) as tls:
+                tls.recv(1)
+
+
+def test_a_killed_worker_loses_nothing_and_every_mesh_is_stored_once(corpus, serial_store, tmp_path, dask_cluster):
     store = tmp_path / "store"
-    settings = batch.BatchSettings(methods=("attention",), n_points=6, view_size=48)
-    killer_done = []
+    victim = dask_cluster.workers[0]
+    at_kill = {}
 
-    def kill_one_worker_when_work_has_started():
+    def kill_one_worker_once_an_entry_is_finished():
         end = time.monotonic() + 120
-        while time.monotonic() < end and not _finished(store):
+        while not _finished(store):
+            if time.monotonic() > end:
+                return                                              # nothing finished: no kill, the test fails
             time.sleep(0.05)
-        dask_cluster.workers[0].send_signal(signal.SIGKILL)
-        killer_done.append(dask_cluster.workers[0].wait(timeout=30))
+        victim.send_signal(signal.SIGKILL)
+        victim.wait(timeout=30)
+        # Read after the kill: whatever is not here yet was finished after it.
+        at_kill.update({p: p.stat().st_mtime_ns for p in _finished(store)})
 
-    killer = threading.Thread(target=kill_one_worker_when_work_has_started)
+    killer = threading.Thread(target=kill_one_worker_once_an_entry_is_finished)
     killer.start()
     with open_executor(scheduler=dask_cluster.address) as executor:
-        summary = batch.run_batch(corpus, store, settings, executor, quiet=True)
+        summary = batch.run_batch(corpus, store, SETTINGS, executor, quiet=True)
     killer.join()
-    assert killer_done and killer_done[0] != 0                      # the worker really died mid-batch
-    assert (summary.done, summary.failed) == (12, 0)
-    files = sorted(p.relative_to(store).as_posix() for p in (store / "meshes").rglob("*") if p.is_file())
-    assert len(files) == 12 and len(set(files)) == 12 and not any(Path(f).name.startswith(".") for f in files)
-    reference = tmp_path / "reference"
-    batch.run_batch(corpus, reference, settings, quiet=True)
-    _assert_same(_entries(reference), _entries(store))
+    assert victim.returncode == -signal.SIGKILL                      # alive until our kill, killed by it
+    # A task whose worker died after writing its entry finds it complete when it runs again elsewhere.
+    assert summary.done + summary.skipped == 8 and summary.skipped <= 1 and summary.failed == 0
+    finished = _finished(store)
+    assert at_kill and len(at_kill) < len(finished) == 8             # entries finished before and after the kill
+    assert {p: p.stat().st_mtime_ns for p in at_kill} == at_kill     # none of them written again
+    assert not _in_flight(store)
+    _assert_same(_entries(serial_store), _entries(store))
 
 
-def test_a_killed_run_resumes_where_it_stopped(corpus, serial_store, tmp_path):
+def test_a_run_killed_mid_write_resumes_where_it_stopped(corpus, serial_store, tmp_path):
     store = tmp_path / "store"
-    command = [sys.executable, "-m", "classify.cli", "batch", str(corpus), "--out", str(store), "--workers", "1",
-               "--methods", "attention,uniform", "--n-points", "6", "--view-size", "32", "--quiet"]
-    run = subprocess.Popen(command, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
-    end = time.monotonic() + 120
-    while time.monotonic() < end and len(_finished(store)) < 2:
-        time.sleep(0.05)
-    run.send_signal(signal.SIGKILL)
-    run.wait(timeout=30)
-    first = _finished(store)
-    assert 2 <= len(first) < 8                                      # killed with work left to do
-    summary = batch.run_batch(corpus, store, SETTINGS, quiet=True)
-    assert summary.skipped == len(first) and summary.done == 8 - len(first)
-    assert not list((store / "meshes").rglob(".*"))                 # a write cut short by the kill is gone
+    run = _driver(3, "kill", corpus, store)
+    run.communicate(timeout=300)
+    assert run.returncode == -signal.SIGKILL
+    assert [p.relative_to(store / "meshes").as_posix() for p in _finished(store)] == ["m00.npz", "m01.npz",
+                                                                                       "m02.npz"]
+    cut_short = _in_flight(store)
+    assert len(cut_short) == 1 and cut_short[0].name.startswith(".m04.")
+    summary = batch.run_batch(corpus, store, SETTINGS, quiet=True)   # the killed run's lock died with it
+    assert (summary.skipped, summary.done, summary.redone, summary.failed) == (3, 5, 0, 0)
+    assert not _in_flight(store)
     _assert_same(_entries(serial_store), _entries(store))
     again = batch.run_batch(corpus, store, SETTINGS, quiet=True)
     assert (again.done, again.skipped) == (0, 8)
+
+
+def test_one_batch_per_store_a_second_fails_at_once_naming_the_holder(tmp_path, capsys):
+    corpus = _corpus(tmp_path / "corpus", 4)
+    store = tmp_path / "store"
+    options = ("--methods", "uniform", "--n-points", "4")
+    holder = _driver(2, "pause", corpus, store, *options)
+    assert holder.stdout.readline() == "paused\n", holder.stderr.read()
+    header = (store / "store.json").read_bytes()
+    in_flight = _in_flight(store)
+    assert len(_finished(store)) == 2 and len(in_flight) == 1
+    assert main(["batch", str(corpus), "--out", str(store), "--workers", "1", "--quiet", *options]) == 1
+    err = capsys.readouterr().err
+    assert (f"visuotactile batch: error: {store}: in use by another batch (process {holder.pid} on "
+            f"{socket.gethostname()}, since ") in err
+    with pytest.raises(batch.StoreInUseError, match="in use by another batch"):
+        batch.run_batch(corpus, store, batch.BatchSettings(methods=("random",)), quiet=True)
+    # Neither touched the holder's header or its write in flight.
+    assert (store / "store.json").read_bytes() == header and _in_flight(store) == in_flight
+    holder.stdin.close()
+    assert holder.wait(timeout=300) == 0, holder.stderr.read()
+    assert len(_finished(store)) == 4 and not _in_flight(store)
+    summary = batch.run_batch(corpus, store, batch.BatchSettings(methods=("uniform",), n_points=4), quiet=True)
+    assert (summary.done, summary.skipped) == (0, 4)
+
+
+def _write_colored_obj(path: Path, mesh, rgb) -> None:
+    lines = [f"v {x!r} {y!r} {z!r} {rgb[0]} {rgb[1]} {rgb[2]}" for x, y, z in mesh.vertices.tolist()]
+    lines += [f"f {a + 1} {b + 1} {c + 1}" for a, b, c in mesh.faces.tolist()]
+    path.write_text("\n".join(lines) + "\n")
+
+
+def test_an_edited_mesh_is_computed_again_and_an_unchanged_one_is_not(tmp_path):
+    import meshsal
+
+    settings = batch.BatchSettings(methods=("uniform",), n_points=4)
+    corpus = _corpus(tmp_path / "corpus", 3)
+    grey = meshsal.load_mesh(corpus / "m02.obj")
+    _write_colored_obj(corpus / "m02.obj", grey, (0.5, 0.5, 0.5))
+    store = tmp_path / "store"
+    assert batch.run_batch(corpus, store, settings, quiet=True).done == 3
+    written = {p.name: p.stat().st_mtime_ns for p in _finished(store)}
+    scale = batch.load_entry(store, "m01").transform.scale
+    # Twice the size in the file: the same nominal mesh, another transform back to the file.
+    m01 = meshsal.load_mesh(corpus / "m01.obj")
+    shapes.write_obj(corpus / "m01.obj", m01.replace(vertices=m01.vertices * 2.0))
+    # The same vertices and faces in another colour: only the colours changed.
+    _write_colored_obj(corpus / "m02.obj", grey, (0.9, 0.1, 0.1))
+    summary = batch.run_batch(corpus, store, settings, quiet=True)
+    assert (summary.done, summary.redone, summary.skipped, summary.failed) == (2, 2, 1, 0)
+    now = {p.name: p.stat().st_mtime_ns for p in _finished(store)}
+    assert now["m00.npz"] == written["m00.npz"] and now["m01.npz"] != written["m01.npz"]
+    assert now["m02.npz"] != written["m02.npz"]
+    assert batch.load_entry(store, "m01").transform.scale == pytest.approx(scale / 2.0)
+    fresh = tmp_path / "fresh"
+    batch.run_batch(corpus, fresh, settings, quiet=True)
+    _assert_same(_entries(fresh), _entries(store))
+    # A file that no longer loads loses its entry: the store never holds one its file would not give.
+    (corpus / "m01.obj").write_text("v 0 0 0\nv 1 0 0\nf 1 2 9\n")
+    summary = batch.run_batch(corpus, store, settings, quiet=True)
+    assert (summary.done, summary.skipped, summary.failed) == (0, 2, 1)
+    assert sorted(batch.load_store(store)) == ["m00", "m02"]
+    failure, = [json.loads(line) for line in (store / "failures.jsonl").read_text().splitlines()]
+    assert failure["name"] == "m01" and failure["error"].endswith("its entry from an earlier run was removed")
+
+
+class _LosingExecutor:
+    """Runs each task in this process, then loses one entry and damages another, as workers writing to a disk
+    of their own, or to a broken one, would leave them."""
+
+    def map(self, fn, tasks):
+        for task in tasks:
+            result = fn(task)
+            entry = Path(task[2]) / "meshes" / f"{task[1]}.npz"
+            if task[1] == "m01":
+                entry.unlink()
+            elif task[1] == "m02":
+                entry.write_bytes(entry.read_bytes()[:200])
+            yield result
+
+
+def test_an_entry_the_client_cannot_read_is_a_failure(tmp_path):
+    settings = batch.BatchSettings(methods=("uniform",), n_points=4)
+    corpus = _corpus(tmp_path / "corpus", 4)
+    store = tmp_path / "store"
+    summary = batch.run_batch(corpus, store, settings, _LosingExecutor(), quiet=True)
+    assert (summary.done, summary.failed) == (2, 2)
+    failures = {f["name"]: f["error"] for f in map(json.loads, (store / "failures.jsonl").read_text().splitlines())}
+    assert failures.keys() == {"m01", "m02"}
+    assert failures["m01"].startswith(f"{store / 'meshes' / 'm01.npz'}: the task reported the entry written but "
+                                      f"it is not there")
+    assert failures["m02"].startswith(f"{store / 'meshes' / 'm02.npz'}: damaged or truncated batch entry")
+    assert sorted(batch.load_store(store)) == ["m00", "sub/m03"]     # the damaged entry is gone
+    again = batch.run_batch(corpus, store, settings, quiet=True)
+    assert (again.done, again.skipped, again.failed) == (2, 2, 0)
 
 
 def test_a_broken_mesh_is_recorded_and_does_not_stop_the_batch(tmp_path, capsys):
@@ -147,7 +320,7 @@ def test_a_broken_mesh_is_recorded_and_does_not_stop_the_batch(tmp_path, capsys)
     assert main(["batch", str(corpus), "--out", str(store), "--workers", "1", "--methods", "uniform",
                  "--n-points", "4", "--quiet"]) == 0
     out, err = capsys.readouterr()
-    assert "| 3 | 0 | 1 |" in out and "failures.jsonl" in err
+    assert "| 3 | 0 | 1 | 0 |" in out and "failures.jsonl" in err
     failures = [json.loads(line) for line in (store / "failures.jsonl").read_text().splitlines()]
     assert [f["name"] for f in failures] == ["broken"] and "broken.obj" in failures[0]["error"]
     entries = batch.load_store(store)

@@ -3,12 +3,25 @@
 :func:`open_executor` yields a ``concurrent.futures``-style executor whose
 ``map`` returns results in order:
 
-* ``scheduler="tcp://host:port"``: an existing Dask cluster (``dask
-  scheduler`` and ``dask worker`` processes), through a
-  ``distributed.Client``;
+* ``scheduler="tls://host:port"`` (or ``tcp://``): an existing Dask cluster
+  (``dask scheduler`` and ``dask worker`` processes), through a
+  ``distributed.Client``; a ``tls://`` address needs certificates
+  (``security``, see :func:`tls_security`, or dask's own
+  ``distributed.comm.tls`` settings) and is refused without them;
 * ``workers=N``: a ``distributed.LocalCluster`` of N worker processes, one
-  thread each, started for the call and closed after it;
-* neither: ``n_jobs`` spawned worker processes (one runs in this process).
+  thread each, started for the call and closed after it.  Everything it
+  opens listens on 127.0.0.1 only (the scheduler, the workers, their nannies
+  and the scheduler's HTTP endpoints); the dashboard is off unless
+  ``dashboard`` gives an address; ``security`` puts it on TLS too, which
+  matters on a machine shared with other users, who can all reach its
+  loopback ports;
+* neither: ``n_jobs`` spawned worker processes (one runs in this process),
+  which talk over pipes and open no port.
+
+A Dask worker runs whatever the scheduler sends it, and results come back
+pickled: whoever reaches a plain ``tcp://`` scheduler can run code on every
+worker and on the client.  Reach a remote cluster over TLS, an SSH tunnel or
+a private network only.
 
 Every task caps BLAS and OpenMP at one thread inside its worker
 (``threadpoolctl``), whatever started the worker, and a LocalCluster's
@@ -23,10 +36,14 @@ from __future__ import annotations
 import logging
 import multiprocessing
 import os
+import sys
 from concurrent.futures import ProcessPoolExecutor
 from contextlib import contextmanager
+from pathlib import Path
 
-__all__ = ["Inline", "worker_pool", "open_executor", "worker_env"]
+__all__ = ["Inline", "worker_pool", "open_executor", "tls_security", "worker_env", "LOOPBACK"]
+
+LOOPBACK = "127.0.0.1"
 
 
 class Inline:
@@ -68,18 +85,95 @@ def worker_pool(n_jobs: int):
         yield pool
 
 
+def tls_security(ca_file, cert, key=None):
+    """A ``distributed.Security`` for mutual TLS, one certificate for every role.
+
+    The client, the scheduler and the workers of a LocalCluster all present
+    ``cert``; towards an existing cluster only the client role is used.  Each
+    side accepts only peers whose certificate ``ca_file`` signed.
+
+    Parameters
+    ----------
+    ca_file : path
+        PEM file of the certificate authority that signed the cluster's certificates.
+    cert : path
+        PEM certificate of this side (it may hold the key too).
+    key : path, optional
+        PEM private key of ``cert`` when it is a separate file.
+
+    Raises
+    ------
+    ValueError
+        A file is missing, unreadable, or the certificate and key do not load,
+        naming the file.
+    """
+    import ssl
+
+    from distributed import Security
+
+    files = {"CA file": ca_file, "certificate": cert, "key": key}
+    for what, path in files.items():
+        if path is not None and not Path(path).is_file():
+            raise ValueError(f"{path}: no such TLS {what}")
+    ca, cert, key = (None if p is None else str(Path(p).resolve()) for p in (ca_file, cert, key))
+    try:
+        ssl.create_default_context(cafile=ca)
+    except (ssl.SSLError, OSError) as exc:
+        raise ValueError(f"{ca}: not a PEM certificate authority ({exc})") from None
+    try:
+        ssl.create_default_context().load_cert_chain(cert, key)
+    except (ssl.SSLError, OSError) as exc:
+        raise ValueError(f"{cert}{' with ' + key if key else ''}: not a PEM certificate and its private key "
+                         f"({exc})") from None
+    roles = {f"tls_{role}_{part}": value for role in ("client", "scheduler", "worker")
+             for part, value in (("cert", cert), ("key", key)) if value is not None}
+    return Security(require_encryption=True, tls_ca_file=ca, **roles)
+
+
+def _has_client_certificate(security) -> bool:
+    return bool(security.tls_ca_file and security.tls_client_cert)
+
+
+def _client_security(scheduler: str, security):
+    """The Security a client of ``scheduler`` uses; refuses a tls:// address without certificates."""
+    from distributed import Security
+
+    security = Security() if security is None else security     # None: dask's distributed.comm.tls config
+    if scheduler.startswith("tls://") and not _has_client_certificate(security):
+        raise ValueError(f"{scheduler}: a tls:// scheduler needs a CA file and a client certificate "
+                         f"(--tls-ca-file, --tls-cert, --tls-key; security=tls_security(...) in Python)")
+    if security.require_encryption and not scheduler.startswith("tls://"):
+        raise ValueError(f"{scheduler}: certificates were given but the address is not tls://; "
+                         f"write it as tls://host:port")
+    return security
+
+
 @contextmanager
-def open_executor(workers: int | None = None, scheduler: str | None = None, n_jobs: int = 1):
+def open_executor(workers: int | None = None, scheduler: str | None = None, n_jobs: int = 1, security=None,
+                  dashboard: str | None = None):
     """An executor on a Dask cluster (``scheduler``), a new LocalCluster (``workers``) or local processes.
 
     Parameters
     ----------
     workers : int, optional
-        Start a ``distributed.LocalCluster`` of this many single-threaded worker processes.
+        Start a ``distributed.LocalCluster`` of this many single-threaded
+        worker processes, listening on 127.0.0.1 only.
     scheduler : str, optional
-        Address of a running Dask scheduler, e.g. ``tcp://127.0.0.1:8786``.
+        Address of a running Dask scheduler: ``tls://host:8786`` with
+        ``security``, or ``tcp://127.0.0.1:8786`` through an SSH tunnel or on
+        a private network.
     n_jobs : int
         Without either: local worker processes (:func:`worker_pool`).
+    security : distributed.Security, optional
+        Certificates (:func:`tls_security`): the client's towards
+        ``scheduler``; every role's for a LocalCluster, which then runs on
+        TLS.  Without it a client takes dask's ``distributed.comm.tls``
+        configuration, and a ``tls://`` address without certificates is a
+        ``ValueError``.
+    dashboard : str, optional
+        LocalCluster only: serve the dashboard at this address, e.g.
+        ``127.0.0.1:8787`` (``:8787`` would serve every interface); its link
+        is printed on stderr.  Off by default.
 
     Yields
     ------
@@ -87,15 +181,21 @@ def open_executor(workers: int | None = None, scheduler: str | None = None, n_jo
     """
     if workers is not None and scheduler is not None:
         raise ValueError("give workers or a scheduler address, not both")
+    if dashboard is not None and workers is None:
+        raise ValueError("a dashboard address is for a new LocalCluster (workers); an existing cluster's "
+                         "scheduler serves its own")
     if scheduler is None and workers is None:
+        if security is not None:
+            raise ValueError("certificates are for a Dask cluster: give workers or a scheduler address")
         with worker_pool(n_jobs) as pool:
             yield pool
         return
     from distributed import Client, LocalCluster
 
     if scheduler is not None:
+        security = _client_security(scheduler, security)
         try:
-            client = Client(scheduler, timeout="20s")
+            client = Client(scheduler, timeout="20s", security=security)
         except OSError as exc:
             raise OSError(f"cannot reach the Dask scheduler at {scheduler}: {exc}") from None
         with client:
@@ -103,7 +203,13 @@ def open_executor(workers: int | None = None, scheduler: str | None = None, n_jo
         return
     if int(workers) < 1:
         raise ValueError(f"workers must be at least 1, got {workers}")
-    # A free port for its status page: never the 8787 another cluster may hold.
-    with LocalCluster(n_workers=int(workers), threads_per_worker=1, processes=True, dashboard_address=":0",
-                      env=worker_env(), silence_logs=logging.ERROR) as cluster, Client(cluster) as client:
+    # The scheduler always serves health and metrics over HTTP: on a free loopback port, never 8787
+    # (another cluster's), and with the dashboard only when asked.
+    http = {"dashboard_address": dashboard} if dashboard is not None else {
+        "dashboard_address": None, "scheduler_kwargs": {"dashboard_address": f"{LOOPBACK}:0"}}
+    with LocalCluster(n_workers=int(workers), threads_per_worker=1, processes=True, host=LOOPBACK,
+                      security=security, env=worker_env(), silence_logs=logging.ERROR, **http) as cluster, \
+            Client(cluster, security=security) as client:
+        if dashboard is not None:
+            print(f"dashboard: {client.dashboard_link}", file=sys.stderr)
         yield client.get_executor()

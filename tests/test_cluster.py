@@ -1,0 +1,103 @@
+"""classify.runtime.cluster: a LocalCluster listens on 127.0.0.1 only (dashboard off unless asked), on TLS when
+given certificates; a tls:// address without certificates and mixed-up options are clear errors."""
+
+import shutil
+
+import psutil
+import pytest
+
+from classify.cli import main
+from classify.runtime.cluster import LOOPBACK, open_executor, tls_security
+from conftest import missing
+
+
+def _listening() -> set:
+    """(pid, ip, port) of every listening TCP socket of this process and its children."""
+    me = psutil.Process()
+    return {(p.pid, c.laddr.ip, c.laddr.port) for p in [me, *me.children(recursive=True)]
+            for c in p.net_connections(kind="inet") if c.status == psutil.CONN_LISTEN}
+
+
+def _addresses(_):
+    from distributed import get_worker
+
+    worker = get_worker()
+    return worker.address, worker.scheduler.address
+
+
+@pytest.fixture(scope="module")
+def certificates(tmp_path_factory):
+    from dask_cluster import make_certificates
+
+    if shutil.which("openssl") is None:
+        missing("the openssl command, which makes the test certificates, is not installed")
+    return make_certificates(tmp_path_factory.mktemp("certs"))
+
+
+@pytest.mark.parametrize("tls", [False, True], ids=["tcp", "tls"])
+def test_a_local_cluster_listens_on_loopback_only_with_no_dashboard(tls, request, capsys):
+    security = None
+    if tls:
+        c = request.getfixturevalue("certificates")
+        security = tls_security(c.ca_file, c.cert, c.key)
+    before = _listening()
+    with open_executor(workers=2, security=security) as executor:
+        addresses = list(executor.map(_addresses, range(4)))
+        opened = _listening() - before
+    scheme = "tls://" if tls else "tcp://"
+    assert {a for pair in addresses for a in pair} <= {a for a in _as_addresses(opened, scheme)}
+    # The scheduler, its nannies and workers, and the HTTP endpoints (health, metrics) of the scheduler and
+    # each worker: all on the loopback interface.
+    assert len(opened) >= 5 and {ip for _, ip, _ in opened} == {LOOPBACK}
+    assert "dashboard" not in capsys.readouterr().err
+
+
+def _as_addresses(opened, scheme):
+    return {f"{scheme}{ip}:{port}" for _, ip, port in opened}
+
+
+def test_a_dashboard_is_served_where_asked(capsys):
+    import urllib.request
+
+    before = _listening()
+    with open_executor(workers=1, dashboard=f"{LOOPBACK}:0") as executor:
+        assert list(executor.map(abs, [-1])) == [1]
+        opened = _listening() - before
+        link = capsys.readouterr().err.strip().removeprefix("dashboard: ")
+        assert link.startswith(f"http://{LOOPBACK}:")
+        with urllib.request.urlopen(link.rsplit("/", 1)[0] + "/health", timeout=10) as reply:
+            assert reply.read() == b"ok"
+    assert {ip for _, ip, _ in opened} == {LOOPBACK}
+
+
+def test_mixed_up_cluster_options_are_clear_errors(certificates, tmp_path):
+    security = tls_security(certificates.ca_file, certificates.cert, certificates.key)
+    with pytest.raises(ValueError, match="tls://10.0.0.1:8786: a tls:// scheduler needs a CA file"):
+        with open_executor(scheduler="tls://10.0.0.1:8786"):
+            pass
+    with pytest.raises(ValueError, match="tcp://10.0.0.1:8786: certificates were given but the address is not tls"):
+        with open_executor(scheduler="tcp://10.0.0.1:8786", security=security):
+            pass
+    with pytest.raises(ValueError, match="certificates are for a Dask cluster"):
+        with open_executor(n_jobs=2, security=security):
+            pass
+    with pytest.raises(ValueError, match="a dashboard address is for a new LocalCluster"):
+        with open_executor(scheduler="tcp://127.0.0.1:8786", dashboard="127.0.0.1:8787"):
+            pass
+    with pytest.raises(ValueError, match="nowhere.pem: no such TLS certificate"):
+        tls_security(certificates.ca_file, tmp_path / "nowhere.pem")
+    with pytest.raises(ValueError, match="not a PEM certificate and its private key"):
+        tls_security(certificates.ca_file, certificates.cert, certificates.ca_file)   # the wrong key
+
+
+def test_the_command_line_refuses_tls_without_certificates(tmp_path, capsys, certificates):
+    args = ["batch", str(tmp_path), "--out", str(tmp_path / "store")]
+    assert main([*args, "--scheduler", "tls://127.0.0.1:8786"]) == 1
+    assert "tls://127.0.0.1:8786: a tls:// scheduler needs a CA file and a client certificate (--tls-ca-file, " \
+           "--tls-cert, --tls-key" in capsys.readouterr().err
+    assert main([*args, "--scheduler", "tls://127.0.0.1:8786", "--tls-cert", str(certificates.cert)]) == 1
+    assert "TLS needs both --tls-ca-file and --tls-cert; only --tls-cert was given" in capsys.readouterr().err
+    assert main(["experiment", "--tls-ca-file", str(certificates.ca_file), "--tls-cert", str(certificates.cert),
+                 "--tls-key", str(certificates.key), "--out", str(tmp_path / "results")]) == 1
+    assert "certificates are for a Dask cluster" in capsys.readouterr().err
+    assert not (tmp_path / "store").exists()
