@@ -10,6 +10,7 @@ on the same session resumes it.  Status lines go to stderr.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import errno
 import sys
 import time
@@ -19,7 +20,7 @@ from hw.press import PressDetector
 from hw.protocol import PROTOCOLS, FrameParser
 from hw.session import Session
 
-__all__ = ["PortError", "NoFramesError", "CaptureResult", "open_port", "capture", "add_arguments", "run", "main"]
+__all__ = ["PortError", "NoFramesError", "CaptureResult", "CaptureOptions", "open_port", "capture", "add_arguments", "run", "main"]
 
 
 class PortError(OSError):
@@ -81,18 +82,12 @@ def open_port(port: str, baud: int = 115200, timeout: float = 0.05):
         raise PortError(f"{port}: not a usable port or pyserial URL: {exc}") from None
 
 
-def capture(port: str, session: Session, object_name: str, *, baud: int = 115200, protocol: str = "binary",
-            plan=None, first_point: int = 0, presses: int | None = None, garbage_timeout: float = 5.0,
-            detector: PressDetector | None = None, quiet: bool = False, stream=None) -> CaptureResult:
-    """Record presses from ``port`` into ``session`` until done.
+@dataclass(frozen=True)
+class CaptureOptions:
+    """How a capture reads its port and when it stops (:func:`capture`).
 
-    Parameters
+    Attributes
     ----------
-    port : str
-        Device path or pyserial URL.
-    session : Session
-    object_name : str
-        The object being pressed.
     baud : int
     protocol : {"binary", "text"}
     plan : hw.plan.Plan, optional
@@ -113,6 +108,37 @@ def capture(port: str, session: Session, object_name: str, *, baud: int = 115200
     detector : PressDetector, optional
         Baseline and press thresholds; the defaults otherwise.
 
+    quiet : bool
+        No status lines.
+    stream : file, optional
+        Where status lines go (default stderr).
+    """
+
+    baud: int = 115200
+    protocol: str = "binary"
+    plan: object = None
+    first_point: int = 0
+    presses: int | None = None
+    garbage_timeout: float = 5.0
+    detector: PressDetector | None = None
+    quiet: bool = False
+    stream: object = None
+
+
+def capture(port: str, session: Session, object_name: str, options: CaptureOptions | None = None,
+            **changes) -> CaptureResult:
+    """Record presses from ``port`` into ``session`` until done.
+
+    Parameters
+    ----------
+    port : str
+        Device path or pyserial URL.
+    session : Session
+    object_name : str
+        The object being pressed.
+    options : CaptureOptions, optional
+        Changed by any ``**changes`` named as its fields (``presses=15``, ``plan=``...).
+
     Raises
     ------
     PortError, NoFramesError, ValueError
@@ -120,34 +146,35 @@ def capture(port: str, session: Session, object_name: str, *, baud: int = 115200
         whose size differs from the session's sensor.  Presses committed
         before the error stay in the session.
     """
-    if protocol not in PROTOCOLS:
-        raise ValueError(f"unknown protocol {protocol!r}; expected one of {PROTOCOLS}")
-    if presses is not None and presses < 1:
-        raise ValueError(f"presses must be at least 1, got {presses}")
-    stream = sys.stderr if stream is None else stream
+    o = dataclasses.replace(options or CaptureOptions(), **changes)
+    if o.protocol not in PROTOCOLS:
+        raise ValueError(f"unknown protocol {o.protocol!r}; expected one of {PROTOCOLS}")
+    if o.presses is not None and o.presses < 1:
+        raise ValueError(f"presses must be at least 1, got {o.presses}")
+    stream = sys.stderr if o.stream is None else o.stream
 
     def say(text: str) -> None:
-        if not quiet:
+        if not o.quiet:
             print(f"capture: {text}", file=stream, flush=True)
 
     recorded = session.point_ids(object_name)
     planned = None
-    if plan is not None:
-        planned = [(p.id, position, p.approach) for p, position in zip(plan.points, plan.positions_mm())]
+    if o.plan is not None:
+        planned = [(p.id, position, p.approach) for p, position in zip(o.plan.points, o.plan.positions_mm())]
         if session.next_point(object_name, planned=planned) is None:
-            say(f"all {len(plan.points)} planned points of {object_name!r} are already in {session.path}")
+            say(f"all {len(o.plan.points)} planned points of {object_name!r} are already in {session.path}")
             return CaptureResult((), "plan", 0, 0, 0, 0, 0)
 
     def upcoming():
-        return session.next_point(object_name, first_point, planned)
+        return session.next_point(object_name, o.first_point, planned)
 
     if recorded:
         say(f"resuming {session.path}: {len(recorded)} presses of {object_name!r} already stored")
 
-    detector = PressDetector() if detector is None else detector
-    parser = FrameParser(protocol=protocol)
-    ser = open_port(port, baud)
-    say(f"reading {port} at {baud} baud ({protocol}); keep the sensor untouched for the baseline")
+    detector = PressDetector() if o.detector is None else o.detector
+    parser = FrameParser(protocol=o.protocol)
+    ser = open_port(port, o.baud)
+    say(f"reading {port} at {o.baud} baud ({o.protocol}); keep the sensor untouched for the baseline")
     stored: list[int] = []
     run_id = None
     told_waiting = False
@@ -167,10 +194,10 @@ def capture(port: str, session: Session, object_name: str, *, baud: int = 115200
                 last_valid, garbage = now, 0
             else:
                 garbage += len(data)
-                if garbage and now - last_valid > garbage_timeout:
+                if garbage and now - last_valid > o.garbage_timeout:
                     raise NoFramesError(
-                        f"{port}: {garbage} bytes in {now - last_valid:.1f} s but no valid {protocol} frame; "
-                        f"check the baud rate (--baud {baud}) and the protocol (--protocol {protocol})")
+                        f"{port}: {garbage} bytes in {now - last_valid:.1f} s but no valid {o.protocol} frame; "
+                        f"check the baud rate (--baud {o.baud}) and the protocol (--protocol {o.protocol})")
             for frame in frames:
                 if frame.shape != sensor:
                     session.ensure_sensor(*frame.shape)
@@ -181,7 +208,7 @@ def capture(port: str, session: Session, object_name: str, *, baud: int = 115200
                     told_waiting = True
                 if run_id is None and detector.baseline is not None:
                     b = detector.baseline
-                    run_id = session.start_run(port, baud, protocol, object_name, b)
+                    run_id = session.start_run(port, o.baud, o.protocol, object_name, b)
                     say(f"baseline from {b.frames} frames (summed noise {b.noise:.1f}, press above {b.on:.0f}); "
                         f"ready for point {upcoming()}")
                 if press is None:
@@ -190,7 +217,7 @@ def capture(port: str, session: Session, object_name: str, *, baud: int = 115200
                             "gaps": parser.gaps, "bytes_skipped": parser.bytes_skipped}
                 # The id is chosen as the press is committed: another capture into this session may have
                 # taken the one announced.
-                added = session.add_next_press(run_id, object_name, press, counters, first_point=first_point,
+                added = session.add_next_press(run_id, object_name, press, counters, first_point=o.first_point,
                                                planned=planned)
                 if added is None:
                     say(f"press not stored: another capture recorded the last planned points of {object_name!r}")
@@ -203,7 +230,7 @@ def capture(port: str, session: Session, object_name: str, *, baud: int = 115200
                     f"{parser.gaps} missing)" + ("" if following is None else f"; next point {following}"))
                 if following is None:
                     return _result(stored, "plan", parser)
-                if presses is not None and len(stored) >= presses:
+                if o.presses is not None and len(stored) >= o.presses:
                     return _result(stored, "presses", parser)
     except KeyboardInterrupt:
         say(f"interrupted; {len(stored)} presses of this run are stored in {session.path}")
