@@ -173,16 +173,22 @@ def scale_to_principal(mesh: Mesh, diagonal_mm: float = 150.0) -> Mesh:
     [8.0, 6.0, 0.0]
     """
     diagonal_mm = _check_diagonal(diagonal_mm)
+    centroid, diagonal = _principal(mesh)
+    scale = diagonal_mm / diagonal
+    return _apply(mesh, Similarity(scale, -scale * centroid))
+
+
+def _principal(mesh: Mesh) -> tuple[np.ndarray, float]:
+    """:func:`principal_diagonal` of a mesh that has one, else a MeshError naming the mesh."""
     if mesh.n_faces == 0:
-        raise MeshError(f"{_label(mesh)}: cannot scale a mesh without faces")
+        raise MeshError(f"{_label(mesh)}: cannot size a mesh without faces")
     try:
         centroid, diagonal = principal_diagonal(mesh.vertices, mesh.faces)
     except MeshError as exc:
         raise MeshError(f"{_label(mesh)}: {exc}") from None
     if not (math.isfinite(diagonal) and diagonal > 0):
-        raise MeshError(f"{_label(mesh)}: cannot scale a mesh of zero extent (all vertices coincide)")
-    scale = diagonal_mm / diagonal
-    return _apply(mesh, Similarity(scale, -scale * centroid))
+        raise MeshError(f"{_label(mesh)}: cannot size a mesh of zero extent (all vertices coincide)")
+    return centroid, diagonal
 
 
 def to_millimetres(mesh: Mesh, units_mm: float) -> Mesh:
@@ -201,10 +207,5 @@ def to_millimetres(mesh: Mesh, units_mm: float) -> Mesh:
     """
     if not (math.isfinite(units_mm) and units_mm > 0):
         raise ValueError(f"units_mm must be positive and finite, got {units_mm}")
-    if mesh.n_faces == 0:
-        raise MeshError(f"{_label(mesh)}: cannot place a mesh without faces")
-    try:
-        centroid, _ = principal_diagonal(mesh.vertices, mesh.faces)
-    except MeshError as exc:
-        raise MeshError(f"{_label(mesh)}: {exc}") from None
+    centroid, _ = _principal(mesh)
     return _apply(mesh, Similarity(float(units_mm), -float(units_mm) * centroid))
