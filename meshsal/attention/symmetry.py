@@ -48,7 +48,6 @@ from __future__ import annotations
 
 import cv2
 import numpy as np
-from numpy.lib.stride_tricks import sliding_window_view
 
 from meshsal.attention.local import luma
 from meshsal.attention.pyramid import center_surround_map, check_image, gaussian_pyramid, upsample
@@ -73,6 +72,30 @@ _FLOOR = 1e-4
 _POWER = 4
 
 
+def _sum_in_numpy_order(terms: list[np.ndarray]) -> np.ndarray:
+    """Elementwise sum of a few float32 arrays, added in the order of NumPy's pairwise sum.
+
+    The same bits as stacking them on a last axis and calling ``.sum(-1)``
+    (eight running sums combined as a tree, the rest added one by one),
+    without the (h, w, len(terms)) products that made the channel slow.
+    """
+    if len(terms) < 8:
+        total = terms[0]
+        for t in terms[1:]:
+            total = total + t
+        return total
+    if len(terms) > 128:
+        raise ValueError(f"_sum_in_numpy_order reproduces NumPy's order for at most 128 terms, got {len(terms)}")
+    blocks = len(terms) - len(terms) % 8
+    r = list(terms[:8])
+    for i in range(8, blocks, 8):
+        r = [r[j] + terms[i + j] for j in range(8)]
+    total = ((r[0] + r[1]) + (r[2] + r[3])) + ((r[4] + r[5]) + (r[6] + r[7]))
+    for t in terms[blocks:]:
+        total = total + t
+    return total
+
+
 def _mirror_correlation(b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Correlation of each window of ``b`` with its mirror image about a vertical line.
 
@@ -90,11 +113,15 @@ def _mirror_correlation(b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     k_on = np.exp(-0.5 * (m / _ACROSS) ** 2)
     k_between = np.exp(-0.5 * ((m - 0.5) / _ACROSS) ** 2)
     k_on, k_between = (k / k.sum() for k in (k_on, k_between))
-    # Column j of the window of pixel c holds b[c + j - r], zero off the image.
-    window = sliding_window_view(np.pad(b, ((0, 0), (r, r))), 2 * r + 1, axis=1)
-    right = window[:, :, r + 1 :]
-    num_on = (window[:, :, r - 1 :: -1] * right * k_on.astype(np.float32)).sum(-1)
-    num_between = (window[:, :, r:0:-1] * right * k_between.astype(np.float32)).sum(-1)
+    # Column c + j of the padded image holds b[:, c + j - r], zero off the image.
+    padded = np.pad(b, ((0, 0), (r, r)))
+
+    def shifted(j):
+        return padded[:, j : j + w]
+
+    k_on32, k_between32 = k_on.astype(np.float32), k_between.astype(np.float32)
+    num_on = _sum_in_numpy_order([shifted(r - j) * shifted(r + j) * k_on32[j - 1] for j in m])
+    num_between = _sum_in_numpy_order([shifted(r + 1 - j) * shifted(r + j) * k_between32[j - 1] for j in m])
     # The energy of the same pairs, (b(p)**2 + b(p')**2) / 2, is a plain filter of b**2.
     energy = b * b
     ker_on = (0.5 * np.concatenate([k_on[::-1], [0.0], k_on]))[None].astype(np.float32)
