@@ -18,7 +18,8 @@ from meshsal.points import (
     project_pixel_paper,
     saliency_maps,
 )
-from meshsal.points.sampling import farthest_points, field_peaks, non_maximum_suppression, random_surface_points
+from meshsal.points.sampling import (farthest_points, field_peaks, non_maximum_suppression, random_surface_points,
+                                     suppress)
 
 import shapes
 
@@ -115,6 +116,53 @@ def test_non_maximum_suppression_respects_taken_points_and_ids():
     assert keep.tolist() == [0]
     with pytest.raises(ValueError, match="min_spacing"):
         non_maximum_suppression(P, -1.0)
+
+
+def greedy_one_by_one(P, spacing, n, ids, ok):
+    """The selection suppress makes, written plainly: each candidate in turn, asked about alone."""
+    chosen, refused = [], 0
+    for i in range(len(P)):
+        if len(chosen) == n:
+            break
+        if any(np.linalg.norm(P[i] - P[j]) < spacing or ids[i] == ids[j] for j in chosen):
+            continue
+        if not ok[i]:
+            refused += 1
+            continue
+        chosen.append(i)
+    return chosen, refused
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_suppress_batches_change_nothing_but_the_calls(seed):
+    rng = np.random.default_rng(seed)
+    k = 600
+    P = rng.random((k, 3)) * 4.0
+    ids = rng.integers(0, 500, k)
+    ok = rng.random(k) < (0.05 if seed % 2 else 0.5)   # mostly refused, or half
+    asked = []
+
+    def accept(batch):
+        asked.append(batch.copy())
+        return ok[batch]
+
+    n = 12
+    got = suppress(P, 0.6, n, ids, accept=accept)
+    chosen, refused = greedy_one_by_one(P, 0.6, n, ids, ok)
+    assert got.chosen.tolist() == chosen and got.refused == refused
+    everyone = np.concatenate(asked)
+    assert np.unique(everyone).size == everyone.size        # each candidate asked once
+    if seed % 2:
+        # Hundreds refused on the way, asked in batches that grow with the refusals.
+        assert refused > 100 and len(asked) < 25
+
+
+def test_suppress_asks_about_a_long_refused_run_in_few_calls():
+    P = np.c_[np.arange(2000.0), np.zeros(2000), np.zeros(2000)]
+    calls = []
+    got = suppress(P, 0.5, 1, accept=lambda batch: calls.append(len(batch)) or batch == 1500)
+    assert got.chosen.tolist() == [1500] and got.refused == 1500
+    assert len(calls) <= 13 and sum(calls) < 2 * 1501
 
 
 # ---------------------------------------------------------------- the attention pipeline

@@ -5,7 +5,7 @@ import pytest
 
 from meshsal.mesh import Mesh
 from meshsal.points import METHODS, MODEL_METHODS, interest_points
-from meshsal.points.touch import contact_gap, default_pad_width, touchable
+from meshsal.points.touch import contact_gap, default_pad_width, pad_rays, pad_touches, touchable
 
 import shapes
 from models import one_feature_model
@@ -63,6 +63,58 @@ def test_gap_is_invariant_to_moving_and_scaling_the_mesh():
     again = contact_gap(moved, moved.vertices[ids], N, 2 * PAD)
     np.testing.assert_allclose(again, 2 * gaps, atol=2e-3)
     assert (gaps > 1.0).any() and (gaps < 1e-3).any()
+
+
+def test_verdicts_are_the_whole_grid_s_for_every_vertex():
+    """The coarse rays refuse most points early; what is refused or kept is exactly contact_gap's verdict."""
+    from meshsal.mesh import vertex_normals
+
+    mesh = spiky_ball(spikes=30)
+    N = vertex_normals(mesh.vertices, mesh.faces)
+    gaps = contact_gap(mesh, mesh.vertices, N, PAD)
+    for tolerance in (None, 0.0, 0.5, 3.0):
+        limit = PAD / 32 if tolerance is None else tolerance
+        expected = gaps <= limit
+        assert (~expected).sum() > 100 and expected.sum() > 100
+        assert np.array_equal(touchable(mesh, mesh.vertices, N, PAD, tolerance), expected)
+    rays = pad_rays(mesh, PAD)
+    assert np.array_equal(pad_touches(rays, mesh.vertices, N), gaps <= PAD / 32)
+    assert 0 < rays.coarse.sum() < rays.coarse.size / 10
+
+
+def pole(x, y, width=0.4, height=10.0):
+    """A 200-unit floor at z = 0 with a thin square pole, ``width`` across and ``height`` high, at (x, y)."""
+    floor_v = [[-100, -100, 0], [100, -100, 0], [100, 100, 0], [-100, 100, 0]]
+    h = width / 2
+    box = [[x - h, y - h, 0], [x + h, y - h, 0], [x + h, y + h, 0], [x - h, y + h, 0],
+           [x - h, y - h, height], [x + h, y - h, height], [x + h, y + h, height], [x - h, y + h, height]]
+    box_f = [[4, 5, 6], [4, 6, 7], [0, 1, 5], [0, 5, 4], [1, 2, 6], [1, 6, 5], [2, 3, 7], [2, 7, 6],
+             [3, 0, 4], [3, 4, 7]]
+    V = np.array(floor_v + box, float)
+    F = np.array([[0, 1, 2], [0, 2, 3]] + [[a + 4, b + 4, c + 4] for a, b, c in box_f])
+    return Mesh(vertices=V, faces=F)
+
+
+def test_an_obstacle_only_a_fine_ray_sees_still_refuses_the_point():
+    from meshsal.mesh.geometry import tangent_frames
+
+    point, up = [[0.0, 0.0, 0.0]], [[0.0, 0.0, 1.0]]
+    rays = pad_rays(pole(0, 0), PAD)
+    step = np.diff(np.unique(rays.offsets[:, 0]))[0]
+    # One grid step off the centre: a ray of the fine grid only.
+    on_fine = np.isclose(rays.offsets, [0.0, step]).all(axis=1)
+    assert on_fine.sum() == 1 and not rays.coarse[on_fine].any()
+    (u,), (v,) = tangent_frames(np.array(up))
+
+    def at(a, b):
+        return (a * u + b * v)[:2]
+
+    mesh = pole(*at(0.0, step))
+    assert contact_gap(mesh, point, up, PAD)[0] == pytest.approx(10.0, abs=1e-3)
+    assert touchable(mesh, point, up, PAD).tolist() == [False]
+    # Between two fine rays it goes unseen by both tests alike.
+    between = pole(*at(0.5 * step, 1.5 * step), width=0.2)
+    assert contact_gap(between, point, up, PAD)[0] < 1e-3 and touchable(between, point, up, PAD).tolist() == [True]
 
 
 def test_bad_inputs():

@@ -41,9 +41,12 @@ _RGB_TO_DKL = (_LMS_TO_DKL @ RGB_TO_LMS).astype(np.float32)
 def srgb_to_linear(img: np.ndarray) -> np.ndarray:
     """Undo the sRGB transfer curve (IEC 61966-2-1); float32 in, float32 out."""
     img = np.ascontiguousarray(img, dtype=np.float32)
+    out = img * np.float32(1.0 / 12.92)
+    # The power only where it applies: most of a rendered view is black background.
+    high = img > 0.04045
     # In float64, then rounded: SIMD power kernels differ by CPU in the last bits, which float32 absorbs.
-    high = np.power(img.astype(np.float64) / 1.055 + 0.055 / 1.055, 2.4).astype(np.float32)
-    return np.where(img <= 0.04045, img * np.float32(1.0 / 12.92), high)
+    out[high] = np.power(img[high].astype(np.float64) / 1.055 + 0.055 / 1.055, 2.4).astype(np.float32)
+    return out
 
 
 def _transform(img: np.ndarray, matrix: np.ndarray) -> np.ndarray:

@@ -48,7 +48,7 @@ from __future__ import annotations
 
 import cv2
 import numpy as np
-from numpy.lib.stride_tricks import sliding_window_view
+from numpy.lib.stride_tricks import as_strided
 
 from meshsal.attention.local import luma
 from meshsal.attention.pyramid import center_surround_map, check_image, gaussian_pyramid, upsample
@@ -73,6 +73,61 @@ _FLOOR = 1e-4
 _POWER = 4
 
 
+def _pair_weights():
+    """The pair weights across a line, normalized: partners at ``c -+ m`` (a line on a column) and at
+    ``c + 1/2 -+ (m - 1/2)`` (a line between columns), ``m = 1..r``."""
+    m = np.arange(1, max(1, int(np.ceil(2.5 * _ACROSS))) + 1)
+    k_on = np.exp(-0.5 * (m / _ACROSS) ** 2)
+    k_between = np.exp(-0.5 * ((m - 0.5) / _ACROSS) ** 2)
+    return k_on / k_on.sum(), k_between / k_between.sum()
+
+
+# Built once: the channel runs these on four small images per view.
+_K_ON, _K_BETWEEN = _pair_weights()
+_R = _K_ON.size
+# The same weights as filters of b**2 (the pairs' energy) and as (r, 1, 1) factors of the products.
+_KER_ON = (0.5 * np.concatenate([_K_ON[::-1], [0.0], _K_ON]))[None].astype(np.float32)
+_KER_BETWEEN = (0.5 * np.concatenate([_K_BETWEEN[::-1], _K_BETWEEN]))[None].astype(np.float32)
+_K_ON32 = _K_ON.astype(np.float32)[:, None, None]
+_K_BETWEEN32 = _K_BETWEEN.astype(np.float32)[:, None, None]
+# Fraction of a window's weight present, by the number of partners on the image (0..r).
+_PRESENT_ON = np.concatenate([[0.0], np.cumsum(_K_ON)])
+_PRESENT_BETWEEN = np.concatenate([[0.0], np.cumsum(_K_BETWEEN)])
+_ALONG_KERNEL = cv2.getGaussianKernel(2 * max(1, int(np.ceil(2.5 * _ALONG))) + 1, _ALONG, cv2.CV_32F)
+_ONE = np.ones(1, np.float32)
+
+
+def _sum_in_numpy_order(terms) -> np.ndarray:
+    """Elementwise sum of a few float32 arrays, added in the order of NumPy's pairwise sum.
+
+    The same bits as stacking them on a last axis and calling ``.sum(-1)``
+    (eight running sums combined as a tree, the rest added one by one),
+    without summing over a short last axis, which made the channel slow.
+    """
+    if len(terms) < 8:
+        total = terms[0]
+        for t in terms[1:]:
+            total = total + t
+        return total
+    if len(terms) > 128:
+        raise ValueError(f"_sum_in_numpy_order reproduces NumPy's order for at most 128 terms, got {len(terms)}")
+    blocks = len(terms) - len(terms) % 8
+    r = list(terms[:8])
+    for i in range(8, blocks, 8):
+        r = [r[j] + terms[i + j] for j in range(8)]
+    total = ((r[0] + r[1]) + (r[2] + r[3])) + ((r[4] + r[5]) + (r[6] + r[7]))
+    for t in terms[blocks:]:
+        total = total + t
+    return total
+
+
+def _columns(padded: np.ndarray, first: int, step: int, w: int) -> np.ndarray:
+    """(r, h, w) view: plane j is ``padded[:, first + step * j : ... + w]`` (no copy)."""
+    s0, s1 = padded.strides
+    return as_strided(padded[:, first:], shape=(_R, padded.shape[0], w), strides=(step * s1, s0, s1),
+                      writeable=False)
+
+
 def _mirror_correlation(b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Correlation of each window of ``b`` with its mirror image about a vertical line.
 
@@ -84,36 +139,30 @@ def _mirror_correlation(b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     pairs and a noisier correlation.
     """
     h, w = b.shape
-    r = max(1, int(np.ceil(2.5 * _ACROSS)))
-    m = np.arange(1, r + 1)
-    # Partners at c -+ m (on a column) and at c + 1/2 -+ (m - 1/2) (between columns).
-    k_on = np.exp(-0.5 * (m / _ACROSS) ** 2)
-    k_between = np.exp(-0.5 * ((m - 0.5) / _ACROSS) ** 2)
-    k_on, k_between = (k / k.sum() for k in (k_on, k_between))
-    # Column j of the window of pixel c holds b[c + j - r], zero off the image.
-    window = sliding_window_view(np.pad(b, ((0, 0), (r, r))), 2 * r + 1, axis=1)
-    right = window[:, :, r + 1 :]
-    num_on = (window[:, :, r - 1 :: -1] * right * k_on.astype(np.float32)).sum(-1)
-    num_between = (window[:, :, r:0:-1] * right * k_between.astype(np.float32)).sum(-1)
+    r = _R
+    # Column c + j of the padded image holds b[:, c + j - r], zero off the image.
+    padded = np.pad(b, ((0, 0), (r, r)))
+    # Plane m - 1 holds the partners at distance m: c - m and c + m (on), c + 1 - m and c + m (between).
+    right = _columns(padded, r + 1, 1, w)
+    num_on = _sum_in_numpy_order(_columns(padded, r - 1, -1, w) * right * _K_ON32)
+    num_between = _sum_in_numpy_order(_columns(padded, r, -1, w) * right * _K_BETWEEN32)
     # The energy of the same pairs, (b(p)**2 + b(p')**2) / 2, is a plain filter of b**2.
     energy = b * b
-    ker_on = (0.5 * np.concatenate([k_on[::-1], [0.0], k_on]))[None].astype(np.float32)
-    ker_between = (0.5 * np.concatenate([k_between[::-1], k_between]))[None].astype(np.float32)
-    den_on = cv2.filter2D(energy, -1, ker_on, borderType=cv2.BORDER_CONSTANT)
-    den_between = cv2.filter2D(energy, -1, ker_between, anchor=(r - 1, 0), borderType=cv2.BORDER_CONSTANT)
+    den_on = cv2.filter2D(energy, -1, _KER_ON, borderType=cv2.BORDER_CONSTANT)
+    den_between = cv2.filter2D(energy, -1, _KER_BETWEEN, anchor=(r - 1, 0), borderType=cv2.BORDER_CONSTANT)
 
     c = np.arange(w)
-    present_on = np.concatenate([[0.0], np.cumsum(k_on)])[np.clip(np.minimum(c, w - 1 - c), 0, r)]
-    present_between = np.concatenate([[0.0], np.cumsum(k_between)])[np.clip(np.minimum(c + 1, w - 1 - c), 0, r)]
-    along = cv2.getGaussianKernel(2 * max(1, int(np.ceil(2.5 * _ALONG))) + 1, _ALONG, cv2.CV_32F)
-    one = np.ones(1, np.float32)
-    present_along = cv2.sepFilter2D(np.ones((h, 1), np.float32), -1, one, along, borderType=cv2.BORDER_CONSTANT)
+    present_on = _PRESENT_ON[np.clip(np.minimum(c, w - 1 - c), 0, r)]
+    present_between = _PRESENT_BETWEEN[np.clip(np.minimum(c + 1, w - 1 - c), 0, r)]
+    present_along = cv2.sepFilter2D(np.ones((h, 1), np.float32), -1, _ONE, _ALONG_KERNEL,
+                                    borderType=cv2.BORDER_CONSTANT)
     out = []
     for num, den, present in ((num_on, den_on, present_on), (num_between, den_between, present_between)):
         # A ratio of window sums, not a mean of per-row ratios: rows with
         # little texture must not weigh as much as the rest.
-        num = cv2.sepFilter2D(np.ascontiguousarray(num, np.float32), -1, one, along, borderType=cv2.BORDER_CONSTANT)
-        den = cv2.sepFilter2D(den, -1, one, along, borderType=cv2.BORDER_CONSTANT)
+        num = cv2.sepFilter2D(np.ascontiguousarray(num, np.float32), -1, _ONE, _ALONG_KERNEL,
+                              borderType=cv2.BORDER_CONSTANT)
+        den = cv2.sepFilter2D(den, -1, _ONE, _ALONG_KERNEL, borderType=cv2.BORDER_CONSTANT)
         coverage = present.astype(np.float32)[None, :] * present_along
         out.append(num / (den + np.float32(_FLOOR)) * coverage * coverage)
     return out[0], out[1]

@@ -136,9 +136,11 @@ def suppress(points: np.ndarray, min_spacing: float, n: int | None = None, ids: 
     Candidates must come sorted by priority (best first).  A candidate is
     skipped if it lies closer than ``min_spacing`` to a chosen or already
     ``taken`` point, or shares an id (e.g. its nearest vertex) with one.
-    ``accept``, when given, is asked about the candidates next in line, in
-    batches of at most as many as are still wanted, each candidate once: a
-    refused candidate blocks nothing, so the next in line takes its place
+    ``accept``, when given, is asked about the candidates next in line, each
+    candidate once, in batches of as many as are still wanted or, when more,
+    as many as it has refused so far; its verdict on a candidate must not
+    depend on the batch, so the batches change only how often it is asked.
+    A refused candidate blocks nothing, so the next in line takes its place
     exactly as if it had never been proposed.
 
     Parameters
@@ -197,19 +199,28 @@ def suppress(points: np.ndarray, min_spacing: float, n: int | None = None, ids: 
     chosen, refused = [], 0
     i = 0
     while len(chosen) < limit:
-        rest = np.flatnonzero(alive[i:])
-        if rest.size == 0:
+        ahead = i + np.flatnonzero(alive[i:])
+        if ahead.size == 0:
             break
-        i += int(rest[0])
-        if accept is not None and verdict[i] == 0:
-            batch = i + np.flatnonzero(alive[i:] & (verdict[i:] == 0))[:limit - len(chosen)]
+        if accept is not None and verdict[ahead[0]] == 0:
+            # Where many are refused, many more are asked at once: one call for the thousand
+            # refusals on a concave mesh's way to its last point, instead of a thousand calls.
+            batch = ahead[verdict[ahead] == 0][:max(limit - len(chosen), refused)]
             verdict[batch] = np.where(np.asarray(accept(batch), bool), 1, -1)
-        alive[i] = False
-        if verdict[i] < 0:
-            refused += 1
-            continue
-        chosen.append(i)
-        block(P[i], None if ids is None else ids[i])
+        # Along the line while verdicts are known: refused ones are passed over, chosen ones block.
+        for i in ahead:
+            if not alive[i]:
+                continue
+            if accept is not None and verdict[i] == 0:
+                break
+            alive[i] = False
+            if verdict[i] < 0:
+                refused += 1
+                continue
+            chosen.append(int(i))
+            block(P[i], None if ids is None else ids[i])
+            if len(chosen) == limit:
+                break
     return Suppression(np.asarray(chosen, dtype=np.int64), refused)
 
 

@@ -20,11 +20,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from meshsal.mesh import Mesh, face_normals, normal_defined
-from meshsal.mesh.embree import embree_scene
 from meshsal.points.record import InterestPoints
 from meshsal.points.rules import Rules
 from meshsal.points.sampling import field_peaks, suppress
-from meshsal.points.touch import touchable
+from meshsal.points.touch import pad_rays, pad_touches
 
 __all__ = ["Candidates", "vertex_candidates", "surface_candidates", "TouchFilter", "select", "saliency_fill",
            "choose_without_views"]
@@ -81,17 +80,16 @@ def surface_candidates(mesh: Mesh, vn: np.ndarray, face_ids, bary, scores) -> Ca
 
 
 class TouchFilter:
-    """Whether the pad can touch candidates first (:func:`meshsal.points.touch.touchable`), on one mesh.
+    """Whether the pad can touch candidates first (:func:`meshsal.points.touch.pad_touches`), on one mesh.
 
-    Its scene is built once and shared by every call of one selection.
+    Its rays (the scene, their start height) are built once and shared by every call of one selection.
     """
 
     def __init__(self, mesh: Mesh, rules: Rules):
-        self.mesh, self.pad_width, self.tolerance = mesh, rules.pad_width, rules.touch_tolerance
-        self.scene = embree_scene(mesh)
+        self.rays, self.tolerance = pad_rays(mesh, rules.pad_width), rules.touch_tolerance
 
     def __call__(self, c: Candidates) -> np.ndarray:
-        return touchable(self.mesh, c.positions, c.normals, self.pad_width, self.tolerance, scene=self.scene)
+        return pad_touches(self.rays, c.positions, c.normals, self.tolerance)
 
 
 def select(first: Candidates, fill: list, rules: Rules, touch: TouchFilter | None = None,
