@@ -7,13 +7,15 @@ import sys
 import time
 from pathlib import Path
 
+from meshsal.util.reproducible import kernel_environment
+
 
 class DaskCluster:
     """A ``dask scheduler`` and two ``dask worker`` processes (no nanny: a kill is a kill) on 127.0.0.1."""
 
     def __init__(self, folder: Path):
         self.file = folder / "scheduler.json"
-        env = {**os.environ, "OPENBLAS_CORETYPE": "Haswell", "OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1"}
+        env = {**os.environ, **kernel_environment(), "OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1"}
         self.env = env
         self.scheduler = subprocess.Popen(
             [sys.executable, "-m", "distributed.cli.dask_scheduler", "--host", "127.0.0.1", "--port", "0",
