@@ -218,9 +218,9 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     """Run one subcommand; returns the exit status (0 success, 1 bad input or failure)."""
-    from meshsal.util.reproducible import pin_blas_kernel
+    from meshsal.util.reproducible import pin_kernels
 
-    pin_blas_kernel()
+    pin_kernels()
     args = build_parser().parse_args(argv)
     try:
         return int(args.func(args) or 0)

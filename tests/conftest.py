@@ -10,9 +10,9 @@ from pathlib import Path
 
 import pytest
 
-from meshsal.util.reproducible import pin_blas_kernel
+from meshsal.util.reproducible import pin_kernels
 
-pin_blas_kernel()   # before anything imports NumPy: the same BLAS kernels, hence numbers, on every x86-64 CPU
+pin_kernels()   # before anything imports NumPy or OpenCV: the same kernels, hence numbers, on every x86-64 CPU
 
 _SHARED = Path(__file__).resolve().parents[1].parent / "shared"
 

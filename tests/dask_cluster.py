@@ -10,6 +10,8 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
+from meshsal.util.reproducible import kernel_environment
+
 
 @dataclass(frozen=True)
 class Certificates:
@@ -54,7 +56,7 @@ class DaskCluster:
         self.certificates = certificates
         self.cwd = cwd
         self.tls = [] if certificates is None else certificates.dask_options()
-        env = {**os.environ, "OPENBLAS_CORETYPE": "Haswell", "OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1"}
+        env = {**os.environ, **kernel_environment(), "OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1"}
         # The workers import the project from its folder, wherever they run.
         env["PYTHONPATH"] = os.pathsep.join([str(Path(__file__).resolve().parents[1]), env.get("PYTHONPATH", "")])
         self.env = env

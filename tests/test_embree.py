@@ -1,4 +1,5 @@
-"""The Embree scene: the direct buffer copy builds the very scene embreex's own path builds."""
+"""The Embree scene: the direct buffer copy builds the very scene embreex's own path builds, in the device whose
+instruction set $VISUOTACTILE_EMBREE_CONFIG chooses."""
 
 import sys
 from types import SimpleNamespace
@@ -6,7 +7,8 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from meshsal.mesh.embree import _attach_directly, _scene_handle, embree_scene, is_robust
+from meshsal.mesh.embree import _attach_directly, _scene_handle, embree_device, embree_scene, is_robust
+from meshsal.util.reproducible import EMBREE_VARIABLE, cpu_flags
 from shapes import bumps, icosphere
 
 
@@ -14,7 +16,7 @@ def _embreex_scene(mesh, robust):
     from embreex import rtcore_scene as rtcs
     from embreex.mesh_construction import TriangleMesh
 
-    scene = rtcs.EmbreeScene(robust=robust)
+    scene = rtcs.EmbreeScene(device=embree_device(), robust=robust)
     TriangleMesh(scene, mesh.vertices.astype(np.float32), mesh.faces.astype(np.int32))
     return scene
 
@@ -52,3 +54,42 @@ def test_robustness_is_read_from_the_scene():
     assert is_robust(embree_scene(sphere))
     assert not is_robust(embree_scene(sphere, robust=False))
     assert not is_robust(SimpleNamespace(is_committed=1, run=None))
+
+
+def _hits(mesh, seed=0):
+    rng = np.random.default_rng(seed)
+    lo, hi = mesh.vertices.min(axis=0), mesh.vertices.max(axis=0)
+    origins = (rng.normal(size=(5000, 3)) * 5.0 * np.linalg.norm(hi - lo)).astype(np.float32)
+    directions = (rng.uniform(lo, hi, size=origins.shape) - origins).astype(np.float32)
+    return embree_scene(mesh).run(origins, directions, output=1)
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="the device is configured where CI runs: Linux")
+def test_every_scene_is_created_in_one_device_made_with_the_configuration(monkeypatch):
+    monkeypatch.setenv(EMBREE_VARIABLE, "isa=sse2")
+    assert embree_device() is not None and embree_device() is embree_device()
+    monkeypatch.setenv(EMBREE_VARIABLE, "")
+    assert embree_device() is None                                   # embreex's own device per scene
+
+
+@pytest.mark.skipif("avx2" not in (cpu_flags() or ()), reason="needs a CPU whose own choice is above SSE2")
+def test_the_configuration_reaches_embree_sse2_kernels_round_differently_from_avx2(monkeypatch):
+    mesh = bumps(n=40)
+    monkeypatch.setenv(EMBREE_VARIABLE, "isa=sse2")
+    sse2 = _hits(mesh)
+    monkeypatch.setenv(EMBREE_VARIABLE, "")
+    native = _hits(mesh)
+    monkeypatch.setenv(EMBREE_VARIABLE, "isa=avx2")
+    avx2 = _hits(mesh)
+    hit = native["primID"] >= 0
+    assert hit.sum() > 500
+    assert not np.array_equal(sse2["tfar"][hit], native["tfar"][hit])  # FMA or not: the last bits differ
+    for key in ("primID", "tfar", "u", "v"):
+        np.testing.assert_array_equal(avx2[key], native[key])        # this CPU's own choice is AVX2
+
+
+@pytest.mark.skipif("avx512f" in (cpu_flags() or ()), reason="needs a CPU without AVX-512")
+def test_a_configuration_embree_refuses_is_an_error_naming_the_variable(monkeypatch):
+    monkeypatch.setenv(EMBREE_VARIABLE, "isa=avx512")
+    with pytest.raises(ValueError, match=f"{EMBREE_VARIABLE}='isa=avx512'.*CPU does not support"):
+        embree_scene(icosphere(subdivisions=1))

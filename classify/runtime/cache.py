@@ -4,8 +4,9 @@ Interest points and imprints depend only on the mesh, the settings and the
 code that computes them, so each result is stored under a key hashing all
 of it: the mesh's arrays (vertices, faces, colors, texture), the settings (as
 canonical JSON), the source files of the packages that compute it and the
-versions of the libraries they call (:func:`library_versions`).  Editing the
-mesh, a setting or that code, or upgrading a library, gives a new key; stale
+versions of the libraries they call and the kernels those run
+(:func:`library_versions`).  Editing the mesh, a setting or that code,
+upgrading a library or unpinning its kernels gives a new key; stale
 entries are never read.  Entries are ``.npz`` files written atomically, so an
 interrupted run leaves no half-written entry (only a temporary file, which is
 never read); an entry that :func:`meshsal.util.npzfile.read_npz` refuses
@@ -85,14 +86,21 @@ def file_fingerprint(*paths) -> str:
 
 
 def library_versions() -> dict:
-    """``{distribution: version}`` of :data:`LIBRARIES` ("absent" when not installed).
+    """``{distribution: version}`` of :data:`LIBRARIES` ("absent" when not installed), and their ``kernels``.
+
+    ``kernels`` says which kernels those libraries run in this process
+    (:func:`meshsal.util.reproducible.kernels`): a result computed with
+    unpinned kernels is never read back by a pinned run, nor one from
+    another CPU by an unpinned run.
 
     Examples
     --------
-    >>> sorted(library_versions()) == sorted(LIBRARIES)
+    >>> sorted(library_versions()) == sorted(LIBRARIES + ("kernels",))
     True
     """
     from importlib import metadata
+
+    from meshsal.util.reproducible import kernels
 
     versions = {}
     for name in LIBRARIES:
@@ -100,6 +108,7 @@ def library_versions() -> dict:
             versions[name] = metadata.version(name)
         except metadata.PackageNotFoundError:
             versions[name] = "absent"
+    versions["kernels"] = kernels()
     return versions
 
 

@@ -25,17 +25,17 @@ a private network only.
 
 Every task caps BLAS and OpenMP at one thread inside its worker
 (``threadpoolctl``), whatever started the worker, and a LocalCluster's
-workers also start with the thread caps and the pinned OpenBLAS kernel of
+workers also start with the thread caps and the pinned kernels of
 ``meshsal.util.reproducible`` in their environment.  Workers of an external
-cluster pick their OpenBLAS kernel themselves: start them with
-``OPENBLAS_CORETYPE=Haswell`` for the same numbers as everywhere else.
+cluster pick their kernels by CPU unless started pinned, e.g.
+``python -m meshsal.util.reproducible dask worker ADDRESS``, for the same
+numbers as everywhere else.
 """
 
 from __future__ import annotations
 
 import logging
 import multiprocessing
-import os
 import sys
 from concurrent.futures import ProcessPoolExecutor
 from contextlib import contextmanager
@@ -61,14 +61,11 @@ def _limit_threads():
 
 
 def worker_env() -> dict:
-    """Environment of a LocalCluster's workers: one BLAS/OpenMP thread, the pinned OpenBLAS kernel."""
-    from meshsal.util.reproducible import pin_blas_kernel
+    """Environment of a LocalCluster's workers: one BLAS/OpenMP thread, the pinned kernels."""
+    from meshsal.util.reproducible import kernel_environment
 
-    pin_blas_kernel()
     env = {name: "1" for name in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")}
-    if "OPENBLAS_CORETYPE" in os.environ:
-        env["OPENBLAS_CORETYPE"] = os.environ["OPENBLAS_CORETYPE"]
-    return env
+    return {**env, **kernel_environment()}
 
 
 @contextmanager

@@ -6,17 +6,32 @@ scene object is the one checked below, :func:`embree_scene` instead hands
 the vertex and index buffers to the Embree library embreex ships, through
 ctypes, in one copy each (1 ms); anywhere else it falls back to embreex's
 own path.  The scenes are the same either way.
+
+Embree picks SSE2, AVX, AVX2 or AVX-512 kernels by CPU, and they round
+differently: a hit's distance and barycentrics change in the last bits, and
+with them renders, imprints and points.  Embree 4 takes its instruction set
+only from the configuration string of the device a scene is created in
+(``isa=sse2``, ``max_isa=avx2``...; it reads no environment variable or
+file), and embreex creates every device without one.  So every scene here
+is created in one device per process made with ``$VISUOTACTILE_EMBREE_CONFIG``
+(``isa=sse2`` once :func:`meshsal.util.reproducible.pin_kernels` has run),
+handed to embreex through ctypes.  With the variable unset or empty, Embree
+chooses.
 """
 
 from __future__ import annotations
 
 import ctypes
 import functools
+import os
+import threading
+import warnings
 from pathlib import Path
 
 import numpy as np
 
 from meshsal.mesh import Mesh
+from meshsal.util.reproducible import EMBREE_VARIABLE
 
 # Embree 4 constants (rtcore_geometry.h, rtcore_buffer.h, rtcore_common.h).
 _GEOMETRY_TYPE_TRIANGLE = 0
@@ -41,9 +56,11 @@ def _library():
         return None
     handle = ctypes.c_void_p
     signatures = {
+        "rtcNewDevice": (handle, [ctypes.c_char_p]),
         "rtcGetSceneDevice": (handle, [handle]),
         "rtcReleaseDevice": (None, [handle]),
         "rtcGetDeviceError": (ctypes.c_int, [handle]),
+        "rtcGetDeviceLastErrorMessage": (ctypes.c_char_p, [handle]),
         "rtcNewGeometry": (handle, [handle, ctypes.c_int]),
         "rtcSetNewGeometryBuffer": (handle, [handle, ctypes.c_int, ctypes.c_uint, ctypes.c_int, ctypes.c_size_t,
                                              ctypes.c_size_t]),
@@ -118,6 +135,73 @@ def _attach_directly(scene, mesh: Mesh) -> bool:
         lib.rtcReleaseDevice(device)
 
 
+def _device_slot(device):
+    """Where an embreex ``EmbreeDevice`` keeps its RTCDevice (a ctypes pointer), or None if that is not proven.
+
+    embreex declares the object as the Python object header, then ``RTCDevice
+    device`` (rtcore.pxd).  A scene created in the device reports the device
+    it belongs to (``rtcGetSceneDevice``): equal to the pointer at that place,
+    it proves the layout.
+    """
+    from embreex import rtcore_scene as rtcs
+
+    lib = _library()
+    header = object.__basicsize__
+    if lib is None or type(device).__basicsize__ < header + 8:
+        return None
+    handle = _scene_handle(rtcs.EmbreeScene(device=device))
+    if not handle:
+        return None
+    owner = lib.rtcGetSceneDevice(handle)
+    try:
+        slot = ctypes.c_void_p.from_address(id(device) + header)
+        return slot if owner and slot.value == owner else None
+    finally:
+        lib.rtcReleaseDevice(owner)
+
+
+_device_lock = threading.Lock()
+
+
+@functools.cache
+def _configured_device(config: str):
+    """One embreex ``EmbreeDevice`` made with ``config``, or None where embreex's layout is not the one checked."""
+    from embreex import rtcore as rtc
+
+    device = rtc.EmbreeDevice()
+    slot = _device_slot(device)
+    if slot is None:
+        warnings.warn(f"${EMBREE_VARIABLE}={config!r} is not applied: this embreex's device is not the one "
+                      f"meshsal.mesh.embree knows, so Embree picks its kernels by CPU", RuntimeWarning, stacklevel=3)
+        return None
+    lib = _library()
+    made = lib.rtcNewDevice(config.encode())
+    if not made:
+        message = (lib.rtcGetDeviceLastErrorMessage(None) or b"no message").decode(errors="replace")
+        raise ValueError(f"Embree refuses the device configuration ${EMBREE_VARIABLE}={config!r}: {message}")
+    replaced, slot.value = slot.value, made
+    lib.rtcReleaseDevice(replaced)
+    return device
+
+
+def embree_device():
+    """The embreex device every scene is created in: made with ``$VISUOTACTILE_EMBREE_CONFIG``, or None.
+
+    None when the variable is unset or empty (embreex then makes a device
+    per scene, and Embree picks its kernels by CPU).
+
+    Raises
+    ------
+    ValueError
+        If Embree refuses the configuration (e.g. ``isa=avx512`` on a CPU without it).
+    """
+    config = os.environ.get(EMBREE_VARIABLE, "").strip()
+    if not config:
+        return None
+    with _device_lock:
+        return _configured_device(config)
+
+
 def is_robust(scene) -> bool:
     """Whether the scene is known to trace robustly: no ray slips between two triangles sharing an edge.
 
@@ -136,6 +220,8 @@ def embree_scene(mesh: Mesh, robust: bool = True):
     and returns a dict with ``primID`` (-1 on a miss), ``u``, ``v`` (the hit's
     barycentrics on the triangle's 2nd and 3rd corners), ``tfar`` and ``Ng``.
     Embree releases the GIL while tracing, so threads may share one scene.
+    Every scene is created in :func:`embree_device`, whose instruction set
+    ``$VISUOTACTILE_EMBREE_CONFIG`` chooses.
 
     A robust scene (the default) is watertight: a ray through an edge or a
     vertex meets one of the faces there.  ``robust=False`` traces about a
@@ -152,9 +238,10 @@ def embree_scene(mesh: Mesh, robust: bool = True):
     from embreex import rtcore_scene as rtcs
     from embreex.mesh_construction import TriangleMesh
 
-    scene = rtcs.EmbreeScene(robust=robust)
+    device = embree_device()
+    scene = rtcs.EmbreeScene(device=device, robust=robust)
     if mesh.n_faces == 0 or not _attach_directly(scene, mesh):
-        scene = rtcs.EmbreeScene(robust=robust)
+        scene = rtcs.EmbreeScene(device=device, robust=robust)
         TriangleMesh(scene, np.ascontiguousarray(mesh.vertices, dtype=np.float32),
                      np.ascontiguousarray(mesh.faces, dtype=np.int32))
     # The first query commits (builds) the scene: do it before threads share it.
