@@ -28,6 +28,7 @@ _EXPORTS = {
     "load_store": "batch",
     "PROTOCOLS": "experiment.protocols",
     "Settings": "experiment",
+    "TouchEnv": "experiment.env",
     "Cell": "reporting.results",
     "Comparison": "reporting.results",
     "ConfusionMatrix": "reporting.results",

@@ -6,11 +6,11 @@ API, the built-in policies and their registry) and ``episodes`` (a policy
 touching a test instance, and the stopping rule).
 """
 
-from classify.policies.episodes import Episode, decisions, run_episode, stopping_curve
+from classify.policies.episodes import Episode, available_places, decisions, run_episode, stopping_curve
 from classify.policies.knowledge import Forecast, Places, PlaceSample, TouchKnowledge, fit_knowledge
 from classify.policies.policy import (POLICIES, InfoGainPolicy, LookaheadPolicy, PlanPolicy, RandomPolicy,
                                       TouchPolicy, TouchState, expected_entropy)
 
 __all__ = ["Places", "PlaceSample", "Forecast", "TouchKnowledge", "fit_knowledge", "TouchState", "TouchPolicy",
            "RandomPolicy", "InfoGainPolicy", "LookaheadPolicy", "PlanPolicy", "POLICIES", "expected_entropy",
-           "Episode", "run_episode", "decisions", "stopping_curve"]
+           "Episode", "available_places", "run_episode", "decisions", "stopping_curve"]

@@ -16,10 +16,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from classify.policies.knowledge import PlaceSample, TouchKnowledge
+from classify.policies.knowledge import Places, PlaceSample, TouchKnowledge
 from classify.policies.policy import TouchPolicy, TouchState
 
-__all__ = ["Episode", "run_episode", "decisions", "stopping_curve"]
+__all__ = ["Episode", "available_places", "run_episode", "decisions", "stopping_curve"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -37,10 +37,22 @@ class Episode:
     choice_s: np.ndarray
 
 
-def _available(sample: PlaceSample, touched: list, min_spacing: float) -> np.ndarray:
-    ok = sample.places.touchable.copy()
+def available_places(places: Places, touched, min_spacing: float) -> np.ndarray:
+    """The places that may be touched next, (P,) bool: touchable, untouched, ``min_spacing`` from every touched one.
+
+    Examples
+    --------
+    >>> line = Places(np.arange(4), np.array([[0.0, 0, 0], [5, 0, 0], [20, 0, 0], [40, 0, 0]]),
+    ...               np.tile([0.0, 0, 1], (4, 1)), np.zeros((4, 1)), np.array([True, True, True, False]))
+    >>> available_places(line, [], 10.0).tolist()
+    [True, True, True, False]
+    >>> available_places(line, [1], 10.0).tolist()          # place 0 is 5 away from the touch, place 2 is 15
+    [False, False, True, False]
+    """
+    ok = places.touchable.copy()
+    touched = list(touched)
     if touched:
-        P = sample.places.positions
+        P = places.positions
         near = np.linalg.norm(P[:, None, :] - P[touched][None, :, :], axis=2).min(axis=1)
         ok &= near >= min_spacing
         ok[touched] = False
@@ -79,7 +91,7 @@ def run_episode(policy: TouchPolicy, sample: PlaceSample, knowledge: TouchKnowle
     belief = np.full(knowledge.n_classes, 1.0 / knowledge.n_classes)
     touched, beliefs, seconds = [], [], []
     for _ in range(touches):
-        available = _available(sample, touched, min_spacing)
+        available = available_places(places, touched, min_spacing)
         if not available.any():
             break
         state = TouchState(places, tuple(touched), sample.imprints[session, touched], belief, available, forecast,
