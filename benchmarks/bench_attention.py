@@ -74,7 +74,7 @@ def bench_channels(mesh, label: str, size: int, repeats: int, threads: int) -> N
     with ThreadPoolExecutor(max_workers=threads) as pool:
         for name in attention.CHANNELS:
             rows.append((name, *median_time(
-                lambda: channel_over_views(name, views, vertex_saliency, pool), repeats)))
+                lambda name=name: channel_over_views(name, views, vertex_saliency, pool), repeats)))
     rows.append(("sum of channels", sum(r[1] for r in rows), sum(r[2] for r in rows)))
     rows.append(("saliency_views (8 channels + combination)", *median_time(whole(threads), repeats)))
     default = cv2.getNumThreads()
@@ -117,7 +117,7 @@ def bench_mesh_saliency(meshes_dir: Path, repeats: int) -> None:
     print("| mesh | vertices | faces | wall (s) | CPU (s) | wall per 100k vertices (s) |")
     print("|---|---:|---:|---:|---:|---:|")
     for label, mesh in cases:
-        wall, cpu = median_time(lambda: mesh_saliency(mesh), repeats)
+        wall, cpu = median_time(lambda mesh=mesh: mesh_saliency(mesh), repeats)
         n = mesh.vertices.shape[0]
         print(f"| {label} | {n} | {mesh.faces.shape[0]} | {wall:.3f} | {cpu:.3f} | {wall * 1e5 / n:.3f} |")
     print(f"\nTarget: 100k vertices <= 1 s (load average at the end: {os.getloadavg()[0]:.1f}).")

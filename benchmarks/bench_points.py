@@ -99,7 +99,7 @@ def main(argv=None) -> int:
         cells = " | ".join(f"{med[k][0]:.2f} / {med[k][1]:.2f}" for k in names)
         print(f"| {label} | {faces} | {med['untouchable'][0]:.0f} | {cells} |")
     print()
-    for label, faces, med in rows:
+    for label, _, med in rows:
         wall = med["interest_points"][0]
         verdict = "met" if wall <= TARGET_S else "NOT met (see the load average)"
         print(f"{label}: end to end {wall:.2f} s wall, {med['interest_points'][1]:.2f} s CPU "

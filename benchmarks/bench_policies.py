@@ -47,18 +47,17 @@ def synthetic(objects: int, places: int, touches: int, seed: int = 0):
 
     rng = np.random.default_rng(seed)
     names = tuple(f"object{j:02d}" for j in range(objects))
-    vertices, place_ids, posteriors, weights = [], [], [], []
+    place_ids, ranked, posteriors, weights = [], [], [], []
     for _ in range(objects):
-        V = rng.normal(size=(4 * places, 3)) * 50.0
-        vertices.append(V)
-        place_ids.append(np.sort(rng.choice(len(V), places, replace=False)))
+        place_ids.append(np.sort(rng.choice(4 * places, places, replace=False)))
+        ranked.append(rng.permutation(places))
         posteriors.append(rng.dirichlet(np.full(objects, 0.3), size=(places, touches)))
         weights.append(np.full((places, touches), 1.0 / touches))
-    knowledge = TouchKnowledge(names, tuple(vertices), tuple(place_ids), tuple(posteriors), tuple(weights), None,
+    knowledge = TouchKnowledge(names, tuple(place_ids), tuple(ranked), tuple(posteriors), tuple(weights), None,
                                Calibration(), "polar")
-    ids = place_ids[0]
-    test = Places(ids, vertices[0][ids], rng.normal(size=(places, 3)), rng.random((places, len(FEATURES))),
-                  np.ones(places, bool))
+    ids = place_ids[0][ranked[0]]
+    test = Places(ids, rng.normal(size=(places, 3)) * 50.0, rng.normal(size=(places, 3)),
+                  rng.random((places, len(FEATURES))), np.ones(places, bool))
     return knowledge, test
 
 
@@ -75,8 +74,8 @@ def main(argv=None) -> int:
     knowledge, places = synthetic(args.objects, args.places, args.touches)
     rng = np.random.default_rng(1)
     with threadpool_limits(1):
-        forecast = knowledge.forecast(places.vertex_ids)                     # warm: imports, first allocations
-        forecast_s = [timed(knowledge.forecast, places.vertex_ids) for _ in range(5)]
+        forecast = knowledge.forecast(len(places))                          # warm: imports, first allocations
+        forecast_s = [timed(knowledge.forecast, len(places)) for _ in range(5)]
         states = []
         for r in range(args.repeats):
             touched = tuple(int(t) for t in rng.choice(args.places, r % 4, replace=False))

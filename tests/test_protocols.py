@@ -80,7 +80,7 @@ def _instance_data(n_objects=3, train_instances=3, sessions=2, k=5, seed=0):
     X, y, inst, point = [], [], [], []
     for o in range(n_objects):
         for j in range(1, train_instances + 1):
-            for s in range(sessions):
+            for _ in range(sessions):
                 img = rng.uniform(0, 0.2, (k, 16, 16))
                 img[:, 3 * o:3 * o + 3, 5:9] = 0.9
                 X.append(img)

@@ -207,7 +207,8 @@ def test_a_lower_instruction_set_changes_neither_the_toys_points_nor_results_csv
 
 
 @needs_avx2
-def test_without_the_pin_the_lower_instruction_set_moves_the_cows_points(runs):
+def test_without_the_pin_the_lower_instruction_set_changes_the_cows_points(runs):
     native, lower = runs["native"], runs["native_lower"]
     assert "*AVX2?" in lower["kernels"]["opencv"] and "*AVX2 " in native["kernels"]["opencv"]  # the forcing took
-    assert lower["points"]["cow"]["vertices"] != native["points"]["cow"]["vertices"]
+    # Since the channels' rewrite the same vertices win here, but their scores (and so any tie) move.
+    assert lower["points"]["cow"]["sha256"] != native["points"]["cow"]["sha256"]

@@ -72,8 +72,7 @@ def test_info_gain_through_the_env_touches_what_run_episode_touches(env, cache):
     training = {(name, j): instance_samples(SampleTask(mesh, name, (), SETTINGS, 0, j, places=True,
                                                        cache_dir=cache)).places
                 for name, mesh in nominal.items() for j in (1, 2)}
-    knowledge = fit_knowledge(training, {n: m.vertices for n, m in nominal.items()},
-                              Recognizer("knn", features="polar"))
+    knowledge = fit_knowledge(training, Recognizer("knn", features="polar"))
     for e, (name, replicate) in enumerate(zip(run.objects, run.replicates)):
         episode = run_episode(InfoGainPolicy(), _sample(name, replicate, cache), knowledge, SETTINGS.n_points,
                               0.5 * SETTINGS.sensor.width_mm, np.random.default_rng(0))

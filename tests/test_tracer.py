@@ -146,7 +146,8 @@ def test_rays_that_do_not_slip_are_answered_by_the_fast_scene_alone():
     robust = _run(embree_scene(mesh), origins, directions)
     assert 1000 < (robust["primID"] >= 0).sum() < 5000
     np.testing.assert_array_equal(ours["primID"] >= 0, robust["primID"] >= 0)
-    np.testing.assert_allclose(ours["tfar"], robust["tfar"], rtol=1e-6)
+    # Fast and robust traversal compute t in different orders: with the pinned SSE2 kernels up to ~3e-6 apart.
+    np.testing.assert_allclose(ours["tfar"], robust["tfar"], rtol=1e-5)
 
 
 def test_an_open_surface_is_traced_robustly_from_the_start():

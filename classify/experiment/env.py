@@ -170,7 +170,7 @@ class TouchEnv(gymnasium.Env):
         n = self.settings.n_points
         training = {(name, j): self._place_sample(name, 0, j)
                     for name in self.names for j in range(1, self.settings.train_instances + 1)}
-        self.knowledge = fit_knowledge(training, {name: m.vertices for name, m in self._nominal.items()}, recognizer)
+        self.knowledge = fit_knowledge(training, recognizer)
         self.max_places, self.max_touches = (POOL_FACTOR + PEAK_FACTOR) * n, n
         self.min_spacing = 0.5 * self.settings.sensor.width_mm
         shape = next(iter(training.values())).imprints.shape[2:]
@@ -226,7 +226,7 @@ class TouchEnv(gymnasium.Env):
         if len(sample.places) > self.max_places:
             raise ValueError(f"TouchEnv: {self.names[truth]!r} replicate {replicate} offers {len(sample.places)} "
                              f"places, more than the {self.max_places} the observation holds")
-        self._episode = _Episode(sample, self.knowledge.forecast(sample.places.vertex_ids),
+        self._episode = _Episode(sample, self.knowledge.forecast(sample.places),
                                  self.knowledge.posterior(sample.imprints[0]), truth, replicate,
                                  np.full(len(self.names), 1.0 / len(self.names)))
         return self._observation(), {"touches": 0, "replicate": replicate}

@@ -55,15 +55,16 @@ def _paper_measurements(objects: ObjectSet, methods, config: ExperimentConfig, r
     return out
 
 
-def _summarize(measurements: list, config: ExperimentConfig, names) -> tuple:
-    """Cells, paired comparisons with the baseline, confusions, selection kept, stopping cells and rate matrices.
+def _summarize(measurements: list, config: ExperimentConfig, names) -> dict:
+    """The measured fields of an :class:`ExperimentResult`: cells, paired comparisons with the baseline,
+    confusions, selection kept, stopping cells and the rate and stopping matrices.
 
     ``names`` are the objects in the order of the rate matrices' columns.  A
     touch policy (protocol "sequential") is compared with the baseline
     method's fixed plan (protocol "instance").
     """
     seed = config.settings.seed
-    rates, sets, kept, stopping = {}, {}, {}, []
+    rates, sets, kept, stopping, stopping_rates = {}, {}, {}, [], {}
     for m in measurements:
         for k, R in m.rates.items():
             key = CellKey(m.method, m.protocol, m.classifier, m.n_objects, m.selection, k)
@@ -72,6 +73,7 @@ def _summarize(measurements: list, config: ExperimentConfig, names) -> tuple:
             kept[f"{m.method}/{m.protocol}/{m.n_objects}"] = m.kept
         if m.stopping is not None and not m.selection:
             correct, used = m.stopping
+            stopping_rates[m.method, m.protocol, m.classifier, m.n_objects] = m.stopping
             for level_index, level in enumerate(config.stop_levels):
                 who = names[:m.n_objects]
                 a = stats.summarize(correct[:, level_index], seed, who)
@@ -91,7 +93,8 @@ def _summarize(measurements: list, config: ExperimentConfig, names) -> tuple:
                 comparisons.append(Comparison(key.method, config.baseline, *key[1:], d.mean, d.ci_low, d.ci_high,
                                               d.p_value, d.replicates))
     confusions = tuple(m.confusion for m in measurements if m.confusion is not None)
-    return cells, tuple(comparisons), confusions, kept, tuple(stopping), rates
+    return {"cells": cells, "comparisons": tuple(comparisons), "confusions": confusions, "selection_kept": kept,
+            "stopping": tuple(stopping), "rates": rates, "stopping_rates": stopping_rates}
 
 
 def run_experiment(objects=None, config: ExperimentConfig | None = None, *, executor=None, n_jobs: int = 2,
@@ -161,13 +164,13 @@ def run_experiment(objects=None, config: ExperimentConfig | None = None, *, exec
                     measurements += policy_recognition(n, stage, objects, config, runtime)
                 timings["sequential"] = time.perf_counter() - t0
 
-    cells, comparisons, confusions, kept, stopping, rates = _summarize(measurements, config, objects.names)
+    summary = _summarize(measurements, config, objects.names)
     timings["total"] = time.perf_counter() - started
     run_settings = {"objects": list(objects.names), **config.to_json(), "libraries": cache_mod.library_versions(),
                     "cache_dir": None if cache_dir is None else str(cache_dir),
                     "learned_channel_weights": [m.channel_weights for m in stage.models]}
-    result = ExperimentResult(cells, comparisons, confusions, objects.names, _object_sets(len(objects)),
-                              config.classifiers, run_settings, kept, timings, rates, stopping)
+    result = ExperimentResult(object_names=objects.names, object_sets=_object_sets(len(objects)),
+                              classifiers=config.classifiers, settings=run_settings, timings=timings, **summary)
     if out_dir is not None:
         write_outputs(result, out_dir)
         for r, model in enumerate(stage.models):
@@ -205,13 +208,13 @@ def run_real(imprint_set, config: ExperimentConfig | None = None, *, out_dir=Non
         for n in _object_sets(len(names)):
             mask = y < n
             measurements += paper_recognition("real", X[mask], y[mask], points[mask], names[:n], config, runtime)
-    cells, _, confusions, kept, _, rates = _summarize(measurements, config.replace(methods=("real",)), names)
+    summary = _summarize(measurements, config.replace(methods=("real",)), names)
     settings = {"real": str(imprint_set.source), "n_imprints": int(len(y)), "folds": config.folds,
                 "repeats": config.repeats, "seed": config.settings.seed, "threshold": config.threshold,
                 "classifiers": list(config.classifiers), "features": config.features,
                 "sensor": repr(imprint_set.sensor)}
-    result = ExperimentResult(cells, (), confusions, names, _object_sets(len(names)), config.classifiers, settings,
-                              kept, {"total": time.perf_counter() - started}, rates)
+    result = ExperimentResult(object_names=names, object_sets=_object_sets(len(names)), classifiers=config.classifiers,
+                              settings=settings, timings={"total": time.perf_counter() - started}, **summary)
     if out_dir is not None:
         write_outputs(result, out_dir)
     return result

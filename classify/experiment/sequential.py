@@ -37,7 +37,6 @@ class PolicyJob:
     ----------
     training : dict (object name, instance) -> classify.policies.PlaceSample, training instances only
     tests : tuple of PlaceSample, the test instances in the order of ``names``
-    vertices : dict object name -> (n, 3) float64, nominal mesh vertices
     names : tuple of str, the objects sorted by name (the classes)
     recognizer : Recognizer
     policies : tuple of str, names in ``classify.policies.POLICIES``
@@ -49,7 +48,6 @@ class PolicyJob:
 
     training: dict
     tests: tuple
-    vertices: dict
     names: tuple
     recognizer: Recognizer
     policies: tuple
@@ -87,7 +85,7 @@ def policy_job(job: PolicyJob) -> PolicyOutcome:
     touched = np.full((len(job.policies), n, K), -1, np.int64)
     choice_s = np.zeros(len(job.policies))
     with threadpool_limits(1):
-        knowledge = fit_knowledge(job.training, job.vertices, job.recognizer)
+        knowledge = fit_knowledge(job.training, job.recognizer)
         for q, name in enumerate(job.policies):
             seconds = []
             for c, test in enumerate(job.tests):
@@ -111,14 +109,13 @@ def policy_jobs(stage, objects, n: int, config: ExperimentConfig) -> list:
     settings = config.settings
     order = objects.by_name(n)
     names = tuple(objects.names[i] for i in order)
-    vertices = {objects.names[i]: objects.nominal[i].vertices for i in order}
     jobs = []
     for r in range(config.replicates):
         training = {(objects.names[i], j): stage.places[r, i, j] for i in order
                     for j in range(1, settings.train_instances + 1)}
         tests = tuple(stage.places[r, i, 0] for i in order)
         for c in config.classifiers:
-            jobs.append(PolicyJob(training, tests, vertices, names, Recognizer(c, False, config.params,
+            jobs.append(PolicyJob(training, tests, names, Recognizer(c, False, config.params,
                                                                                config.threshold, config.features),
                                   config.policies, settings.n_points, 0.5 * settings.sensor.width_mm, settings.seed,
                                   r, config.stop_levels))

@@ -86,7 +86,7 @@ def run_episode(policy: TouchPolicy, sample: PlaceSample, knowledge: TouchKnowle
     import time
 
     places = sample.places
-    forecast = knowledge.forecast(places.vertex_ids)
+    forecast = knowledge.forecast(places)
     felt = knowledge.posterior(sample.imprints[session])           # what each place would feel; the policy never sees it
     belief = np.full(knowledge.n_classes, 1.0 / knowledge.n_classes)
     touched, beliefs, seconds = [], [], []

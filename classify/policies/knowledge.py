@@ -14,14 +14,21 @@ by a classifier that never saw that touch's instance.  Those are the
 per-object models a policy forecasts with: "if the object were j, touching
 here would feel like one of these".
 
-Places carry across instances through the mesh: every instance of an object
-is a turned, resized, repainted copy of one nominal mesh, so a vertex id
-names the same place on all of them, and under the hypothesis "the object is
-j" the test instance's vertex ``v`` is object j's vertex ``v``
-(:meth:`TouchKnowledge.forecast`).  The candidate places depend on the shape
-alone, so training touched (nearly) the same places; a place training did
-not touch takes the nearest one it did, in the object's own frame.  A scan
-of a new object would need registration instead.
+Places carry across instances by where they lie on the shape.  The candidate
+places start with a farthest-point pool from the vertex farthest from the
+centroid, which depends on the shape alone, so its first :data:`LANDMARKS`
+places are the same places of every turned, resized, repainted instance of
+an object.  Each place is located by its :func:`signatures`, its distances to
+those landmarks over the distance of the first two: invariant to the pose
+and the size.  Under the hypothesis "the object is j" a place of the test
+instance is the trained place of j with the nearest signature
+(:meth:`TouchKnowledge.match`): the very same place when the object is j,
+whatever order the mesh-saliency peaks came in.  Everything in it is
+computed from the instance's own geometry, as a robot would compute it from
+a scan: nothing of the object's identity (its nominal mesh, its vertex
+numbering, its pose) enters the correspondence.  Where a shape is symmetric
+the landmarks, and so the places, are defined only up to its symmetry (a
+ball's pool starts anywhere), which is what a touch can tell apart anyway.
 """
 
 from __future__ import annotations
@@ -30,7 +37,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["Places", "PlaceSample", "Forecast", "TouchKnowledge", "fit_knowledge"]
+__all__ = ["LANDMARKS", "Places", "PlaceSample", "Forecast", "TouchKnowledge", "signatures", "fit_knowledge"]
+
+#: The first candidate places (the pool's start, found again on every instance) every place is located against.
+LANDMARKS = 8
 
 
 @dataclass(frozen=True, eq=False)
@@ -77,6 +87,25 @@ class PlaceSample:
                                   a["touchable"].astype(bool)), a["imprints"])
 
 
+def signatures(places: Places) -> np.ndarray:
+    """Where each place lies on its shape, whatever the pose and size: (P, LANDMARKS) float64.
+
+    A place's distances to the first :data:`LANDMARKS` places (the start of
+    the shape-determined pool), over the distance between the first two.
+
+    Examples
+    --------
+    >>> X = np.array([[0.0, 0, 0], [10, 0, 0], [0, 5, 0]])
+    >>> line = Places(np.arange(3), X, np.tile([0.0, 0, 1], (3, 1)), np.zeros((3, 1)), np.ones(3, bool))
+    >>> signatures(line).round(3).tolist()[2]
+    [0.5, 1.118, 0.0]
+    """
+    X = np.asarray(places.positions, dtype=np.float64)
+    d = np.linalg.norm(X[:, None, :] - X[None, :LANDMARKS, :], axis=2)
+    scale = d[1, 0] if len(X) > 1 else 0.0
+    return d / scale if scale > 0 else d
+
+
 @dataclass(frozen=True, eq=False)
 class Forecast:
     """What a touch at each of an instance's places would feel like under each hypothesis.
@@ -104,10 +133,10 @@ class TouchKnowledge:
     ----------
     names : tuple of str
         The classes, in label order.
-    vertices : tuple of (n_j, 3) float64
-        Each object's nominal mesh vertices (the frame places are matched in).
     place_ids : tuple of (P_j,) int64
-        The places each object's training instances were touched at.
+        The places (vertex ids) each object's training instances were touched at.
+    signatures : tuple of (P_j, LANDMARKS) float64
+        Where each of those places lies on its object (:func:`signatures`).
     posteriors : tuple of (P_j, S, C) float64
         Calibrated held-out posteriors of those touches (a touch scored by a
         classifier fitted without its instance).
@@ -120,8 +149,8 @@ class TouchKnowledge:
     """
 
     names: tuple
-    vertices: tuple
     place_ids: tuple
+    signatures: tuple
     posteriors: tuple
     weights: tuple
     model: object
@@ -142,31 +171,23 @@ class TouchKnowledge:
             return np.zeros((0, self.n_classes))
         return calibrate(posteriors(self.model, describe(imprints, self.features), self.n_classes), self.calibration)
 
-    def match(self, j: int, vertex_ids: np.ndarray) -> np.ndarray:
-        """The trained place of object ``j`` each vertex would be if the object were j, (P,) int64 (-1: none).
+    def match(self, j: int, places: Places) -> np.ndarray:
+        """The trained place of object ``j`` each of an instance's places would be if the object were j.
 
-        Under "the object is j" an instance's vertex ``v`` is j's vertex ``v``;
-        its trained place is the one nearest to that vertex in j's frame (the
-        vertex itself when training touched it).
+        Returns (P,) int64 indices into ``place_ids[j]``: the trained place with the nearest signature.
         """
         from scipy.spatial import cKDTree
 
-        ids = np.asarray(vertex_ids, dtype=np.int64)
-        out = np.full(ids.size, -1, np.int64)
-        mine = ids < len(self.vertices[j])
-        if mine.any():
-            out[mine] = cKDTree(self.vertices[j][self.place_ids[j]]).query(self.vertices[j][ids[mine]])[1]
-        return out
+        return cKDTree(self.signatures[j]).query(signatures(places))[1].astype(np.int64)
 
-    def forecast(self, vertex_ids: np.ndarray) -> Forecast:
-        """The :class:`Forecast` of an instance's places, given as vertex ids of its mesh."""
-        ids = np.asarray(vertex_ids, dtype=np.int64)
-        C = self.n_classes
+    def forecast(self, places: Places) -> Forecast:
+        """The :class:`Forecast` of an instance's candidate places."""
+        C, P = self.n_classes, len(places)
         S = max(w.shape[1] for w in self.weights)
-        out = np.full((C, ids.size, S, C), 1.0 / C)
-        weight = np.zeros((C, ids.size, S))
+        out = np.full((C, P, S, C), 1.0 / C)
+        weight = np.zeros((C, P, S))
         for j in range(C):
-            place = self.match(j, ids)
+            place = self.match(j, places)
             mine = place >= 0
             s = self.posteriors[j].shape[1]
             out[j, mine, :s] = self.posteriors[j][place[mine]]
@@ -174,14 +195,13 @@ class TouchKnowledge:
         return Forecast(out, weight)
 
 
-def fit_knowledge(training: dict, nominal_vertices: dict, recognizer) -> TouchKnowledge:
+def fit_knowledge(training: dict, recognizer) -> TouchKnowledge:
     """Touch knowledge from training instances' place samples.
 
     Parameters
     ----------
     training : dict (object name, instance index) -> PlaceSample
         Training instances only (index >= 1); every session of every place is a training touch.
-    nominal_vertices : dict object name -> (n, 3) float64, the object's nominal mesh vertices
     recognizer : classify.recognizers.touches.Recognizer
         The single-touch classifier (selection is not applied: every place counts).
 
@@ -218,7 +238,8 @@ def fit_knowledge(training: dict, nominal_vertices: dict, recognizer) -> TouchKn
     calibration = fit_calibration(held, y)
     held = calibrate(held, calibration)
     model = recognizer.fit(F, y, groups)
-    place_ids, posteriors, weights = [], [], []
+    located = np.concatenate([signatures(training[k].places) for k in keys for _ in range(len(training[k].imprints))])
+    place_ids, located_places, posteriors, weights = [], [], [], []
     for c in range(len(names)):
         mine = y == c
         ids, where = np.unique(vertex[mine], return_inverse=True)
@@ -232,8 +253,10 @@ def fit_knowledge(training: dict, nominal_vertices: dict, recognizer) -> TouchKn
             weight[p, slot[p]] = 1.0 / counts[p]
             slot[p] += 1
         place_ids.append(ids)
+        # A vertex lies at one place of its object: the signature of its first training touch.
+        first = np.unique(where, return_index=True)[1]
+        located_places.append(located[mine][first])
         posteriors.append(post)
         weights.append(weight)
-    vertices = tuple(np.asarray(nominal_vertices[name], dtype=np.float64) for name in names)
-    return TouchKnowledge(names, vertices, tuple(place_ids), tuple(posteriors), tuple(weights), model, calibration,
-                          recognizer.features)
+    return TouchKnowledge(names, tuple(place_ids), tuple(located_places), tuple(posteriors), tuple(weights), model,
+                          calibration, recognizer.features)

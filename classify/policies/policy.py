@@ -56,7 +56,7 @@ class TouchState:
         Places that may be touched next: touchable, untouched and at least
         the minimum spacing from every touched place.
     forecast : Forecast
-        ``knowledge.forecast(places.vertex_ids)``.
+        ``knowledge.forecast(places)``.
     knowledge : TouchKnowledge
         Fitted on training instances only.
     """

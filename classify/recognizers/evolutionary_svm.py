@@ -145,7 +145,7 @@ def solve_dual(K, Y, C=1.0, strategy: Strategy | None = None, **changes):
     rows = np.arange(p)[:, None]
     stall = 0
     generation = 0
-    for generation in range(1, es.max_generations + 1):
+    for generation in range(1, es.max_generations + 1):  # noqa: B007 (read after the loop: generations run)
         parent = rng.integers(0, mu, size=(p, lam))
         sigma = np.clip(S[rows, parent] * np.exp(tau * rng.standard_normal((p, lam))), 1e-6, 1.0)
         idx = rng.integers(0, n, size=(p, lam, m))

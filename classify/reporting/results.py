@@ -125,7 +125,10 @@ class ExperimentResult:
     classifier, n_objects, selection, touches)``) to its (replicates, objects) matrix of
     rates in percent.  ``selection_kept`` maps ``"method/protocol/n_objects"``
     to the mean fraction of training imprints similarity selection kept.
-    ``stopping`` holds the stopping rule's :class:`StoppingCell` records.
+    ``stopping`` holds the stopping rule's :class:`StoppingCell` records, and
+    ``stopping_rates`` maps ``(method, protocol, classifier, n_objects)`` to the
+    (correct, touches used) matrices behind them, each (replicates, levels,
+    objects), so that a subset of the objects can be summarized afterwards.
     """
 
     cells: tuple
@@ -139,6 +142,7 @@ class ExperimentResult:
     timings: dict = field(default_factory=dict)
     rates: dict = field(default_factory=dict)
     stopping: tuple = ()
+    stopping_rates: dict = field(default_factory=dict)
 
     def cell(self, method, protocol, classifier, n_objects, selection, touches=1) -> Cell:
         """The cell of these coordinates (KeyError when it was not measured)."""
@@ -167,6 +171,9 @@ class ExperimentResult:
                       for k, v in self.rates.items()],
             "selection_kept": self.selection_kept,
             "stopping": [dataclasses.asdict(s) for s in self.stopping],
+            "stopping_by_object": [{"method": k[0], "protocol": k[1], "classifier": k[2], "n_objects": k[3],
+                                    "correct": np.asarray(c).tolist(), "touches": np.asarray(t).tolist()}
+                                   for k, (c, t) in self.stopping_rates.items()],
             "timings_s": self.timings,
         }
 

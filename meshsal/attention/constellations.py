@@ -24,6 +24,12 @@ centre matching all its copies equally well.
   - distance weighting ``D_ij = exp(-d_ij**2 / (2 sigma_d**2))`` (the paper's
     optional term favouring local symmetries; ``sigma_d=None`` drops it).
 
+The attention pipeline's symmetry channel no longer uses this (it is
+:mod:`meshsal.attention.symmetry`); it stays, public, as the method the paper
+cites and as the reference the channel's pop-out tests were measured
+against.  About 500 lines: the paper's two symmetries (mirror, rotation),
+matching and voting, which only read well together.
+
   Votes are accumulated in a (theta, r) Hough space, blurred (respecting that
   ``(theta, r)`` and ``(theta + pi, -r)`` are the same line); its strongest
   local maxima are the symmetry axes, each refined to the weighted mean of
