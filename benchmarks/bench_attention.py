@@ -33,9 +33,11 @@ from benchlib import DEFAULT_MESHES, hand_124k, hand_150mm, machine
 
 import meshsal
 from meshsal import attention
-from meshsal.views import cameras as cameras_mod, render
 from meshsal.attention.combine import channel_function
 from meshsal.mesh.curvature import mesh_saliency
+from meshsal.views import cameras as cameras_mod
+from meshsal.views import render
+
 
 def median_time(fn, repeats: int) -> tuple[float, float]:
     """Median wall time and median process CPU time (all threads) of ``fn()``, seconds.
@@ -73,8 +75,9 @@ def bench_channels(mesh, label: str, size: int, repeats: int, threads: int) -> N
     rows = []
     with ThreadPoolExecutor(max_workers=threads) as pool:
         for name in attention.CHANNELS:
-            rows.append((name, *median_time(
-                lambda name=name: channel_over_views(name, views, vertex_saliency, pool), repeats)))
+            rows.append(
+                (name, *median_time(lambda name=name: channel_over_views(name, views, vertex_saliency, pool), repeats))
+            )
     rows.append(("sum of channels", sum(r[1] for r in rows), sum(r[2] for r in rows)))
     rows.append(("saliency_views (8 channels + combination)", *median_time(whole(threads), repeats)))
     default = cv2.getNumThreads()
@@ -86,16 +89,20 @@ def bench_channels(mesh, label: str, size: int, repeats: int, threads: int) -> N
         cv2.setNumThreads(default)
 
     n = len(views)
-    print(f"\n### Channel maps: {label}, {n} views at {size}x{size}, "
-          f"{threads} threads (OpenCV: {default}), median of {repeats}\n")
+    print(
+        f"\n### Channel maps: {label}, {n} views at {size}x{size}, "
+        f"{threads} threads (OpenCV: {default}), median of {repeats}\n"
+    )
     print("| channel | wall, all views (s) | CPU, all views (s) | CPU per view (ms) |")
     print("|---|---:|---:|---:|")
     for name, wall, cpu in rows:
         print(f"| {name} | {wall:.3f} | {cpu:.3f} | {1000 * cpu / n:.2f} |")
     wall, cpu = rows[-3][1:]
-    print(f"\nTarget: saliency_views of all views <= 1.5 s on 2 cores; measured {wall:.2f} s wall, "
-          f"{cpu:.2f} s CPU (load average at the end: {os.getloadavg()[0]:.1f}). "
-          f"Rendering the views, not included: {render_s:.2f} s.")
+    print(
+        f"\nTarget: saliency_views of all views <= 1.5 s on 2 cores; measured {wall:.2f} s wall, "
+        f"{cpu:.2f} s CPU (load average at the end: {os.getloadavg()[0]:.1f}). "
+        f"Rendering the views, not included: {render_s:.2f} s."
+    )
 
 
 def subdivided(mesh, target_vertices: int):
@@ -111,8 +118,11 @@ def subdivided(mesh, target_vertices: int):
 def bench_mesh_saliency(meshes_dir: Path, repeats: int) -> None:
     path = meshes_dir / "nefertiti.obj"
     base = meshsal.load_mesh(path)
-    cases = [("nefertiti", base), ("nefertiti, 1:4 midpoint upsample (igl.upsample)", subdivided(base, 150_000)),
-             ("hand toy, Loop-subdivided and decimated to 124k faces (concave)", hand_124k())]
+    cases = [
+        ("nefertiti", base),
+        ("nefertiti, 1:4 midpoint upsample (igl.upsample)", subdivided(base, 150_000)),
+        ("hand toy, Loop-subdivided and decimated to 124k faces (concave)", hand_124k()),
+    ]
     print(f"\n### Mesh saliency (Lee et al. 2005), median of {repeats}\n")
     print("| mesh | vertices | faces | wall (s) | CPU (s) | wall per 100k vertices (s) |")
     print("|---|---:|---:|---:|---:|---:|")
@@ -125,12 +135,17 @@ def bench_mesh_saliency(meshes_dir: Path, repeats: int) -> None:
 
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--meshes-dir", type=Path, default=DEFAULT_MESHES,
-                        help=f"folder of the public test meshes (default {DEFAULT_MESHES})")
+    parser.add_argument(
+        "--meshes-dir",
+        type=Path,
+        default=DEFAULT_MESHES,
+        help=f"folder of the public test meshes (default {DEFAULT_MESHES})",
+    )
     parser.add_argument("--size", type=int, default=256, help="view size in pixels (default 256)")
     parser.add_argument("--repeats", type=int, default=3, help="timed repeats, median reported (default 3)")
-    parser.add_argument("--threads", type=int, default=os.cpu_count() or 1,
-                        help="worker threads over views (default: CPU count)")
+    parser.add_argument(
+        "--threads", type=int, default=os.cpu_count() or 1, help="worker threads over views (default: CPU count)"
+    )
     parser.add_argument("--skip-mesh-saliency", action="store_true", help="only time the channel maps")
     args = parser.parse_args(argv)
     spot = args.meshes_dir / "spot" / "spot.obj"
@@ -139,8 +154,9 @@ def main(argv=None) -> int:
         return 1
     print(machine())
     bench_channels(meshsal.load_mesh(spot), "the textured cow (spot)", args.size, args.repeats, args.threads)
-    bench_channels(hand_150mm(), "the hand toy at 150 mm (concave, painted per vertex)", args.size, args.repeats,
-                   args.threads)
+    bench_channels(
+        hand_150mm(), "the hand toy at 150 mm (concave, painted per vertex)", args.size, args.repeats, args.threads
+    )
     if not args.skip_mesh_saliency:
         bench_mesh_saliency(args.meshes_dir, args.repeats)
     print(f"\n{machine()}")

@@ -55,8 +55,15 @@ def _run(folder: Path, workers: int, settings: BatchSettings, scratch: Path) -> 
 
     for entry in load_store(store).values():
         busy += sum(entry.timings.values())
-    return {"workers": workers, "wall": wall, "done": summary.done, "rate": summary.done / wall,
-            "overhead": 1.0 - busy / (workers * wall), "peak_mb": peak, "stages": summary.stage_median_s}
+    return {
+        "workers": workers,
+        "wall": wall,
+        "done": summary.done,
+        "rate": summary.done / wall,
+        "overhead": 1.0 - busy / (workers * wall),
+        "peak_mb": peak,
+        "stages": summary.stage_median_s,
+    }
 
 
 def _ycb_stages(settings: BatchSettings, scratch: Path) -> dict:
@@ -87,10 +94,14 @@ def main() -> int:
         print("| workers | wall (cluster up) | meshes/s | scheduling overhead | peak memory per worker |")
         print("|---:|---:|---:|---:|---:|")
         for r in runs:
-            print(f"| {r['workers']} | {r['wall']:.1f} s | {r['rate']:.2f} | {100 * r['overhead']:.1f} % "
-                  f"| {r['peak_mb']:.0f} MB |")
-        print(f"\n2 workers / 1 worker: {runs[1]['rate'] / runs[0]['rate']:.2f}x; the 1,000-mesh corpus on 2 workers "
-              f"at this rate: {1000 / runs[1]['rate'] / 60:.1f} min\n")
+            print(
+                f"| {r['workers']} | {r['wall']:.1f} s | {r['rate']:.2f} | {100 * r['overhead']:.1f} % "
+                f"| {r['peak_mb']:.0f} MB |"
+            )
+        print(
+            f"\n2 workers / 1 worker: {runs[1]['rate'] / runs[0]['rate']:.2f}x; the 1,000-mesh corpus on 2 workers "
+            f"at this rate: {1000 / runs[1]['rate'] / 60:.1f} min\n"
+        )
         ycb = _ycb_stages(settings, scratch)
         print("| stage, median per mesh | corpus (~470 faces, 1 worker) | YCB scan (15,728 faces, in process) |")
         print("|---|---:|---:|")
@@ -98,8 +109,10 @@ def main() -> int:
             print(f"| {k} | {1000 * runs[0]['stages'].get(k, float('nan')):.1f} ms | {1000 * ycb[k]:.1f} ms |")
         per_mesh = sum(ycb.values())
         efficiency = 1.0 - runs[1]["overhead"]
-        print(f"\n1,000 YCB-sized objects: {per_mesh:.2f} s each; on N workers about "
-              + ", ".join(f"N={n}: {1000 * per_mesh / (n * efficiency) / 60:.1f} min" for n in (2, 8, 32)))
+        print(
+            f"\n1,000 YCB-sized objects: {per_mesh:.2f} s each; on N workers about "
+            + ", ".join(f"N={n}: {1000 * per_mesh / (n * efficiency) / 60:.1f} min" for n in (2, 8, 32))
+        )
     finally:
         shutil.rmtree(scratch, ignore_errors=True)
     return 0

@@ -87,49 +87,70 @@ def main(argv=None) -> int:
     if not np.array_equal(tactile.imprints(mesh, P, N, sensor), tactile.imprints(mesh, P, N, sensor, scene=scene)):
         print("bench_imprints: a prebuilt scene changed the imprints", file=sys.stderr)
         return 1
-    small = interleaved_medians({
-        "scene": lambda: embree_scene(mesh),
-        "poses": lambda: tactile.sensor_poses(mesh, P, N, sensor),
-        "fast": lambda: tactile.imprints(mesh, P, N, sensor),
-        "fast_scene": lambda: tactile.imprints(mesh, P, N, sensor, scene=scene),
-        "exact": lambda: imprints_exact(mesh, P, N, sensor),
-    }, args.repeats, warm=True)
-    big = interleaved_medians({
-        "batch": lambda: tactile.imprints(mesh, PB, NB, sensor),
-        "batch_scene": lambda: tactile.imprints(mesh, PB, NB, sensor, scene=scene),
-        "batch_poses": lambda: tactile.sensor_poses(mesh, PB, NB, sensor),
-        "batch_coarse": lambda: tactile.imprints(mesh, PB, NB, coarse, scene=scene),
-    }, args.batch_repeats)
+    small = interleaved_medians(
+        {
+            "scene": lambda: embree_scene(mesh),
+            "poses": lambda: tactile.sensor_poses(mesh, P, N, sensor),
+            "fast": lambda: tactile.imprints(mesh, P, N, sensor),
+            "fast_scene": lambda: tactile.imprints(mesh, P, N, sensor, scene=scene),
+            "exact": lambda: imprints_exact(mesh, P, N, sensor),
+        },
+        args.repeats,
+        warm=True,
+    )
+    big = interleaved_medians(
+        {
+            "batch": lambda: tactile.imprints(mesh, PB, NB, sensor),
+            "batch_scene": lambda: tactile.imprints(mesh, PB, NB, sensor, scene=scene),
+            "batch_poses": lambda: tactile.sensor_poses(mesh, PB, NB, sensor),
+            "batch_coarse": lambda: tactile.imprints(mesh, PB, NB, coarse, scene=scene),
+        },
+        args.batch_repeats,
+    )
     load_after = load_average()
 
     def rays(s):
         return (s.rows * s.supersample) * (s.cols * s.supersample)
 
     k = args.batch
-    print(f"imprint benchmark: {path.name}, {mesh.n_faces} faces, 150 mm; sensor {sensor.rows}x{sensor.cols}, "
-          f"pitch {sensor.pitch_mm} mm, supersample {sensor.supersample} ({rays(sensor)} rays/imprint), mode "
-          f"{sensor.mode}, plane {sensor.plane}; {os.cpu_count()} CPUs; medians of {args.repeats} interleaved warm "
-          f"rounds ({args.batch_repeats} rounds for the batches)")
+    print(
+        f"imprint benchmark: {path.name}, {mesh.n_faces} faces, 150 mm; sensor {sensor.rows}x{sensor.cols}, "
+        f"pitch {sensor.pitch_mm} mm, supersample {sensor.supersample} ({rays(sensor)} rays/imprint), mode "
+        f"{sensor.mode}, plane {sensor.plane}; {os.cpu_count()} CPUs; medians of {args.repeats} interleaved warm "
+        f"rounds ({args.batch_repeats} rounds for the batches)"
+    )
     print(f"load average (1/5/15 min): {load_before} before, {load_after} after\n")
     print("| measure | seconds | imprints/s | note |")
     print("|---|---|---|---|")
     print(f"| Embree scene build | {small['scene']:.4f} | | once per mesh (`meshsal.mesh.embree.embree_scene`) |")
     print(f"| pose fit, 15 points | {small['poses']:.4f} | | shared by both paths, included in both |")
-    print(f"| fast, 15 imprints, scene built in the call | {small['fast']:.4f} | {15 / small['fast']:.0f} | "
-          "`imprints(mesh, P, N, sensor)` |")
-    print(f"| fast, 15 imprints, prebuilt scene | {small['fast_scene']:.4f} | {15 / small['fast_scene']:.0f} | "
-          "`imprints(..., scene=scene)` |")
+    print(
+        f"| fast, 15 imprints, scene built in the call | {small['fast']:.4f} | {15 / small['fast']:.0f} | "
+        "`imprints(mesh, P, N, sensor)` |"
+    )
+    print(
+        f"| fast, 15 imprints, prebuilt scene | {small['fast_scene']:.4f} | {15 / small['fast_scene']:.0f} | "
+        "`imprints(..., scene=scene)` |"
+    )
     print(f"| exact, 15 imprints | {small['exact']:.4f} | {15 / small['exact']:.0f} | plane sections + z-buffer |")
-    print(f"| **ratio exact / fast, prebuilt scene** | **{small['exact'] / small['fast_scene']:.1f}x** | | "
-          "target >= 20x is judged here: many imprints per mesh, scene built once |")
-    print(f"| ratio exact / fast, scene built in the call | {small['exact'] / small['fast']:.1f}x | | "
-          "one-off call on a new mesh |")
-    print(f"| **fast, batch of {k}, scene built in the call** | {big['batch']:.3f} | **{k / big['batch']:.0f}** | "
-          "target >= 1000/s |")
+    print(
+        f"| **ratio exact / fast, prebuilt scene** | **{small['exact'] / small['fast_scene']:.1f}x** | | "
+        "target >= 20x is judged here: many imprints per mesh, scene built once |"
+    )
+    print(
+        f"| ratio exact / fast, scene built in the call | {small['exact'] / small['fast']:.1f}x | | "
+        "one-off call on a new mesh |"
+    )
+    print(
+        f"| **fast, batch of {k}, scene built in the call** | {big['batch']:.3f} | **{k / big['batch']:.0f}** | "
+        "target >= 1000/s |"
+    )
     print(f"| fast, batch of {k}, prebuilt scene | {big['batch_scene']:.3f} | {k / big['batch_scene']:.0f} | |")
     print(f"| pose fit, {k} points | {big['batch_poses']:.3f} | | included above |")
-    print(f"| fast, batch of {k}, prebuilt scene, supersample 2 | {big['batch_coarse']:.3f} | "
-          f"{k / big['batch_coarse']:.0f} | {rays(coarse)} rays/imprint; not the default |")
+    print(
+        f"| fast, batch of {k}, prebuilt scene, supersample 2 | {big['batch_coarse']:.3f} | "
+        f"{k / big['batch_coarse']:.0f} | {rays(coarse)} rays/imprint; not the default |"
+    )
     return 0
 
 

@@ -65,11 +65,22 @@ def serve() -> None:
 
 
 def start(native: bool) -> subprocess.Popen:
-    env = {k: v for k, v in os.environ.items() if k not in ("OPENBLAS_CORETYPE", "OPENCV_CPU_DISABLE", "OPENCV_IPP",
-                                                              "NPY_DISABLE_CPU_FEATURES", "VISUOTACTILE_EMBREE_CONFIG")}
+    env = {
+        k: v
+        for k, v in os.environ.items()
+        if k
+        not in (
+            "OPENBLAS_CORETYPE",
+            "OPENCV_CPU_DISABLE",
+            "OPENCV_IPP",
+            "NPY_DISABLE_CPU_FEATURES",
+            "VISUOTACTILE_EMBREE_CONFIG",
+        )
+    }
     env.update(OMP_NUM_THREADS="1", OPENBLAS_NUM_THREADS="1", VISUOTACTILE_KERNELS="native" if native else "pinned")
-    child = subprocess.Popen([sys.executable, __file__, "--serve"], env=env, stdin=subprocess.PIPE,
-                             stdout=subprocess.PIPE, text=True)
+    child = subprocess.Popen(
+        [sys.executable, __file__, "--serve"], env=env, stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True
+    )
     ready = json.loads(child.stdout.readline())
     print(f"{'native' if native else 'pinned'}: {ready['kernels']}")
     return child
@@ -106,8 +117,10 @@ def main() -> None:
     for stage in STAGES:
         native, pinned = np.array(cpu["native", stage]), np.array(cpu["pinned", stage])
         ratio = pinned / native
-        print(f"| {stage} | {np.median(native):.3f} | {np.median(pinned):.3f} | "
-              f"{np.median(ratio):.2f} ({ratio.min():.2f}-{ratio.max():.2f}) |")
+        print(
+            f"| {stage} | {np.median(native):.3f} | {np.median(pinned):.3f} | "
+            f"{np.median(ratio):.2f} ({ratio.min():.2f}-{ratio.max():.2f}) |"
+        )
 
 
 if __name__ == "__main__":

@@ -44,10 +44,12 @@ def main(argv=None) -> int:
     parser.add_argument("--corpus", type=Path, default=SHARED / "corpus" / "random-objects")
     parser.add_argument("--repeats", type=int, default=15)
     args = parser.parse_args(argv)
-    meshes = [("nefertiti (OBJ, 99,938 faces)", args.meshes_dir / "nefertiti.obj"),
-              ("power_drill (YCB OBJ, 15,728 faces)", args.meshes_dir / "ycb" / "power_drill.obj"),
-              ("power_drill (embedded PLY)", ycb.path("power_drill")),
-              ("corpus 000.obj (about 470 faces)", args.corpus / "000.obj")]
+    meshes = [
+        ("nefertiti (OBJ, 99,938 faces)", args.meshes_dir / "nefertiti.obj"),
+        ("power_drill (YCB OBJ, 15,728 faces)", args.meshes_dir / "ycb" / "power_drill.obj"),
+        ("power_drill (embedded PLY)", ycb.path("power_drill")),
+        ("corpus 000.obj (about 470 faces)", args.corpus / "000.obj"),
+    ]
     print("| mesh | median CPU ms | min CPU ms |")
     print("|---|---:|---:|")
     for label, path in meshes:

@@ -91,8 +91,10 @@ def main(argv=None) -> int:
         rows.append((label, mesh.n_faces, medians))
 
     names = [k for k in rows[0][2] if k != "untouchable"]
-    print(f"\ninterest_points (attention) at {args.size}x{args.size}, median of {args.repeats}: "
-          "wall / CPU seconds (CPU of all threads)\n")
+    print(
+        f"\ninterest_points (attention) at {args.size}x{args.size}, median of {args.repeats}: "
+        "wall / CPU seconds (CPU of all threads)\n"
+    )
     print("| mesh | faces | refused | " + " | ".join(names) + " |")
     print("|---|---:|---:|" + "---:|" * len(names))
     for label, faces, med in rows:
@@ -102,8 +104,10 @@ def main(argv=None) -> int:
     for label, _, med in rows:
         wall = med["interest_points"][0]
         verdict = "met" if wall <= TARGET_S else "NOT met (see the load average)"
-        print(f"{label}: end to end {wall:.2f} s wall, {med['interest_points'][1]:.2f} s CPU "
-              f"(target <= {TARGET_S:.0f} s on 2 cores): {verdict}")
+        print(
+            f"{label}: end to end {wall:.2f} s wall, {med['interest_points'][1]:.2f} s CPU "
+            f"(target <= {TARGET_S:.0f} s on 2 cores): {verdict}"
+        )
     print(machine())
     return 0
 

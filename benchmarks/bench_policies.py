@@ -53,11 +53,17 @@ def synthetic(objects: int, places: int, touches: int, seed: int = 0):
         ranked.append(rng.permutation(places))
         posteriors.append(rng.dirichlet(np.full(objects, 0.3), size=(places, touches)))
         weights.append(np.full((places, touches), 1.0 / touches))
-    knowledge = TouchKnowledge(names, tuple(place_ids), tuple(ranked), tuple(posteriors), tuple(weights), None,
-                               Calibration(), "polar")
+    knowledge = TouchKnowledge(
+        names, tuple(place_ids), tuple(ranked), tuple(posteriors), tuple(weights), None, Calibration(), "polar"
+    )
     ids = place_ids[0][ranked[0]]
-    test = Places(ids, rng.normal(size=(places, 3)) * 50.0, rng.normal(size=(places, 3)),
-                  rng.random((places, len(FEATURES))), np.ones(places, bool))
+    test = Places(
+        ids,
+        rng.normal(size=(places, 3)) * 50.0,
+        rng.normal(size=(places, 3)),
+        rng.random((places, len(FEATURES))),
+        np.ones(places, bool),
+    )
     return knowledge, test
 
 
@@ -74,30 +80,42 @@ def main(argv=None) -> int:
     knowledge, places = synthetic(args.objects, args.places, args.touches)
     rng = np.random.default_rng(1)
     with threadpool_limits(1):
-        forecast = knowledge.forecast(len(places))                          # warm: imports, first allocations
+        forecast = knowledge.forecast(len(places))  # warm: imports, first allocations
         forecast_s = [timed(knowledge.forecast, len(places)) for _ in range(5)]
         states = []
         for r in range(args.repeats):
             touched = tuple(int(t) for t in rng.choice(args.places, r % 4, replace=False))
             available = np.ones(args.places, bool)
             available[list(touched)] = False
-            states.append(TouchState(places, touched, np.zeros((len(touched), 16, 16), np.float32),
-                                     rng.dirichlet(np.full(args.objects, 1.0 if r % 2 else 5.0)), available,
-                                     forecast, knowledge))
+            states.append(
+                TouchState(
+                    places,
+                    touched,
+                    np.zeros((len(touched), 16, 16), np.float32),
+                    rng.dirichlet(np.full(args.objects, 1.0 if r % 2 else 5.0)),
+                    available,
+                    forecast,
+                    knowledge,
+                )
+            )
         policies = {name: POLICIES.get(name)() for name in POLICIES.names()}
         times = {name: [] for name in policies}
         for state in states:
             for name, policy in policies.items():
                 times[name].append(timed(policy.choose, state, np.random.default_rng(0)))
-    print(f"| what ({args.objects} objects, {args.places} places, {args.touches} training touches each) "
-          f"| median wall | median CPU | target |")
+    print(
+        f"| what ({args.objects} objects, {args.places} places, {args.touches} training touches each) "
+        f"| median wall | median CPU | target |"
+    )
     print("|---|---:|---:|---:|")
     rows = {"forecast of every place under every object, once per episode": forecast_s}
     rows.update({f"choose: {name}": t for name, t in times.items()})
     for what, t in rows.items():
         target = "<= 20 ms" if what == "choose: info_gain" else ""
-        print(f"| {what} | {statistics.median(w for w, _ in t) * 1e3:.2f} ms "
-              f"| {statistics.median(c for _, c in t) * 1e3:.2f} ms | {target} |")
+        print(
+            f"| {what} | {statistics.median(w for w, _ in t) * 1e3:.2f} ms "
+            f"| {statistics.median(c for _, c in t) * 1e3:.2f} ms | {target} |"
+        )
     return 0
 
 

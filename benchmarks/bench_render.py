@@ -30,8 +30,8 @@ from pathlib import Path
 import numpy as np
 
 from meshsal import load_mesh
-from meshsal.mesh.embree import embree_scene
 from meshsal.mesh import bounding_sphere
+from meshsal.mesh.embree import embree_scene
 from meshsal.views.cameras import camera_rays, view_rig
 from meshsal.views.render import _candidates, _hull_points, _pixel_grid, render_views
 from meshsal.views.tracer import tracer
@@ -86,8 +86,11 @@ def open3d_contenders(mesh, every, same) -> dict:
         return scene
 
     scene = new_scene()
-    return {"o3d prebuilt": lambda: scene.cast_rays(every), "o3d built": lambda: new_scene().cast_rays(every),
-            "o3d same": lambda: scene.cast_rays(same)}
+    return {
+        "o3d prebuilt": lambda: scene.cast_rays(every),
+        "o3d built": lambda: new_scene().cast_rays(every),
+        "o3d same": lambda: scene.cast_rays(same),
+    }
 
 
 def main(argv=None) -> int:
@@ -110,26 +113,32 @@ def main(argv=None) -> int:
         return list(pool.map(lambda r: prebuilt.first_hits(*r), candidates))
 
     same = np.vstack([np.hstack([o, np.broadcast_to(d, o.shape)]) for o, d in candidates])
-    contenders = {"prebuilt": lambda: render_views(mesh, cameras, size=args.size, scene=prebuilt),
-                  "built": lambda: render_views(mesh, cameras, size=args.size),
-                  "robust": lambda: render_views(mesh, cameras, size=args.size, scene=robust),
-                  "trace": trace,
-                  **open3d_contenders(mesh, every_pixel_rays(mesh, cameras, args.size), same)}
+    contenders = {
+        "prebuilt": lambda: render_views(mesh, cameras, size=args.size, scene=prebuilt),
+        "built": lambda: render_views(mesh, cameras, size=args.size),
+        "robust": lambda: render_views(mesh, cameras, size=args.size, scene=robust),
+        "trace": trace,
+        **open3d_contenders(mesh, every_pixel_rays(mesh, cameras, args.size), same),
+    }
     times = round_robin(contenders, args.repeats)
     pool.shutdown()
     seconds = {label: float(np.median(t)) for label, t in times.items()}
 
-    print(f"nefertiti: {mesh.n_faces} faces, {len(cameras)} views at {args.size}^2 = {n_rays} pixels; "
-          f"the renderer casts {cast} rays ({cast / n_rays:.0%}); {args.repeats} rounds\n")
+    print(
+        f"nefertiti: {mesh.n_faces} faces, {len(cameras)} views at {args.size}^2 = {n_rays} pixels; "
+        f"the renderer casts {cast} rays ({cast / n_rays:.0%}); {args.repeats} rounds\n"
+    )
     print("| renderer | seconds (72 views) | Mpixels/s |")
     print("|---|---:|---:|")
-    labels = {"prebuilt": "meshsal.render_views (Embree, shaded), tracer prebuilt",
-              "built": "meshsal.render_views, scene built in the call",
-              "robust": "meshsal.render_views, a robust scene prebuilt (every ray robust)",
-              "trace": "its tracer alone, prebuilt (its rays, no shading)",
-              "o3d prebuilt": "Open3D RaycastingScene, trace only, a ray per pixel, scene prebuilt",
-              "o3d built": "Open3D, scene built in the call, a ray per pixel",
-              "o3d same": "Open3D, trace only, the renderer's rays"}
+    labels = {
+        "prebuilt": "meshsal.render_views (Embree, shaded), tracer prebuilt",
+        "built": "meshsal.render_views, scene built in the call",
+        "robust": "meshsal.render_views, a robust scene prebuilt (every ray robust)",
+        "trace": "its tracer alone, prebuilt (its rays, no shading)",
+        "o3d prebuilt": "Open3D RaycastingScene, trace only, a ray per pixel, scene prebuilt",
+        "o3d built": "Open3D, scene built in the call, a ray per pixel",
+        "o3d same": "Open3D, trace only, the renderer's rays",
+    }
     for key, label in labels.items():
         if key in seconds:
             print(f"| {label} | {seconds[key]:.3f} | {n_rays / seconds[key] / 1e6:.2f} |")
@@ -137,14 +146,18 @@ def main(argv=None) -> int:
         print("\nOpen3D is not installed: no ratio.")
     else:
         print("\n| throughput against Open3D | median | range |\n|---|---:|---:|")
-        for label, ours, theirs in (("both scenes prebuilt", "prebuilt", "o3d prebuilt"),
-                                    ("both scenes built in the call", "built", "o3d built"),
-                                    ("a robust scene, both prebuilt", "robust", "o3d prebuilt"),
-                                    ("tracers alone, the same rays", "trace", "o3d same")):
+        for label, ours, theirs in (
+            ("both scenes prebuilt", "prebuilt", "o3d prebuilt"),
+            ("both scenes built in the call", "built", "o3d built"),
+            ("a robust scene, both prebuilt", "robust", "o3d prebuilt"),
+            ("tracers alone, the same rays", "trace", "o3d same"),
+        ):
             ratio = times[theirs] / times[ours]
             print(f"| {label} | {np.median(ratio):.2f}x | {ratio.min():.2f}-{ratio.max():.2f}x |")
-    print(f"\ntarget: 72 views <= 0.5 s -> {'met' if seconds['built'] <= 0.5 else 'missed'} "
-          f"({seconds['built']:.3f} s with the scene built in the call)")
+    print(
+        f"\ntarget: 72 views <= 0.5 s -> {'met' if seconds['built'] <= 0.5 else 'missed'} "
+        f"({seconds['built']:.3f} s with the scene built in the call)"
+    )
     return 0
 
 

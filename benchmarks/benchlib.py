@@ -69,5 +69,11 @@ def hand_124k():
     ms.meshing_decimation_quadric_edge_collapse(targetfacenum=124_000, preservetopology=True, preservenormal=True)
     ms.meshing_remove_unreferenced_vertices()
     out = ms.current_mesh()
-    return scale_to(Mesh(vertices=out.vertex_matrix(), faces=out.face_matrix(),
-                         vertex_colors=out.vertex_color_matrix()[:, :3], name="hand, 124k faces"))
+    return scale_to(
+        Mesh(
+            vertices=out.vertex_matrix(),
+            faces=out.face_matrix(),
+            vertex_colors=out.vertex_color_matrix()[:, :3],
+            name="hand, 124k faces",
+        )
+    )

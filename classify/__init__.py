@@ -41,10 +41,17 @@ _EXPORTS = {
 _SUBMODULES = {"recognizers", "experiment", "reporting", "runtime", "batch", "cli"}
 #: Where each module of the flat layout went.
 _MOVED = {
-    "classifiers": "recognizers.classifiers", "evolutionary_svm": "recognizers.evolutionary_svm",
-    "fusion": "recognizers.fusion", "dataset": "experiment.samples", "learned": "experiment.survey",
-    "protocols": "experiment.protocols", "results": "reporting.results", "report": "reporting.report",
-    "stats": "reporting.stats", "cluster": "runtime.cluster", "cache": "runtime.cache",
+    "classifiers": "recognizers.classifiers",
+    "evolutionary_svm": "recognizers.evolutionary_svm",
+    "fusion": "recognizers.fusion",
+    "dataset": "experiment.samples",
+    "learned": "experiment.survey",
+    "protocols": "experiment.protocols",
+    "results": "reporting.results",
+    "report": "reporting.report",
+    "stats": "reporting.stats",
+    "cluster": "runtime.cluster",
+    "cache": "runtime.cache",
 }
 
 __getattr__, __dir__, __all__ = attach(__name__, _EXPORTS, _SUBMODULES, _MOVED)

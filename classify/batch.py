@@ -55,9 +55,24 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["FORMAT", "ENTRY_FORMAT", "VERSION", "SUFFIXES", "LOCK", "BatchSettings", "MeshEntry", "BatchSummary",
-           "StoreInUseError", "find_meshes", "source_hash", "process_mesh", "lock_store", "run_batch", "load_entry",
-           "load_store"]
+__all__ = [
+    "FORMAT",
+    "ENTRY_FORMAT",
+    "VERSION",
+    "SUFFIXES",
+    "LOCK",
+    "BatchSettings",
+    "MeshEntry",
+    "BatchSummary",
+    "StoreInUseError",
+    "find_meshes",
+    "source_hash",
+    "process_mesh",
+    "lock_store",
+    "run_batch",
+    "load_entry",
+    "load_store",
+]
 
 FORMAT = "visuotactile.BatchStore"
 ENTRY_FORMAT = "visuotactile.BatchEntry"
@@ -83,18 +98,26 @@ class BatchSettings:
         methods = POINT_METHODS.check(self.methods)
         needs_model = [m for m in methods if m in MODEL_METHODS]
         if needs_model:
-            raise ValueError(f"{', '.join(needs_model)}: a learned method needs a touch model fitted on training "
-                             f"instances ('visuotactile experiment'), which a batch of single meshes has not")
+            raise ValueError(
+                f"{', '.join(needs_model)}: a learned method needs a touch model fitted on training "
+                f"instances ('visuotactile experiment'), which a batch of single meshes has not"
+            )
         if int(self.n_points) != self.n_points or self.n_points < 1:
             raise ValueError(f"n_points must be a positive integer, got {self.n_points!r}")
         if not self.size_mm > 0 or self.view_size < 16:
-            raise ValueError(f"size_mm must be positive and view_size at least 16, got {self.size_mm}, "
-                             f"{self.view_size}")
+            raise ValueError(
+                f"size_mm must be positive and view_size at least 16, got {self.size_mm}, {self.view_size}"
+            )
         object.__setattr__(self, "methods", methods)
 
     def to_json(self) -> dict:
-        return {"methods": list(self.methods), "n_points": int(self.n_points), "size_mm": float(self.size_mm),
-                "view_size": int(self.view_size), "seed": int(self.seed)}
+        return {
+            "methods": list(self.methods),
+            "n_points": int(self.n_points),
+            "size_mm": float(self.size_mm),
+            "view_size": int(self.view_size),
+            "seed": int(self.seed),
+        }
 
 
 @dataclass(frozen=True, eq=False)
@@ -123,10 +146,11 @@ class BatchSummary:
 
     def markdown(self) -> str:
         rate = self.done / self.wall_s if self.wall_s > 0 else 0.0
-        lines = ["| meshes done | skipped (stored, unchanged) | failed | redone (file changed) | wall | meshes/s |",
-                 "|---:|---:|---:|---:|---:|---:|",
-                 f"| {self.done} | {self.skipped} | {self.failed} | {self.redone} | {self.wall_s:.1f} s | "
-                 f"{rate:.2f} |"]
+        lines = [
+            "| meshes done | skipped (stored, unchanged) | failed | redone (file changed) | wall | meshes/s |",
+            "|---:|---:|---:|---:|---:|---:|",
+            f"| {self.done} | {self.skipped} | {self.failed} | {self.redone} | {self.wall_s:.1f} s | {rate:.2f} |",
+        ]
         if self.stage_median_s:
             lines += ["", "| stage | median per mesh |", "|---|---:|"]
             lines += [f"| {k} | {v * 1000:.1f} ms |" for k, v in self.stage_median_s.items()]
@@ -234,8 +258,7 @@ def process_mesh(path, name: str, store, settings: BatchSettings) -> dict:
         return {**result, "status": "failed", "error": error}
 
 
-def _compute(source, path: Path, name: str, store: Path, settings: BatchSettings, timings: dict,
-             digest: str) -> None:
+def _compute(source, path: Path, name: str, store: Path, settings: BatchSettings, timings: dict, digest: str) -> None:
     import tactile
     from classify.experiment.samples import method_points
     from classify.runtime.cache import hash_arrays
@@ -257,8 +280,9 @@ def _compute(source, path: Path, name: str, store: Path, settings: BatchSettings
     scene = embree_scene(mesh)
     sensor = tactile.Sensor()
     t = time.perf_counter()
-    options = PointOptions(n=settings.n_points, seed=settings.seed, size=settings.view_size, threads=1,
-                           pad_width=sensor.width_mm)
+    options = PointOptions(
+        n=settings.n_points, seed=settings.seed, size=settings.view_size, threads=1, pad_width=sensor.width_mm
+    )
     picked = method_points(mesh, settings.methods, options, vertex_saliency=saliency)
     timings["points"] = time.perf_counter() - t
     for method in settings.methods:
@@ -271,12 +295,23 @@ def _compute(source, path: Path, name: str, store: Path, settings: BatchSettings
         arrays[f"{method}/imprints"] = np.asarray(images, np.float32)
     t = time.perf_counter()
     frame = mesh.transform
-    meta = {"format": ENTRY_FORMAT, "version": VERSION, "name": name, "source": str(path),
-            "source_sha256": digest, "mesh_sha256": hash_arrays(mesh.vertices, mesh.faces),
-            "settings": settings.to_json(),
-            "to_source": {"scale": frame.scale, "offset": frame.offset.tolist(), "rotation": frame.rotation.tolist(),
-                          "meaning": "nominal = scale * rotation @ source + offset"},
-            "methods": methods, "timings_s": timings}
+    meta = {
+        "format": ENTRY_FORMAT,
+        "version": VERSION,
+        "name": name,
+        "source": str(path),
+        "source_sha256": digest,
+        "mesh_sha256": hash_arrays(mesh.vertices, mesh.faces),
+        "settings": settings.to_json(),
+        "to_source": {
+            "scale": frame.scale,
+            "offset": frame.offset.tolist(),
+            "rotation": frame.rotation.tolist(),
+            "meaning": "nominal = scale * rotation @ source + offset",
+        },
+        "methods": methods,
+        "timings_s": timings,
+    }
     target = _entry_path(store, name)
     with atomic_path(target) as tmp:
         with open(tmp, "wb") as fh:
@@ -320,13 +355,14 @@ def lock_store(store):
         try:
             fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except BlockingIOError:
-            raise StoreInUseError(f"{store}: in use by another batch ({_holder(fd)}); wait for it to end or "
-                                  f"write to another --out") from None
+            raise StoreInUseError(
+                f"{store}: in use by another batch ({_holder(fd)}); wait for it to end or write to another --out"
+            ) from None
         except OSError as exc:
-            raise OSError(f"{path}: cannot lock the store ({exc.strerror}); put the store on a filesystem with "
-                          f"file locks") from None
-        holder = {"pid": os.getpid(), "host": socket.gethostname(),
-                  "started": time.strftime("%Y-%m-%d %H:%M:%S %z")}
+            raise OSError(
+                f"{path}: cannot lock the store ({exc.strerror}); put the store on a filesystem with file locks"
+            ) from None
+        holder = {"pid": os.getpid(), "host": socket.gethostname(), "started": time.strftime("%Y-%m-%d %H:%M:%S %z")}
         os.ftruncate(fd, 0)
         os.pwrite(fd, (json.dumps(holder) + "\n").encode(), 0)
         yield
@@ -355,8 +391,10 @@ def _open_store(store: Path, settings: BatchSettings) -> None:
         if not isinstance(have, dict):
             raise ValueError(f"{header}: not a batch store header (not a JSON object)")
         if have.get("format") != FORMAT or have.get("settings") != wanted["settings"]:
-            raise ValueError(f"{store}: this store holds other settings ({have.get('settings')}); "
-                             f"write to another --out or use the same settings")
+            raise ValueError(
+                f"{store}: this store holds other settings ({have.get('settings')}); "
+                f"write to another --out or use the same settings"
+            )
         return
     write_text(header, json.dumps(wanted, indent=2) + "\n")
 
@@ -369,9 +407,11 @@ def _check_entry(store: Path, result: dict) -> dict:
     try:
         meta = _entry_meta(path)
     except FileNotFoundError:
-        problem = (f"{path}: the task reported the entry {'written' if result['status'] == 'done' else 'stored'} "
-                   f"but it is not there; the workers must write to the client's store (a filesystem every "
-                   f"worker mounts at the same path)")
+        problem = (
+            f"{path}: the task reported the entry {'written' if result['status'] == 'done' else 'stored'} "
+            f"but it is not there; the workers must write to the client's store (a filesystem every "
+            f"worker mounts at the same path)"
+        )
         return {**result, "status": "failed", "error": problem}
     except ValueError as exc:
         problem = f"{exc}, after the task reported it {'written' if result['status'] == 'done' else 'stored'}"
@@ -379,12 +419,13 @@ def _check_entry(store: Path, result: dict) -> dict:
         if meta.get("source_sha256") == result["source_sha256"]:
             return result
         problem = f"{path}: holds another version of the mesh than its task computed"
-    path.unlink(missing_ok=True)    # no entry rather than one its file does not give
+    path.unlink(missing_ok=True)  # no entry rather than one its file does not give
     return {**result, "status": "failed", "error": problem + "; the entry was removed"}
 
 
-def run_batch(directory, store, settings: BatchSettings | None = None, executor=None,
-              quiet: bool = False) -> BatchSummary:
+def run_batch(
+    directory, store, settings: BatchSettings | None = None, executor=None, quiet: bool = False
+) -> BatchSummary:
     """Write the entry of every mesh under ``directory`` that ``store`` does not hold for the same mesh.
 
     Parameters
@@ -418,19 +459,29 @@ def run_batch(directory, store, settings: BatchSettings | None = None, executor=
         started = time.perf_counter()
         executor = Inline() if executor is None else executor
         tasks = [(str(path), name, str(store), settings) for name, path in meshes]
-        results = [_check_entry(store, r) for r in progress(executor.map(_task, tasks), total=len(tasks),
-                                                                desc="batch", quiet=quiet, unit="meshes")]
+        results = [
+            _check_entry(store, r)
+            for r in progress(executor.map(_task, tasks), total=len(tasks), desc="batch", quiet=quiet, unit="meshes")
+        ]
         wall = time.perf_counter() - started
         failed = [r for r in results if r["status"] == "failed"]
         sources = {name: str(path) for name, path in meshes}
-        write_text(store / "failures.jsonl", "".join(json.dumps({"name": r["name"], "source": sources[r["name"]],
-                                                                 "error": r["error"]}) + "\n" for r in failed))
+        write_text(
+            store / "failures.jsonl",
+            "".join(
+                json.dumps({"name": r["name"], "source": sources[r["name"]], "error": r["error"]}) + "\n"
+                for r in failed
+            ),
+        )
         for stale in (store / "meshes").rglob(".*.npz"):
-            stale.unlink(missing_ok=True)    # left by a worker killed while writing; its mesh was redone
+            stale.unlink(missing_ok=True)  # left by a worker killed while writing; its mesh was redone
     done = [r for r in results if r["status"] == "done"]
     skipped = sum(r["status"] == "skipped" for r in results)
-    medians = {k: float(np.median([r["timings"][k] for r in done])) for k in STAGES
-               if done and all(k in r["timings"] for r in done)}
+    medians = {
+        k: float(np.median([r["timings"][k] for r in done]))
+        for k in STAGES
+        if done and all(k in r["timings"] for r in done)
+    }
     return BatchSummary(len(done), skipped, len(failed), wall, medians, redone=sum(r["redone"] for r in done))
 
 
@@ -457,8 +508,10 @@ def load_entry(store, name: str) -> MeshEntry:
     meta = parse_json(str(arrays.pop("meta")), path, "batch entry")
     if not isinstance(meta, dict) or meta.get("format") != ENTRY_FORMAT or meta.get("version") != VERSION:
         found = meta if isinstance(meta, dict) else {}
-        raise ValueError(f"{path}: not a version {VERSION} batch entry (format {found.get('format')!r}, "
-                         f"version {found.get('version')!r})")
+        raise ValueError(
+            f"{path}: not a version {VERSION} batch entry (format {found.get('format')!r}, "
+            f"version {found.get('version')!r})"
+        )
     try:
         source, frame = str(meta["source"]), meta["to_source"]
         transform = Similarity(frame["scale"], frame["offset"], frame["rotation"])
@@ -467,10 +520,16 @@ def load_entry(store, name: str) -> MeshEntry:
             mine = {key.split("/", 1)[1]: value for key, value in arrays.items() if key.startswith(f"{method}/")}
             points[method] = InterestPoints.from_arrays(mine, info, arrays["vertex_saliency"], method)
             k = len(mine["positions"])
-            imprints[method] = tactile.ImprintSet(imprints=mine["imprints"], labels=np.zeros(k, np.int64),
-                                                  object_names=(name,), point_ids=np.arange(k),
-                                                  positions=mine["positions"], normals=mine["normals"],
-                                                  sensor=tactile.Sensor(), source=f"{source} ({method} points)")
+            imprints[method] = tactile.ImprintSet(
+                imprints=mine["imprints"],
+                labels=np.zeros(k, np.int64),
+                object_names=(name,),
+                point_ids=np.arange(k),
+                positions=mine["positions"],
+                normals=mine["normals"],
+                sensor=tactile.Sensor(),
+                source=f"{source} ({method} points)",
+            )
     except (KeyError, TypeError, ValueError, AttributeError) as exc:
         raise ValueError(f"{path}: damaged batch entry ({type(exc).__name__}: {exc})") from None
     return MeshEntry(name, source, points, imprints, transform, meta.get("timings_s", {}))
@@ -481,6 +540,7 @@ def load_store(store) -> dict:
     root = Path(store) / "meshes"
     if not (Path(store) / "store.json").exists():
         raise ValueError(f"{store}: not a batch store (no store.json)")
-    names = sorted(p.relative_to(root).with_suffix("").as_posix() for p in root.rglob("*.npz")
-                   if not p.name.startswith("."))
+    names = sorted(
+        p.relative_to(root).with_suffix("").as_posix() for p in root.rglob("*.npz") if not p.name.startswith(".")
+    )
     return {name: load_entry(store, name) for name in names}

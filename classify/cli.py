@@ -13,92 +13,149 @@ import sys
 
 def register(subparsers) -> None:
     """Add the recognition subcommands (``experiment``, ``batch``)."""
-    from classify.recognizers.classifiers import CLASSIFIERS
     from classify.experiment import DEFAULT_REPLICATES, FULL_REPLICATES
     from classify.experiment.protocols import PROTOCOL_REGISTRY, PROTOCOLS
     from classify.policies import POLICIES
+    from classify.recognizers.classifiers import CLASSIFIERS
     from meshsal.points import POINT_METHODS
 
     p = subparsers.add_parser(
         "experiment",
         help="recognition experiment: interest points -> imprints -> five classifiers (Table 1)",
-        description=("Run the whole pipeline on the six toy objects (or --objects): interest points, simulated "
-                     "16x16 imprints, and recognition by kNN, naive Bayes, decision tree, evolutionary SVM and a "
-                     "deep network under the 'paper' protocol (one clean imprint per point, 5-fold CV grouped by "
-                     "point, repeated, similarity selection on training folds only: the paper's Table 1 like with "
-                     "like) and the 'instance' protocol (train on several fresh instances of each object: turned, "
-                     "resized, repainted, each touched in its own sessions; test on another instance after "
-                     "k = 1..n touches, calibrated posteriors multiplied). Rates come with 95 %% bootstrap "
-                     "intervals over replicates and objects; with several --methods, paired differences against "
-                     "--baseline. Prints Markdown tables and writes results.json, results.csv, "
-                     "confusion_<classifier>.png and touches.png under --out (with a learned method, each "
-                     "replicate's touch model in touch_models/). With --real, reports recognition "
-                     "on a saved ImprintSet (the paper's Table 2 layout) instead."),
+        description=(
+            "Run the whole pipeline on the six toy objects (or --objects): interest points, simulated "
+            "16x16 imprints, and recognition by kNN, naive Bayes, decision tree, evolutionary SVM and a "
+            "deep network under the 'paper' protocol (one clean imprint per point, 5-fold CV grouped by "
+            "point, repeated, similarity selection on training folds only: the paper's Table 1 like with "
+            "like) and the 'instance' protocol (train on several fresh instances of each object: turned, "
+            "resized, repainted, each touched in its own sessions; test on another instance after "
+            "k = 1..n touches, calibrated posteriors multiplied). Rates come with 95 %% bootstrap "
+            "intervals over replicates and objects; with several --methods, paired differences against "
+            "--baseline. Prints Markdown tables and writes results.json, results.csv, "
+            "confusion_<classifier>.png and touches.png under --out (with a learned method, each "
+            "replicate's touch model in touch_models/). With --real, reports recognition "
+            "on a saved ImprintSet (the paper's Table 2 layout) instead."
+        ),
     )
-    p.add_argument("--objects", nargs="+", metavar="OBJECTS",
-                   help="object sets (toys, ycb), object names or mesh files (OBJ/PLY/OFF/STL), separated by "
-                        "spaces or commas, e.g. 'toys,ycb'; default: toys")
+    p.add_argument(
+        "--objects",
+        nargs="+",
+        metavar="OBJECTS",
+        help="object sets (toys, ycb), object names or mesh files (OBJ/PLY/OFF/STL), separated by "
+        "spaces or commas, e.g. 'toys,ycb'; default: toys",
+    )
     size = p.add_mutually_exclusive_group()
-    size.add_argument("--size-mm", type=float, default=150.0,
-                      help="nominal size: every object is scaled to this principal-frame box diagonal (mm)")
-    size.add_argument("--real-size", action="store_true",
-                      help="keep the real size of objects with real units (the toys in mm, the YCB scans in metres), "
-                           "each instance still resized by +-5 %%, instead of --size-mm")
-    p.add_argument("--methods", type=_csv_list, default=("attention",),
-                   help=f"comma-separated interest-point methods: {POINT_METHODS.help_text()}")
-    p.add_argument("--policies", type=_csv_list, default=(),
-                   help=f"comma-separated touch policies, run touch by touch on the instance protocol's instances "
-                        f"and compared with the baseline's fixed plan: {POLICIES.help_text()}")
-    p.add_argument("--baseline", default=None,
-                   help="the method the others are compared with (default: uniform if measured, else the first)")
-    p.add_argument("--protocols", type=_csv_list, default=PROTOCOLS,
-                   help=f"comma-separated protocols: {PROTOCOL_REGISTRY.help_text()}")
-    p.add_argument("--classifiers", type=_csv_list, default=None,
-                   help=f"comma-separated classifiers (default all): {CLASSIFIERS.help_text()}")
+    size.add_argument(
+        "--size-mm",
+        type=float,
+        default=150.0,
+        help="nominal size: every object is scaled to this principal-frame box diagonal (mm)",
+    )
+    size.add_argument(
+        "--real-size",
+        action="store_true",
+        help="keep the real size of objects with real units (the toys in mm, the YCB scans in metres), "
+        "each instance still resized by +-5 %%, instead of --size-mm",
+    )
+    p.add_argument(
+        "--methods",
+        type=_csv_list,
+        default=("attention",),
+        help=f"comma-separated interest-point methods: {POINT_METHODS.help_text()}",
+    )
+    p.add_argument(
+        "--policies",
+        type=_csv_list,
+        default=(),
+        help=f"comma-separated touch policies, run touch by touch on the instance protocol's instances "
+        f"and compared with the baseline's fixed plan: {POLICIES.help_text()}",
+    )
+    p.add_argument(
+        "--baseline",
+        default=None,
+        help="the method the others are compared with (default: uniform if measured, else the first)",
+    )
+    p.add_argument(
+        "--protocols",
+        type=_csv_list,
+        default=PROTOCOLS,
+        help=f"comma-separated protocols: {PROTOCOL_REGISTRY.help_text()}",
+    )
+    p.add_argument(
+        "--classifiers",
+        type=_csv_list,
+        default=None,
+        help=f"comma-separated classifiers (default all): {CLASSIFIERS.help_text()}",
+    )
     p.add_argument("--n-points", type=int, default=15, help="interest points per object instance")
-    p.add_argument("--replicates", type=int, default=None,
-                   help=f"instance-protocol replicates, each with fresh instances (default {DEFAULT_REPLICATES}, "
-                        f"a quick run; --full gives {FULL_REPLICATES})")
+    p.add_argument(
+        "--replicates",
+        type=int,
+        default=None,
+        help=f"instance-protocol replicates, each with fresh instances (default {DEFAULT_REPLICATES}, "
+        f"a quick run; --full gives {FULL_REPLICATES})",
+    )
     p.add_argument("--full", action="store_true", help=f"a full run: {FULL_REPLICATES} replicates")
     p.add_argument("--train-instances", type=int, default=3, help="training instances per object and replicate")
     p.add_argument("--train-sessions", type=int, default=2, help="acquisition sessions per training instance")
     p.add_argument("--folds", type=int, default=5, help="paper protocol: cross-validation folds")
     p.add_argument("--repeats", type=int, default=10, help="paper protocol: repeats with reshuffled folds")
     p.add_argument("--view-size", type=int, default=None, help="rendered view size for the interest points")
-    p.add_argument("--mode", choices=("contour", "pressure"), default=None,
-                   help="imprint mode of the simulated sensor (default: tactile.Sensor's)")
+    p.add_argument(
+        "--mode",
+        choices=("contour", "pressure"),
+        default=None,
+        help="imprint mode of the simulated sensor (default: tactile.Sensor's)",
+    )
     p.add_argument("--out", default="results", help="output directory (default ./results)")
-    p.add_argument("--cache-dir", default=None,
-                   help="cache of points, imprints and rates (default $XDG_CACHE_HOME/visuotactile or "
-                        "./.cache/visuotactile); 'none' disables it")
+    p.add_argument(
+        "--cache-dir",
+        default=None,
+        help="cache of points, imprints and rates (default $XDG_CACHE_HOME/visuotactile or "
+        "./.cache/visuotactile); 'none' disables it",
+    )
     p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--features", choices=("raw", "polar"), default="raw",
-                   help="what the classifiers see: raw taxels (the paper's) or roll-invariant polar Fourier "
-                        "descriptors")
-    p.add_argument("--jobs", type=int, default=2,
-                   help="local worker processes without --workers or --scheduler (default 2; results do not "
-                        "depend on it)")
+    p.add_argument(
+        "--features",
+        choices=("raw", "polar"),
+        default="raw",
+        help="what the classifiers see: raw taxels (the paper's) or roll-invariant polar Fourier descriptors",
+    )
+    p.add_argument(
+        "--jobs",
+        type=int,
+        default=2,
+        help="local worker processes without --workers or --scheduler (default 2; results do not depend on it)",
+    )
     p.add_argument("--quiet", action="store_true", help="no progress bars")
-    p.add_argument("--real", metavar="SET.npz",
-                   help="a saved tactile.ImprintSet (e.g. from 'visuotactile export'): report recognition on it")
+    p.add_argument(
+        "--real",
+        metavar="SET.npz",
+        help="a saved tactile.ImprintSet (e.g. from 'visuotactile export'): report recognition on it",
+    )
     _add_cluster_options(p, default_workers=None)
     p.set_defaults(func=_experiment)
 
     b = subparsers.add_parser(
         "batch",
         help="points and imprints for every mesh of a folder, on a Dask cluster, into a resumable store",
-        description=("Compute interest points (per --methods) and their simulated imprints for every mesh file "
-                     "(.obj .ply .off .stl) under DIR, one task per mesh on a Dask cluster: a LocalCluster of "
-                     "--workers processes (default: one per core), or an existing cluster at --scheduler. Each "
-                     "mesh's entry is written atomically to STORE/meshes/<name>.npz; a rerun skips the meshes "
-                     "already there; a broken mesh goes to STORE/failures.jsonl and does not stop the batch. "
-                     "Load the store with classify.batch.load_store(STORE)."),
+        description=(
+            "Compute interest points (per --methods) and their simulated imprints for every mesh file "
+            "(.obj .ply .off .stl) under DIR, one task per mesh on a Dask cluster: a LocalCluster of "
+            "--workers processes (default: one per core), or an existing cluster at --scheduler. Each "
+            "mesh's entry is written atomically to STORE/meshes/<name>.npz; a rerun skips the meshes "
+            "already there; a broken mesh goes to STORE/failures.jsonl and does not stop the batch. "
+            "Load the store with classify.batch.load_store(STORE)."
+        ),
     )
     b.add_argument("directory", metavar="DIR", help="folder of meshes (searched recursively)")
     b.add_argument("--out", required=True, metavar="STORE", help="the store folder (created or resumed)")
-    b.add_argument("--methods", type=_csv_list, default=("attention", "uniform"),
-                   help=f"comma-separated interest-point methods (default attention,uniform): "
-                        f"{POINT_METHODS.help_text()}")
+    b.add_argument(
+        "--methods",
+        type=_csv_list,
+        default=("attention", "uniform"),
+        help=f"comma-separated interest-point methods (default attention,uniform): {POINT_METHODS.help_text()}",
+    )
     b.add_argument("--n-points", type=int, default=15, help="points (and imprints) per mesh and method")
     b.add_argument("--size-mm", type=float, default=150.0, help="nominal size: principal-frame box diagonal (mm)")
     b.add_argument("--view-size", type=int, default=128, help="rendered view size for the attention points")
@@ -110,20 +167,32 @@ def register(subparsers) -> None:
 
 def _add_cluster_options(p, default_workers):
     where = p.add_mutually_exclusive_group()
-    where.add_argument("--workers", type=int, default=None, metavar="N",
-                       help="run on a new Dask LocalCluster of N single-threaded worker processes"
-                            + (" (default: one per core; 1 runs in this process)" if default_workers == 0 else ""))
-    where.add_argument("--scheduler", metavar="ADDRESS",
-                       help="run on an existing Dask cluster: tls://HOST:8786 with the --tls-* certificates, or "
-                            "tcp://127.0.0.1:8786 through an SSH tunnel (see 'Many meshes' in the README); a "
-                            "plain tcp:// scheduler runs the code of anyone who reaches it")
+    where.add_argument(
+        "--workers",
+        type=int,
+        default=None,
+        metavar="N",
+        help="run on a new Dask LocalCluster of N single-threaded worker processes"
+        + (" (default: one per core; 1 runs in this process)" if default_workers == 0 else ""),
+    )
+    where.add_argument(
+        "--scheduler",
+        metavar="ADDRESS",
+        help="run on an existing Dask cluster: tls://HOST:8786 with the --tls-* certificates, or "
+        "tcp://127.0.0.1:8786 through an SSH tunnel (see 'Many meshes' in the README); a "
+        "plain tcp:// scheduler runs the code of anyone who reaches it",
+    )
     tls = p.add_argument_group("TLS (mutual; as 'dask scheduler' and 'dask worker' take them)")
-    tls.add_argument("--tls-ca-file", metavar="PEM", help="certificate authority that signed the cluster's "
-                                                          "certificates")
+    tls.add_argument(
+        "--tls-ca-file", metavar="PEM", help="certificate authority that signed the cluster's certificates"
+    )
     tls.add_argument("--tls-cert", metavar="PEM", help="this client's certificate (with --workers: every role's)")
     tls.add_argument("--tls-key", metavar="PEM", help="its private key, unless the certificate file holds it")
-    p.add_argument("--dashboard", metavar="ADDRESS",
-                   help="with --workers: serve the Dask dashboard at ADDRESS, e.g. 127.0.0.1:8787 (default: none)")
+    p.add_argument(
+        "--dashboard",
+        metavar="ADDRESS",
+        help="with --workers: serve the Dask dashboard at ADDRESS, e.g. 127.0.0.1:8787 (default: none)",
+    )
 
 
 def _cluster(args) -> dict:
@@ -145,12 +214,13 @@ def _batch(args) -> int:
     from classify.batch import BatchSettings, run_batch
     from classify.runtime.cluster import open_executor
 
-    settings = BatchSettings(methods=args.methods, n_points=args.n_points, size_mm=args.size_mm,
-                             view_size=args.view_size, seed=args.seed)
+    settings = BatchSettings(
+        methods=args.methods, n_points=args.n_points, size_mm=args.size_mm, view_size=args.view_size, seed=args.seed
+    )
     workers = None
     if not args.scheduler:
         workers = args.workers if args.workers is not None else (os.cpu_count() or 1)
-        workers = workers if workers > 1 else None     # one worker: this process, no cluster
+        workers = workers if workers > 1 else None  # one worker: this process, no cluster
     with open_executor(workers=workers, scheduler=args.scheduler, **_cluster(args)) as executor:
         summary = run_batch(args.directory, args.out, settings, executor, args.quiet)
     print(summary.markdown())
@@ -168,31 +238,51 @@ def _csv_list(text: str) -> tuple:
 
 def _experiment(args) -> int:
     import tactile
-    from classify.experiment import (DEFAULT_REPLICATES, FULL_REPLICATES, ExperimentConfig, Settings, format_tables,
-                                     run_experiment, run_real)
+    from classify.experiment import (
+        DEFAULT_REPLICATES,
+        FULL_REPLICATES,
+        ExperimentConfig,
+        Settings,
+        format_tables,
+        run_experiment,
+        run_real,
+    )
     from classify.recognizers.classifiers import NAMES
     from classify.runtime.cluster import open_executor
 
     if args.full and args.replicates is not None:
         raise ValueError("give --full or --replicates, not both")
     sensor = tactile.Sensor() if args.mode is None else tactile.Sensor(mode=args.mode)
-    settings = Settings(n_points=args.n_points, size_mm=None if args.real_size else args.size_mm,
-                        view_size=args.view_size, sensor=sensor,
-                        train_instances=args.train_instances, train_sessions=args.train_sessions, seed=args.seed)
-    config = ExperimentConfig(methods=args.methods, protocols=args.protocols, classifiers=args.classifiers or NAMES,
-                              settings=settings, folds=args.folds, repeats=args.repeats, features=args.features,
-                              baseline=args.baseline, policies=args.policies,
-                              replicates=FULL_REPLICATES if args.full else (args.replicates or DEFAULT_REPLICATES))
+    settings = Settings(
+        n_points=args.n_points,
+        size_mm=None if args.real_size else args.size_mm,
+        view_size=args.view_size,
+        sensor=sensor,
+        train_instances=args.train_instances,
+        train_sessions=args.train_sessions,
+        seed=args.seed,
+    )
+    config = ExperimentConfig(
+        methods=args.methods,
+        protocols=args.protocols,
+        classifiers=args.classifiers or NAMES,
+        settings=settings,
+        folds=args.folds,
+        repeats=args.repeats,
+        features=args.features,
+        baseline=args.baseline,
+        policies=args.policies,
+        replicates=FULL_REPLICATES if args.full else (args.replicates or DEFAULT_REPLICATES),
+    )
     if args.real:
         result = run_real(args.real, config, out_dir=args.out, quiet=args.quiet, n_jobs=args.jobs)
         print(format_tables(result, title="Table 2 layout (real imprints)"))
         return 0
-    cache_dir = "default" if args.cache_dir is None else (None if args.cache_dir.lower() == "none"
-                                                          else args.cache_dir)
-    with open_executor(workers=args.workers, scheduler=args.scheduler, n_jobs=args.jobs,
-                       **_cluster(args)) as executor:
-        result = run_experiment(args.objects, config, executor=executor, cache_dir=cache_dir, out_dir=args.out,
-                                quiet=args.quiet)
+    cache_dir = "default" if args.cache_dir is None else (None if args.cache_dir.lower() == "none" else args.cache_dir)
+    with open_executor(workers=args.workers, scheduler=args.scheduler, n_jobs=args.jobs, **_cluster(args)) as executor:
+        result = run_experiment(
+            args.objects, config, executor=executor, cache_dir=cache_dir, out_dir=args.out, quiet=args.quiet
+        )
     print(format_tables(result))
     if not args.quiet:
         print(f"results written to {args.out}/ ({result.timings['total']:.0f} s)", file=sys.stderr)

@@ -20,7 +20,17 @@ from hw.press import PressDetector
 from hw.protocol import PROTOCOLS, FrameParser
 from hw.session import Session
 
-__all__ = ["PortError", "NoFramesError", "CaptureResult", "CaptureOptions", "open_port", "capture", "add_arguments", "run", "main"]
+__all__ = [
+    "PortError",
+    "NoFramesError",
+    "CaptureResult",
+    "CaptureOptions",
+    "open_port",
+    "capture",
+    "add_arguments",
+    "run",
+    "main",
+]
 
 
 class PortError(OSError):
@@ -75,8 +85,9 @@ def open_port(port: str, baud: int = 115200, timeout: float = 0.05):
         if code in (errno.EBUSY, errno.EAGAIN):
             raise PortError(f"{port}: the serial port is busy (another program has it open)") from None
         if code == errno.EACCES:
-            raise PortError(f"{port}: permission denied opening the serial port "
-                            "(on Linux, join the 'dialout' group)") from None
+            raise PortError(
+                f"{port}: permission denied opening the serial port (on Linux, join the 'dialout' group)"
+            ) from None
         raise PortError(f"{port}: cannot open the serial port: {exc}") from None
     except ValueError as exc:
         raise PortError(f"{port}: not a usable port or pyserial URL: {exc}") from None
@@ -125,8 +136,9 @@ class CaptureOptions:
     stream: object = None
 
 
-def capture(port: str, session: Session, object_name: str, options: CaptureOptions | None = None,
-            **changes) -> CaptureResult:
+def capture(
+    port: str, session: Session, object_name: str, options: CaptureOptions | None = None, **changes
+) -> CaptureResult:
     """Record presses from ``port`` into ``session`` until done.
 
     Parameters
@@ -186,8 +198,10 @@ def capture(port: str, session: Session, object_name: str, options: CaptureOptio
             try:
                 data = ser.read(ser.in_waiting or 1)
             except Exception as exc:  # pyserial raises SerialException or OSError subclasses
-                raise PortError(f"{port}: the port stopped answering ({exc}); {len(stored)} presses of this run "
-                                f"are stored in {session.path}; run again to resume") from None
+                raise PortError(
+                    f"{port}: the port stopped answering ({exc}); {len(stored)} presses of this run "
+                    f"are stored in {session.path}; run again to resume"
+                ) from None
             frames = parser.feed(data)
             now = time.monotonic()
             if frames:
@@ -197,7 +211,8 @@ def capture(port: str, session: Session, object_name: str, options: CaptureOptio
                 if garbage and now - last_valid > o.garbage_timeout:
                     raise NoFramesError(
                         f"{port}: {garbage} bytes in {now - last_valid:.1f} s but no valid {o.protocol} frame; "
-                        f"check the baud rate (--baud {o.baud}) and the protocol (--protocol {o.protocol})")
+                        f"check the baud rate (--baud {o.baud}) and the protocol (--protocol {o.protocol})"
+                    )
             for frame in frames:
                 if frame.shape != sensor:
                     session.ensure_sensor(*frame.shape)
@@ -209,25 +224,34 @@ def capture(port: str, session: Session, object_name: str, options: CaptureOptio
                 if run_id is None and detector.baseline is not None:
                     b = detector.baseline
                     run_id = session.start_run(port, o.baud, o.protocol, object_name, b)
-                    say(f"baseline from {b.frames} frames (summed noise {b.noise:.1f}, press above {b.on:.0f}); "
-                        f"ready for point {upcoming()}")
+                    say(
+                        f"baseline from {b.frames} frames (summed noise {b.noise:.1f}, press above {b.on:.0f}); "
+                        f"ready for point {upcoming()}"
+                    )
                 if press is None:
                     continue
-                counters = {"frames": parser.frames, "crc_errors": parser.crc_errors + parser.bad_lines,
-                            "gaps": parser.gaps, "bytes_skipped": parser.bytes_skipped}
+                counters = {
+                    "frames": parser.frames,
+                    "crc_errors": parser.crc_errors + parser.bad_lines,
+                    "gaps": parser.gaps,
+                    "bytes_skipped": parser.bytes_skipped,
+                }
                 # The id is chosen as the press is committed: another capture into this session may have
                 # taken the one announced.
-                added = session.add_next_press(run_id, object_name, press, counters, first_point=o.first_point,
-                                               planned=planned)
+                added = session.add_next_press(
+                    run_id, object_name, press, counters, first_point=o.first_point, planned=planned
+                )
                 if added is None:
                     say(f"press not stored: another capture recorded the last planned points of {object_name!r}")
                     return _result(stored, "plan", parser)
                 point_id = added[1]
                 stored.append(point_id)
                 following = upcoming()
-                say(f"press {len(stored)}: point {point_id} stored (peak {press.peak_sum:.0f}, "
+                say(
+                    f"press {len(stored)}: point {point_id} stored (peak {press.peak_sum:.0f}, "
                     f"{press.frames} frames; {parser.frames} frames received, {parser.crc_errors} CRC errors, "
-                    f"{parser.gaps} missing)" + ("" if following is None else f"; next point {following}"))
+                    f"{parser.gaps} missing)" + ("" if following is None else f"; next point {following}")
+                )
                 if following is None:
                     return _result(stored, "plan", parser)
                 if o.presses is not None and len(stored) >= o.presses:
@@ -240,8 +264,9 @@ def capture(port: str, session: Session, object_name: str, options: CaptureOptio
 
 
 def _result(stored, stopped, parser) -> CaptureResult:
-    return CaptureResult(tuple(stored), stopped, parser.frames, parser.crc_errors, parser.bad_lines,
-                         parser.gaps, parser.bytes_skipped)
+    return CaptureResult(
+        tuple(stored), stopped, parser.frames, parser.crc_errors, parser.bad_lines, parser.gaps, parser.bytes_skipped
+    )
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -253,14 +278,27 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--object", required=True, help="name of the object being pressed")
     ids = p.add_mutually_exclusive_group()
     ids.add_argument("--points", metavar="PLAN_JSON", help="probe plan: presses take its point ids in order")
-    ids.add_argument("--first-point", type=int, default=0, metavar="ID",
-                     help="id of the first press without a plan; counts up (default 0, or resume)")
+    ids.add_argument(
+        "--first-point",
+        type=int,
+        default=0,
+        metavar="ID",
+        help="id of the first press without a plan; counts up (default 0, or resume)",
+    )
     p.add_argument("--presses", type=int, metavar="N", help="stop after N presses (default: until Ctrl-C)")
-    p.add_argument("--garbage-timeout", type=float, default=5.0, metavar="SECONDS",
-                   help="give up after this long with bytes but no valid frame (default 5)")
+    p.add_argument(
+        "--garbage-timeout",
+        type=float,
+        default=5.0,
+        metavar="SECONDS",
+        help="give up after this long with bytes but no valid frame (default 5)",
+    )
     p.add_argument("--baseline-frames", type=int, default=20, help="quiet frames for the baseline (default 20)")
-    p.add_argument("--threshold", type=float,
-                   help="summed counts above the baseline that start a press (default: from the rest noise)")
+    p.add_argument(
+        "--threshold",
+        type=float,
+        help="summed counts above the baseline that start a press (default: from the rest noise)",
+    )
     p.add_argument("--quiet", action="store_true", help="no status lines")
 
 
@@ -271,13 +309,25 @@ def run(args) -> int:
     plan = load_plan(args.points) if args.points else None
     detector = PressDetector(baseline_frames=args.baseline_frames, threshold=args.threshold)
     with Session(args.session) as session:
-        result = capture(args.port, session, args.object, baud=args.baud, protocol=args.protocol, plan=plan,
-                         first_point=args.first_point, presses=args.presses,
-                         garbage_timeout=args.garbage_timeout, detector=detector, quiet=args.quiet)
+        result = capture(
+            args.port,
+            session,
+            args.object,
+            baud=args.baud,
+            protocol=args.protocol,
+            plan=plan,
+            first_point=args.first_point,
+            presses=args.presses,
+            garbage_timeout=args.garbage_timeout,
+            detector=detector,
+            quiet=args.quiet,
+        )
     if not args.quiet:
-        print(f"capture: {len(result.point_ids)} presses stored in {args.session} ({result.stopped}); "
-              f"{result.frames} frames, {result.crc_errors + result.bad_lines} corrupt, {result.gaps} missing",
-              file=sys.stderr)
+        print(
+            f"capture: {len(result.point_ids)} presses stored in {args.session} ({result.stopped}); "
+            f"{result.frames} frames, {result.crc_errors + result.bad_lines} corrupt, {result.gaps} missing",
+            file=sys.stderr,
+        )
     return 0
 
 

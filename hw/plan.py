@@ -22,11 +22,20 @@ from pathlib import Path
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from meshsal.util.jsonfile import read_json
 from meshsal.mesh import Similarity
+from meshsal.util.jsonfile import read_json
 
-__all__ = ["FORMAT", "ProbePoint", "Plan", "sensor_rotations", "quaternion_from_matrix", "matrix_from_quaternion",
-           "make_plan", "save_plan", "load_plan"]
+__all__ = [
+    "FORMAT",
+    "ProbePoint",
+    "Plan",
+    "sensor_rotations",
+    "quaternion_from_matrix",
+    "matrix_from_quaternion",
+    "make_plan",
+    "save_plan",
+    "load_plan",
+]
 
 FORMAT = "visuotactile-probe-plan"
 VERSION = 1
@@ -133,8 +142,16 @@ def matrix_from_quaternion(q) -> np.ndarray:
     return Rotation.from_quat([x, y, z, w]).as_matrix()
 
 
-def make_plan(mesh, n: int = 15, method: str = "attention", size_mm: float = 150.0, sensor=None, seed: int = 0,
-              quiet: bool = True, source: str = "") -> Plan:
+def make_plan(
+    mesh,
+    n: int = 15,
+    method: str = "attention",
+    size_mm: float = 150.0,
+    sensor=None,
+    seed: int = 0,
+    quiet: bool = True,
+    source: str = "",
+) -> Plan:
     """Plan one press per interest point of ``mesh``.
 
     Parameters
@@ -168,16 +185,25 @@ def make_plan(mesh, n: int = 15, method: str = "attention", size_mm: float = 150
     positions = scaled.transform.to_source(poses.centers)
     approach = -scaled.transform.direction_to_source(poses.normals)
     rotations = scaled.transform.rotation.T @ sensor_rotations(poses)
-    points = tuple(ProbePoint(i, positions[i], approach[i], quaternion_from_matrix(rotations[i]))
-                   for i in range(len(positions)))
+    points = tuple(
+        ProbePoint(i, positions[i], approach[i], quaternion_from_matrix(rotations[i])) for i in range(len(positions))
+    )
     # File -> planning frame: undo the mesh's own transform, then apply the scaled one.
     frame = mesh.transform.inverse().then(scaled.transform)
     width_mm, height_mm = sensor.cols * sensor.pitch_mm, sensor.rows * sensor.pitch_mm
-    info = {"rows": sensor.rows, "cols": sensor.cols, "pitch_mm": sensor.pitch_mm, "width_mm": width_mm,
-            "height_mm": height_mm, "depth_mm": sensor.depth_mm, "width": width_mm / frame.scale,
-            "height": height_mm / frame.scale}
-    return Plan(points=points, sensor=info, mesh=source or mesh.name, size_mm=float(size_mm), method=method,
-                frame=frame)
+    info = {
+        "rows": sensor.rows,
+        "cols": sensor.cols,
+        "pitch_mm": sensor.pitch_mm,
+        "width_mm": width_mm,
+        "height_mm": height_mm,
+        "depth_mm": sensor.depth_mm,
+        "width": width_mm / frame.scale,
+        "height": height_mm / frame.scale,
+    }
+    return Plan(
+        points=points, sensor=info, mesh=source or mesh.name, size_mm=float(size_mm), method=method, frame=frame
+    )
 
 
 def _plan_dict(plan: Plan) -> dict:
@@ -188,15 +214,27 @@ def _plan_dict(plan: Plan) -> dict:
         "size_mm": plan.size_mm,
         "method": plan.method,
         "units": "positions in the mesh file's frame and units; sensor width and height in mm and in file units",
-        "planning_frame": {"scale": plan.frame.scale, "offset": plan.frame.offset.tolist(),
-                           "rotation": plan.frame.rotation.tolist(),
-                           "meaning": "position_mm = scale * rotation @ position + offset: the mesh scaled to size_mm "
-                                      "and centred, where imprints are simulated; scale = mm per file unit"},
-        "sensor": {**plan.sensor,
-                   "axes": "x = increasing column, y = increasing row (row 0 at the top), z = approach "
-                           "(into the surface); tactile's pad at in-plane angle 0"},
-        "points": [{"id": p.id, "position": p.position.tolist(), "approach": p.approach.tolist(),
-                    "quaternion": p.quaternion.tolist()} for p in plan.points],
+        "planning_frame": {
+            "scale": plan.frame.scale,
+            "offset": plan.frame.offset.tolist(),
+            "rotation": plan.frame.rotation.tolist(),
+            "meaning": "position_mm = scale * rotation @ position + offset: the mesh scaled to size_mm "
+            "and centred, where imprints are simulated; scale = mm per file unit",
+        },
+        "sensor": {
+            **plan.sensor,
+            "axes": "x = increasing column, y = increasing row (row 0 at the top), z = approach "
+            "(into the surface); tactile's pad at in-plane angle 0",
+        },
+        "points": [
+            {
+                "id": p.id,
+                "position": p.position.tolist(),
+                "approach": p.approach.tolist(),
+                "quaternion": p.quaternion.tolist(),
+            }
+            for p in plan.points
+        ],
     }
 
 
@@ -235,17 +273,28 @@ def load_plan(path) -> Plan:
             position = np.array(item["position"], dtype=np.float64).reshape(3)
             approach = np.array(item["approach"], dtype=np.float64).reshape(3)
             quaternion = np.array(item["quaternion"], dtype=np.float64).reshape(4)
-            if not (np.isfinite(position).all() and abs(np.linalg.norm(approach) - 1) < 1e-6
-                    and abs(np.linalg.norm(quaternion) - 1) < 1e-6):
+            if not (
+                np.isfinite(position).all()
+                and abs(np.linalg.norm(approach) - 1) < 1e-6
+                and abs(np.linalg.norm(quaternion) - 1) < 1e-6
+            ):
                 raise ValueError("non-finite position or non-unit approach/quaternion")
             points.append(ProbePoint(int(item["id"]), position, approach, quaternion))
         ids = [p.id for p in points]
         if len(set(ids)) != len(ids):
             raise ValueError("repeated point ids")
-        plan = Plan(points=tuple(points), sensor=dict(data["sensor"]), mesh=str(data.get("mesh", "")),
-                    size_mm=float(data["size_mm"]), method=str(data.get("method", "")),
-                    frame=Similarity(float(data["planning_frame"]["scale"]), data["planning_frame"]["offset"],
-                                     data["planning_frame"].get("rotation", np.eye(3))))
+        plan = Plan(
+            points=tuple(points),
+            sensor=dict(data["sensor"]),
+            mesh=str(data.get("mesh", "")),
+            size_mm=float(data["size_mm"]),
+            method=str(data.get("method", "")),
+            frame=Similarity(
+                float(data["planning_frame"]["scale"]),
+                data["planning_frame"]["offset"],
+                data["planning_frame"].get("rotation", np.eye(3)),
+            ),
+        )
     except (KeyError, TypeError, ValueError) as exc:
         raise ValueError(f"{path}: damaged probe plan ({type(exc).__name__}: {exc})") from None
     if not plan.points:

@@ -113,8 +113,15 @@ class PressDetector:
     (1, 800.0, 3)
     """
 
-    def __init__(self, baseline_frames: int = 20, on_sigma: float = 8.0, off_sigma: float = 4.0,
-                 min_rise: float = 64.0, threshold: float | None = None, min_frames: int = 2):
+    def __init__(
+        self,
+        baseline_frames: int = 20,
+        on_sigma: float = 8.0,
+        off_sigma: float = 4.0,
+        min_rise: float = 64.0,
+        threshold: float | None = None,
+        min_frames: int = 2,
+    ):
         if baseline_frames < 2:
             raise ValueError(f"baseline_frames must be at least 2, got {baseline_frames}")
         if not 0 < off_sigma <= on_sigma:
@@ -150,8 +157,10 @@ class PressDetector:
             self._learn(values)
             return None
         if values.shape != self.baseline.values.shape:
-            raise ValueError(f"frame of {values.shape[0]} x {values.shape[1]} taxels after a baseline of "
-                             f"{self.baseline.values.shape[0]} x {self.baseline.values.shape[1]}")
+            raise ValueError(
+                f"frame of {values.shape[0]} x {values.shape[1]} taxels after a baseline of "
+                f"{self.baseline.values.shape[0]} x {self.baseline.values.shape[1]}"
+            )
         s = self.pressure(values)
         p = self._press
         if p is None:
@@ -169,10 +178,18 @@ class PressDetector:
             return None
         peak = p["peak"]
         imprint = np.clip(peak.values.astype(np.float32) - self.baseline.values, 0.0, None)
-        return Press(imprint=imprint, raw=peak.values.copy(), peak_sum=p["peak_sum"],
-                     seq_start=p["start"].seq, seq_peak=peak.seq, seq_end=p["last"].seq,
-                     t_start_us=p["start"].t_us, t_peak_us=peak.t_us, t_end_us=p["last"].t_us,
-                     frames=p["n"])
+        return Press(
+            imprint=imprint,
+            raw=peak.values.copy(),
+            peak_sum=p["peak_sum"],
+            seq_start=p["start"].seq,
+            seq_peak=peak.seq,
+            seq_end=p["last"].seq,
+            t_start_us=p["start"].t_us,
+            t_peak_us=peak.t_us,
+            t_end_us=p["last"].t_us,
+            frames=p["n"],
+        )
 
     def _learn(self, values: np.ndarray) -> None:
         if self._window and values.shape != self._window[0].shape:
@@ -198,7 +215,6 @@ class PressDetector:
         else:
             on = level + max(self.on_sigma * noise, self.min_rise)
             off = level + max(self.off_sigma * noise, self.min_rise / 2.0)
-        self.baseline = Baseline(values=rest.astype(np.float32), noise=noise, on=on, off=off,
-                                 frames=len(stack))
+        self.baseline = Baseline(values=rest.astype(np.float32), noise=noise, on=on, off=off, frames=len(stack))
         self.waiting = False
         self._window = []

@@ -149,22 +149,24 @@ class Session:
                     for statement in _SCHEMA.split(";"):
                         if statement.strip():
                             con.execute(statement)
-                    con.executemany("INSERT INTO meta VALUES (?, ?)",
-                                    [("format", FORMAT), ("version", str(SCHEMA_VERSION)),
-                                     ("created", repr(time.time()))])
+                    con.executemany(
+                        "INSERT INTO meta VALUES (?, ?)",
+                        [("format", FORMAT), ("version", str(SCHEMA_VERSION)), ("created", repr(time.time()))],
+                    )
                 elif self._meta().get("format") == FORMAT and self._meta().get("version") == "1":
                     self._migrate_from_1()
         meta = self._meta()
         if meta.get("format") != FORMAT:
             raise sqlite3.DatabaseError("it holds no visuotactile capture session")
         if meta.get("version") != str(SCHEMA_VERSION):
-            raise sqlite3.DatabaseError(f"session version {meta.get('version')} is not the supported "
-                                        f"{SCHEMA_VERSION}")
+            raise sqlite3.DatabaseError(f"session version {meta.get('version')} is not the supported {SCHEMA_VERSION}")
         mode = con.execute("PRAGMA journal_mode=WAL").fetchone()[0]
         if mode.lower() != "wal":
-            raise OSError(f"{self.path}: SQLite cannot keep a write-ahead log here (journal mode stays {mode!r}): "
-                          f"the filesystem lacks the shared memory or file locks it needs, as network "
-                          f"filesystems may; keep the session on a local disk")
+            raise OSError(
+                f"{self.path}: SQLite cannot keep a write-ahead log here (journal mode stays {mode!r}): "
+                f"the filesystem lacks the shared memory or file locks it needs, as network "
+                f"filesystems may; keep the session on a local disk"
+            )
         # FULL: a press is on disk before the next one starts.
         con.execute("PRAGMA synchronous=FULL")
 
@@ -177,16 +179,20 @@ class Session:
     def _migrate_from_1(self) -> None:
         """Version 1 to 2, inside the caller's transaction: the UNIQUE (object, point_id) index."""
         con = self._con
-        shared = con.execute("SELECT object, point_id, group_concat(id, ', ') FROM presses"
-                             " GROUP BY object, point_id HAVING count(*) > 1 ORDER BY min(id)").fetchall()
+        shared = con.execute(
+            "SELECT object, point_id, group_concat(id, ', ') FROM presses"
+            " GROUP BY object, point_id HAVING count(*) > 1 ORDER BY min(id)"
+        ).fetchall()
         if shared:
             listed = "; ".join(f"{obj!r} point {pid} (presses {ids})" for obj, pid, ids in shared[:10])
             more = f" and {len(shared) - 10} more" if len(shared) > 10 else ""
-            raise ValueError(f"{self.path}: presses share a point id: {listed}{more}.  A version 1 session "
-                             f"cannot take the index that keeps point ids unique until each (object, point) "
-                             f"has one press: delete the extra presses or give them free point ids (sqlite3 "
-                             f"{self.path} \"UPDATE presses SET point_id = ... WHERE id = ...\"), then open it "
-                             f"again")
+            raise ValueError(
+                f"{self.path}: presses share a point id: {listed}{more}.  A version 1 session "
+                f"cannot take the index that keeps point ids unique until each (object, point) "
+                f"has one press: delete the extra presses or give them free point ids (sqlite3 "
+                f'{self.path} "UPDATE presses SET point_id = ... WHERE id = ..."), then open it '
+                f"again"
+            )
         con.execute("DROP INDEX IF EXISTS presses_object")
         con.execute("CREATE UNIQUE INDEX presses_point ON presses(object, point_id)")
         con.execute("UPDATE meta SET value = ? WHERE key = 'version'", (str(SCHEMA_VERSION),))
@@ -216,11 +222,14 @@ class Session:
         with self._transaction():
             known = self.sensor
             if known is None:
-                self._con.executemany("INSERT INTO meta VALUES (?, ?)",
-                                      [("rows", str(int(rows))), ("cols", str(int(cols)))])
+                self._con.executemany(
+                    "INSERT INTO meta VALUES (?, ?)", [("rows", str(int(rows))), ("cols", str(int(cols)))]
+                )
         if known is not None and known != (rows, cols):
-            raise ValueError(f"{self.path}: the session was recorded with a {known[0]} x {known[1]} sensor "
-                             f"but the port sends {rows} x {cols} frames; use another --session for this sensor")
+            raise ValueError(
+                f"{self.path}: the session was recorded with a {known[0]} x {known[1]} sensor "
+                f"but the port sends {rows} x {cols} frames; use another --session for this sensor"
+            )
 
     def start_run(self, port: str, baud: int, protocol: str, object_name: str, baseline: Baseline) -> int:
         """Record the start of a capture run with its baseline; returns the run id."""
@@ -228,13 +237,23 @@ class Session:
             cur = self._con.execute(
                 "INSERT INTO runs (started, port, baud, protocol, object, baseline, baseline_noise,"
                 " threshold_on, threshold_off) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?)",
-                (time.time(), port, int(baud), protocol, object_name,
-                 np.ascontiguousarray(baseline.values, np.float32).tobytes(), baseline.noise,
-                 baseline.on, baseline.off))
+                (
+                    time.time(),
+                    port,
+                    int(baud),
+                    protocol,
+                    object_name,
+                    np.ascontiguousarray(baseline.values, np.float32).tobytes(),
+                    baseline.noise,
+                    baseline.on,
+                    baseline.off,
+                ),
+            )
             return int(cur.lastrowid)
 
-    def add_press(self, run_id: int, object_name: str, point_id: int, press: Press, counters: dict,
-                  position=None, approach=None) -> int:
+    def add_press(
+        self, run_id: int, object_name: str, point_id: int, press: Press, counters: dict, position=None, approach=None
+    ) -> int:
         """Commit one press under ``point_id`` in its own transaction; returns its row id.
 
         ``counters`` holds the parser's ``frames``, ``crc_errors`` (failed
@@ -246,8 +265,9 @@ class Session:
         with self._transaction():
             return self._insert(run_id, object_name, int(point_id), press, counters, position, approach)
 
-    def add_next_press(self, run_id: int, object_name: str, press: Press, counters: dict, *, first_point: int = 0,
-                       planned=None) -> tuple[int, int] | None:
+    def add_next_press(
+        self, run_id: int, object_name: str, press: Press, counters: dict, *, first_point: int = 0, planned=None
+    ) -> tuple[int, int] | None:
         """Commit one press under the next free point id, chosen inside the insert's own transaction.
 
         Two captures into one session and object, in one process or several,
@@ -287,8 +307,9 @@ class Session:
 
     def _next_point(self, object_name: str, first_point: int, planned):
         if planned is None:
-            (largest,) = self._con.execute("SELECT max(point_id) FROM presses WHERE object = ?",
-                                           (object_name,)).fetchone()
+            (largest,) = self._con.execute(
+                "SELECT max(point_id) FROM presses WHERE object = ?", (object_name,)
+            ).fetchone()
             return int(first_point) if largest is None else max(int(first_point), largest + 1), None, None
         done = set(self.point_ids(object_name))
         return next(((int(i), p, a) for i, p, a in planned if int(i) not in done), None)
@@ -307,12 +328,29 @@ class Session:
                 " seq_end, t_start_us, t_peak_us, t_end_us, frames, host_time, frames_received, crc_errors,"
                 " gaps, bytes_skipped, px, py, pz, ax, ay, az)"
                 " VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
-                (run_id, object_name, point_id,
-                 np.ascontiguousarray(press.imprint, np.float32).tobytes(),
-                 np.ascontiguousarray(press.raw, "<u2").tobytes(), float(press.peak_sum),
-                 press.seq_start, press.seq_peak, press.seq_end, press.t_start_us, press.t_peak_us,
-                 press.t_end_us, press.frames, time.time(), int(counters["frames"]),
-                 int(counters["crc_errors"]), int(counters["gaps"]), int(counters["bytes_skipped"]), *p, *a))
+                (
+                    run_id,
+                    object_name,
+                    point_id,
+                    np.ascontiguousarray(press.imprint, np.float32).tobytes(),
+                    np.ascontiguousarray(press.raw, "<u2").tobytes(),
+                    float(press.peak_sum),
+                    press.seq_start,
+                    press.seq_peak,
+                    press.seq_end,
+                    press.t_start_us,
+                    press.t_peak_us,
+                    press.t_end_us,
+                    press.frames,
+                    time.time(),
+                    int(counters["frames"]),
+                    int(counters["crc_errors"]),
+                    int(counters["gaps"]),
+                    int(counters["bytes_skipped"]),
+                    *p,
+                    *a,
+                ),
+            )
         except sqlite3.IntegrityError:
             raise ValueError(f"{self.path}: point {point_id} of {object_name!r} is already recorded") from None
         return int(cur.lastrowid)
@@ -322,14 +360,17 @@ class Session:
 
     def point_ids(self, object_name: str) -> list[int]:
         """Point ids already recorded for ``object_name``, in recording order."""
-        return [r[0] for r in self._con.execute(
-            "SELECT point_id FROM presses WHERE object = ? ORDER BY id", (object_name,))]
+        return [
+            r[0] for r in self._con.execute("SELECT point_id FROM presses WHERE object = ? ORDER BY id", (object_name,))
+        ]
 
     def presses(self, object_name: str | None = None) -> list[PressRecord]:
         """All stored presses (of one object when given), in recording order."""
         sensor = self.sensor
-        query = ("SELECT id, run_id, object, point_id, imprint, raw, peak_sum, seq_peak, t_peak_us, host_time,"
-                 " frames_received, crc_errors, gaps, px, py, pz, ax, ay, az FROM presses")
+        query = (
+            "SELECT id, run_id, object, point_id, imprint, raw, peak_sum, seq_peak, t_peak_us, host_time,"
+            " frames_received, crc_errors, gaps, px, py, pz, ax, ay, az FROM presses"
+        )
         args: tuple = ()
         if object_name is not None:
             query += " WHERE object = ?"
@@ -338,12 +379,25 @@ class Session:
         for r in self._con.execute(query + " ORDER BY id", args):
             position = None if r[13] is None else np.array(r[13:16], dtype=np.float64)
             approach = None if r[16] is None else np.array(r[16:19], dtype=np.float64)
-            out.append(PressRecord(
-                id=r[0], run_id=r[1], object=r[2], point_id=r[3],
-                imprint=np.frombuffer(r[4], np.float32).reshape(sensor).copy(),
-                raw=np.frombuffer(r[5], "<u2").reshape(sensor).astype(np.uint16),
-                peak_sum=r[6], seq_peak=r[7], t_peak_us=r[8], host_time=r[9], frames_received=r[10],
-                crc_errors=r[11], gaps=r[12], position=position, approach=approach))
+            out.append(
+                PressRecord(
+                    id=r[0],
+                    run_id=r[1],
+                    object=r[2],
+                    point_id=r[3],
+                    imprint=np.frombuffer(r[4], np.float32).reshape(sensor).copy(),
+                    raw=np.frombuffer(r[5], "<u2").reshape(sensor).astype(np.uint16),
+                    peak_sum=r[6],
+                    seq_peak=r[7],
+                    t_peak_us=r[8],
+                    host_time=r[9],
+                    frames_received=r[10],
+                    crc_errors=r[11],
+                    gaps=r[12],
+                    position=position,
+                    approach=approach,
+                )
+            )
         return out
 
 
@@ -419,8 +473,9 @@ def export_imprints(path, rows: int = 16, cols: int = 16, full_scale="session", 
         try:
             value = float(full_scale)
         except (TypeError, ValueError):
-            raise ValueError(f"full_scale must be 'session', 'imprint' or a positive number, "
-                             f"got {full_scale!r}") from None
+            raise ValueError(
+                f"full_scale must be 'session', 'imprint' or a positive number, got {full_scale!r}"
+            ) from None
         if not value > 0:
             raise ValueError(f"full_scale must be positive, got {value}")
         scale = np.full(len(records), value)

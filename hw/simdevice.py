@@ -73,11 +73,25 @@ class SimulatedSensor:
     [0, 0, 0, 1, 1, 1]
     """
 
-    def __init__(self, imprints, rng, protocol: str = "binary", presses: int | None = None,
-                 press_frames: int = 15, idle_frames: int = 20, lead_frames: int = 40,
-                 rest_level: float = 200.0, rest_spread: float = 40.0, noise: float = 3.0,
-                 full_scale: float = 3000.0, adc_max: float = 4095.0,
-                 garbage: float = 0.0, bitflips: float = 0.0, drop: float = 0.0, rate: float = 100.0):
+    def __init__(
+        self,
+        imprints,
+        rng,
+        protocol: str = "binary",
+        presses: int | None = None,
+        press_frames: int = 15,
+        idle_frames: int = 20,
+        lead_frames: int = 40,
+        rest_level: float = 200.0,
+        rest_spread: float = 40.0,
+        noise: float = 3.0,
+        full_scale: float = 3000.0,
+        adc_max: float = 4095.0,
+        garbage: float = 0.0,
+        bitflips: float = 0.0,
+        drop: float = 0.0,
+        rate: float = 100.0,
+    ):
         imprints = np.asarray(imprints, dtype=np.float64)
         if imprints.ndim != 3 or imprints.shape[0] == 0:
             raise ValueError(f"imprints must have shape (k, rows, cols) with k >= 1, got {imprints.shape}")
@@ -177,8 +191,15 @@ def open_pty() -> tuple[int, str]:
     return master, path
 
 
-def serve(master: int, sensor: SimulatedSensor, rate: float, disconnect_after: int | None = None,
-          wait_for_reader: bool = True, stop=None, log=None) -> None:
+def serve(
+    master: int,
+    sensor: SimulatedSensor,
+    rate: float,
+    disconnect_after: int | None = None,
+    wait_for_reader: bool = True,
+    stop=None,
+    log=None,
+) -> None:
     """Stream ``sensor`` into a pty master at ``rate`` frames per second.
 
     Returns after ``disconnect_after`` frames (closing ``master``, which the
@@ -215,7 +236,7 @@ def serve(master: int, sensor: SimulatedSensor, rate: float, disconnect_after: i
             data = sensor.next_bytes()
             while data and not stopped():
                 try:
-                    data = data[os.write(master, data):]
+                    data = data[os.write(master, data) :]
                 except BlockingIOError:
                     if _hung_up(poller, 50) and wait_for_reader:
                         break
@@ -267,11 +288,17 @@ def _parser() -> argparse.ArgumentParser:
 
     p = argparse.ArgumentParser(prog="python -m hw.simdevice", description=__doc__.split("\n\n")[0])
     p.add_argument("--object", required=True, help="a toy name (meshsal.objects.toys.NAMES) or a mesh file")
-    p.add_argument("--size-mm", type=float, default=150.0, help="principal-frame box diagonal of the object in mm (default 150)")
+    p.add_argument(
+        "--size-mm", type=float, default=150.0, help="principal-frame box diagonal of the object in mm (default 150)"
+    )
     p.add_argument("--points", metavar="PLAN_JSON", help="press the points of this probe plan")
     p.add_argument("--n", type=int, default=15, help="interest points without a plan (default 15)")
-    p.add_argument("--method", default="random", choices=POINT_METHODS.names(),
-                   help="interest point method without a plan (default random: starts at once)")
+    p.add_argument(
+        "--method",
+        default="random",
+        choices=POINT_METHODS.names(),
+        help="interest point method without a plan (default random: starts at once)",
+    )
     p.add_argument("--presses", type=int, help="number of presses (default: one per point)")
     p.add_argument("--rate", type=float, default=100.0, help="frames per second (default 100)")
     p.add_argument("--press-frames", type=int, default=31, help="frames per press (default 31)")
@@ -281,8 +308,12 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--full-scale", type=float, default=3000.0, help="counts at imprint value 1 (default 3000)")
     p.add_argument("--rows", type=int, default=16, help="sensor rows (default 16)")
     p.add_argument("--cols", type=int, default=16, help="sensor columns (default 16)")
-    p.add_argument("--mode", choices=SENSOR_MODES.names(), default="contour",
-                   help="imprint mode of the simulated pad (default contour, the paper's image)")
+    p.add_argument(
+        "--mode",
+        choices=SENSOR_MODES.names(),
+        default="contour",
+        help="imprint mode of the simulated pad (default contour, the paper's image)",
+    )
     p.add_argument("--protocol", choices=PROTOCOLS, default="binary")
     p.add_argument("--garbage", type=float, default=0.0, help="probability of a garbage burst per frame")
     p.add_argument("--bitflips", type=float, default=0.0, help="probability of a flipped bit per frame")
@@ -303,10 +334,9 @@ def main(argv: list[str] | None = None) -> int:
 
     try:
         import tactile
+        from hw.plan import load_plan
         from meshsal.mesh.transform import scale_to_principal
         from meshsal.objects import load_object
-
-        from hw.plan import load_plan
 
         plan = load_plan(args.points) if args.points else None
         mesh = scale_to_principal(load_object(args.object), plan.size_mm if plan is not None else args.size_mm)
@@ -316,16 +346,33 @@ def main(argv: list[str] | None = None) -> int:
         empty = np.flatnonzero(imprints.reshape(len(imprints), -1).max(axis=1) <= 0)
         if empty.size:
             raise ValueError(f"{args.object}: the sensor touches nothing at point(s) {ids[empty].tolist()}")
-        sim = SimulatedSensor(imprints, np.random.default_rng(args.seed), protocol=args.protocol,
-                              presses=args.presses, press_frames=args.press_frames, idle_frames=args.idle_frames,
-                              lead_frames=args.lead_frames, noise=args.noise, full_scale=args.full_scale,
-                              garbage=args.garbage, bitflips=args.bitflips, drop=args.drop, rate=args.rate)
+        sim = SimulatedSensor(
+            imprints,
+            np.random.default_rng(args.seed),
+            protocol=args.protocol,
+            presses=args.presses,
+            press_frames=args.press_frames,
+            idle_frames=args.idle_frames,
+            lead_frames=args.lead_frames,
+            noise=args.noise,
+            full_scale=args.full_scale,
+            garbage=args.garbage,
+            bitflips=args.bitflips,
+            drop=args.drop,
+            rate=args.rate,
+        )
         if args.dump:
             from meshsal.util.atomic import atomic_path
 
             with atomic_path(args.dump) as tmp:
-                np.savez(tmp, imprints=imprints.astype(np.float32), point_ids=ids, positions=positions,
-                         normals=normals, full_scale=args.full_scale)
+                np.savez(
+                    tmp,
+                    imprints=imprints.astype(np.float32),
+                    point_ids=ids,
+                    positions=positions,
+                    normals=normals,
+                    full_scale=args.full_scale,
+                )
     except (ValueError, OSError) as exc:
         print(f"simdevice: error: {exc}", file=sys.stderr)
         return 1
@@ -334,8 +381,7 @@ def main(argv: list[str] | None = None) -> int:
     log(f"{args.object}: {sim.presses} presses of {len(ids)} points on {path}")
     signal.signal(signal.SIGTERM, lambda *_: sys.exit(0))
     try:
-        serve(master, sim, args.rate, disconnect_after=args.disconnect_after, wait_for_reader=not args.no_wait,
-              log=log)
+        serve(master, sim, args.rate, disconnect_after=args.disconnect_after, wait_for_reader=not args.no_wait, log=log)
     except KeyboardInterrupt:
         pass
     return 0

@@ -47,12 +47,26 @@ _EXPORTS = {
 _SUBMODULES = {"util", "mesh", "objects", "views", "attention", "points", "cli"}
 #: Where each module of the flat layout went.
 _MOVED = {
-    "atomic": "util.atomic", "progress": "util.progress", "registry": "util.registry", "jsonfile": "util.jsonfile",
-    "lazy": "util.lazy", "reproducible": "util.reproducible",
-    "io": "mesh.io", "transform": "mesh.transform", "curvature": "mesh.curvature", "embree": "mesh.embree",
-    "toys": "objects.toys", "sdf": "objects.sdf", "ycb": "objects.ycb", "instances": "objects.instances",
-    "render": "views.render", "tracer": "views.tracer", "overlay": "views.overlay",
-    "learned": "points.learned", "touch": "points.touch", "sampling": "points.sampling",
+    "atomic": "util.atomic",
+    "progress": "util.progress",
+    "registry": "util.registry",
+    "jsonfile": "util.jsonfile",
+    "lazy": "util.lazy",
+    "reproducible": "util.reproducible",
+    "io": "mesh.io",
+    "transform": "mesh.transform",
+    "curvature": "mesh.curvature",
+    "embree": "mesh.embree",
+    "toys": "objects.toys",
+    "sdf": "objects.sdf",
+    "ycb": "objects.ycb",
+    "instances": "objects.instances",
+    "render": "views.render",
+    "tracer": "views.tracer",
+    "overlay": "views.overlay",
+    "learned": "points.learned",
+    "touch": "points.touch",
+    "sampling": "points.sampling",
 }
 
 __getattr__, __dir__, __all__ = attach(__name__, _EXPORTS, _SUBMODULES, _MOVED)

@@ -16,9 +16,11 @@ def register(subparsers) -> None:
 
 def _add_toys(subparsers) -> None:
     p = subparsers.add_parser(
-        "toys", help="write the six embedded toy objects as PLY",
+        "toys",
+        help="write the six embedded toy objects as PLY",
         description="Write the six procedural toys (cow, glasses, cup, hand, plane, dromedary) "
-                    "as binary PLY files with vertex colors, in millimetres.")
+        "as binary PLY files with vertex colors, in millimetres.",
+    )
     p.add_argument("--out", required=True, type=Path, help="output folder")
     p.add_argument("--seed", type=int, default=0, help="seed of the toys' random details (default 0)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
@@ -26,8 +28,8 @@ def _add_toys(subparsers) -> None:
 
 
 def _cmd_toys(args) -> int:
-    from meshsal.objects import toys
     from meshsal.mesh.io import save_ply
+    from meshsal.objects import toys
     from meshsal.util.progress import progress
 
     for name in progress(toys.NAMES, desc="toys", quiet=args.quiet):
@@ -38,10 +40,12 @@ def _cmd_toys(args) -> int:
 
 def _add_render(subparsers) -> None:
     p = subparsers.add_parser(
-        "render", help="render a mesh from the 72 viewpoints",
+        "render",
+        help="render a mesh from the 72 viewpoints",
         description="Render MESH from the 72 viewpoints of the rig (18 sets of 4 views 90 degrees apart) "
-                    "as PNG files view_SS_K.png, plus contact_sheet.png. With --saliency, also each "
-                    "view's saliency map and its eight channel maps.")
+        "as PNG files view_SS_K.png, plus contact_sheet.png. With --saliency, also each "
+        "view's saliency map and its eight channel maps.",
+    )
     p.add_argument("mesh", type=Path, help="mesh file (OBJ, PLY, OFF, STL) or a toy name (cow, glasses, ...)")
     p.add_argument("--out", required=True, type=Path, help="output folder")
     p.add_argument("--size", type=int, default=256, help="image size in pixels (default 256)")
@@ -55,13 +59,13 @@ def _to_uint8(image: np.ndarray) -> np.ndarray:
 
 
 def _cmd_render(args) -> int:
+    from meshsal.objects import load_object
     from meshsal.util.atomic import write_png
     from meshsal.util.errors import naming
-    from meshsal.views.overlay import tile
     from meshsal.util.progress import progress
     from meshsal.views.cameras import view_rig
+    from meshsal.views.overlay import tile
     from meshsal.views.render import render_views
-    from meshsal.objects import load_object
 
     if args.size < 16:
         raise ValueError(f"--size must be at least 16 pixels, got {args.size}")
@@ -94,72 +98,123 @@ def _add_points(subparsers) -> None:
     from meshsal.points import COMBINATIONS, POINT_METHODS
 
     p = subparsers.add_parser(
-        "points", help="choose interest points on a mesh by visual attention (or a baseline)",
+        "points",
+        help="choose interest points on a mesh by visual attention (or a baseline)",
         description="Scale MESH to --size-mm (principal-frame box diagonal), render the 72 views, compute their saliency and choose --n "
-                    "interest points (the paper's pipeline, or a baseline with --method). Writes "
-                    "saliency.ply (mesh saliency as vertex quality and colours), points.json and points.csv "
-                    "(ids from 1, in the mesh file's own units and frame), views.png (the best set's four "
-                    "views, saliency overlaid, points numbered) and contact_sheet.png (all 72 saliency maps).")
+        "interest points (the paper's pipeline, or a baseline with --method). Writes "
+        "saliency.ply (mesh saliency as vertex quality and colours), points.json and points.csv "
+        "(ids from 1, in the mesh file's own units and frame), views.png (the best set's four "
+        "views, saliency overlaid, points numbered) and contact_sheet.png (all 72 saliency maps).",
+    )
     p.add_argument("mesh", type=Path, help="mesh file (OBJ, PLY, OFF, STL) or a toy name (cow, glasses, ...)")
     p.add_argument("--out", required=True, type=Path, help="output folder")
     p.add_argument("--n", type=int, default=15, help="number of points (default 15)")
-    p.add_argument("--method", choices=POINT_METHODS.names(), default="attention",
-                   help=f"how to choose them (default attention): {POINT_METHODS.help_text()}")
-    p.add_argument("--size-mm", type=float, default=150.0,
-                   help="scale the mesh to this principal-frame box diagonal in mm first, as the experiment does "
-                        "(default 150)")
-    p.add_argument("--pad-mm", type=float, default=32.0,
-                   help="width of the tactile pad in mm (default 32: 16 x 16 taxels at 2 mm)")
-    p.add_argument("--min-spacing-mm", type=float, default=None,
-                   help="no two points closer than this, in mm after scaling (default half of --pad-mm)")
-    p.add_argument("--combination", choices=COMBINATIONS, default="equal",
-                   help="how the eight attention channels are summed: the paper's equal weights, each also "
-                        "weighted by Itti's N(.), or the weights learned in a touch model (--model) "
-                        "(default equal)")
-    p.add_argument("--model", type=Path, default=None,
-                   help="touch model JSON (written by 'visuotactile experiment' to touch_models/) for the "
-                        "learned methods and the learned combination")
-    p.add_argument("--no-touch-check", dest="touch", action="store_false",
-                   help="keep points the pad, pressed along the normal, would not meet first")
+    p.add_argument(
+        "--method",
+        choices=POINT_METHODS.names(),
+        default="attention",
+        help=f"how to choose them (default attention): {POINT_METHODS.help_text()}",
+    )
+    p.add_argument(
+        "--size-mm",
+        type=float,
+        default=150.0,
+        help="scale the mesh to this principal-frame box diagonal in mm first, as the experiment does (default 150)",
+    )
+    p.add_argument(
+        "--pad-mm", type=float, default=32.0, help="width of the tactile pad in mm (default 32: 16 x 16 taxels at 2 mm)"
+    )
+    p.add_argument(
+        "--min-spacing-mm",
+        type=float,
+        default=None,
+        help="no two points closer than this, in mm after scaling (default half of --pad-mm)",
+    )
+    p.add_argument(
+        "--combination",
+        choices=COMBINATIONS,
+        default="equal",
+        help="how the eight attention channels are summed: the paper's equal weights, each also "
+        "weighted by Itti's N(.), or the weights learned in a touch model (--model) "
+        "(default equal)",
+    )
+    p.add_argument(
+        "--model",
+        type=Path,
+        default=None,
+        help="touch model JSON (written by 'visuotactile experiment' to touch_models/) for the "
+        "learned methods and the learned combination",
+    )
+    p.add_argument(
+        "--no-touch-check",
+        dest="touch",
+        action="store_false",
+        help="keep points the pad, pressed along the normal, would not meet first",
+    )
     p.add_argument("--size", type=int, default=128, help="rendered view size in pixels (default 128)")
-    p.add_argument("--threshold", type=float, default=0.5,
-                   help="peaks and salient pixels exceed this fraction of their map's maximum (default 0.5)")
+    p.add_argument(
+        "--threshold",
+        type=float,
+        default=0.5,
+        help="peaks and salient pixels exceed this fraction of their map's maximum (default 0.5)",
+    )
     p.add_argument("--seed", type=int, default=0, help="seed of the random baselines (default 0)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=_cmd_points)
 
 
 def _cmd_points(args) -> int:
-    from meshsal.views import overlay
-    from meshsal.util.atomic import write_png
-    from meshsal.util.errors import naming
+    from meshsal.attention import plateau_fraction
+    from meshsal.mesh import Similarity
     from meshsal.mesh.curvature import mesh_saliency
     from meshsal.mesh.io import save_ply
-    from meshsal.mesh import Similarity
-    from meshsal.attention import plateau_fraction
-    from meshsal.points.learned import TouchModel
-    from meshsal.points import (MODEL_METHODS, attention_combination, attention_maps, best_view_set, points_by_method,
-                         view_channels)
     from meshsal.mesh.transform import scale_to_principal
     from meshsal.objects import load_object
+    from meshsal.points import (
+        MODEL_METHODS,
+        attention_combination,
+        attention_maps,
+        best_view_set,
+        points_by_method,
+        view_channels,
+    )
+    from meshsal.points.learned import TouchModel
+    from meshsal.util.atomic import write_png
+    from meshsal.util.errors import naming
+    from meshsal.views import overlay
 
     if args.size < 16:
         raise ValueError(f"--size must be at least 16 pixels, got {args.size}")
     combination = attention_combination(args.method, args.combination)
     if (args.method in MODEL_METHODS or combination == "learned") and args.model is None:
-        raise ValueError(f"--method {args.method} --combination {args.combination} needs --model FILE, a touch "
-                         f"model written by 'visuotactile experiment' (its touch_models/ folder)")
+        raise ValueError(
+            f"--method {args.method} --combination {args.combination} needs --model FILE, a touch "
+            f"model written by 'visuotactile experiment' (its touch_models/ folder)"
+        )
     model = None if args.model is None else TouchModel.load(args.model)
     with naming(args.mesh):
         mesh = scale_to_principal(load_object(args.mesh), args.size_mm)
         vertex_saliency = mesh_saliency(mesh)
         seen = view_channels(mesh, size=args.size, vertex_saliency=vertex_saliency, quiet=args.quiet)
         weights = model.channel_weights if combination == "learned" else None
-        rule = {"min_spacing": args.min_spacing_mm, "threshold": args.threshold, "pad_width": args.pad_mm,
-                "touch": args.touch}
-        pts = points_by_method(mesh, [args.method], n=args.n, seed=args.seed, vertex_saliency=vertex_saliency,
-                               seen=seen, combination=args.combination, weights=weights, model=model,
-                               **rule)[args.method]
+        rule = {
+            "min_spacing": args.min_spacing_mm,
+            "threshold": args.threshold,
+            "pad_width": args.pad_mm,
+            "touch": args.touch,
+        }
+        pts = points_by_method(
+            mesh,
+            [args.method],
+            n=args.n,
+            seed=args.seed,
+            vertex_saliency=vertex_saliency,
+            seen=seen,
+            combination=args.combination,
+            weights=weights,
+            model=model,
+            **rule,
+        )[args.method]
         views, maps = seen.views, attention_maps(seen, combination, weights)
 
         to_source = mesh.transform.to_source
@@ -168,20 +223,32 @@ def _cmd_points(args) -> int:
         source_mesh = mesh.replace(vertices=to_source(mesh.vertices), vertex_colors=colors, transform=Similarity())
         save_ply(args.out / "saliency.ply", source_mesh, quality=vertex_saliency)
 
-        settings = {"n": args.n, "method": args.method, "size_mm": args.size_mm, "view_size": args.size,
-                    "threshold": args.threshold, "seed": args.seed, "combination": combination,
-                    "pad_mm": args.pad_mm, "touch_check": args.touch,
-                    "model": None if args.model is None else str(args.model), "channel_weights": weights}
+        settings = {
+            "n": args.n,
+            "method": args.method,
+            "size_mm": args.size_mm,
+            "view_size": args.size,
+            "threshold": args.threshold,
+            "seed": args.seed,
+            "combination": combination,
+            "pad_mm": args.pad_mm,
+            "touch_check": args.touch,
+            "model": None if args.model is None else str(args.model),
+            "channel_weights": weights,
+        }
         pts.save(args.out / "points.json", frame=mesh.transform, source=str(args.mesh), settings=settings)
         pts.save_csv(args.out / "points.csv", frame=mesh.transform)
 
         best = pts.best_set if pts.best_set >= 0 else best_view_set(maps)
-        write_png(args.out / "views.png", overlay.views_picture(views, maps, range(4 * best, 4 * best + 4),
-                                                                pts.positions))
+        write_png(
+            args.out / "views.png", overlay.views_picture(views, maps, range(4 * best, 4 * best + 4), pts.positions)
+        )
         write_png(args.out / "contact_sheet.png", overlay.contact_sheet(maps, [v.mask for v in views]))
         plateau = np.median([plateau_fraction(m, v.mask) for m, v in zip(maps, views)])
     lost = f", {pts.untouchable} candidates the pad could not touch first skipped" if pts.untouchable > 0 else ""
-    print(f"wrote {len(pts)} {args.method} points of {args.mesh} to {args.out}{lost}; "
-          f"saliency maps ({combination}): median {100 * plateau:.0f} % of the silhouette above half "
-          f"the maximum")
+    print(
+        f"wrote {len(pts)} {args.method} points of {args.mesh} to {args.out}{lost}; "
+        f"saliency maps ({combination}): median {100 * plateau:.0f} % of the silhouette above half "
+        f"the maximum"
+    )
     return 0

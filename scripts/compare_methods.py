@@ -54,8 +54,11 @@ def main() -> int:
     baseline = document["settings"].get("baseline") or methods[0]
     cells = {}
     for cell in document["rates"]:
-        if cell["protocol"] in ROWS and (cell["classifier"], cell["n_objects"], cell["selection"]) == \
-                (args.classifier, len(names), args.selection):
+        if cell["protocol"] in ROWS and (cell["classifier"], cell["n_objects"], cell["selection"]) == (
+            args.classifier,
+            len(names),
+            args.selection,
+        ):
             row = ROWS[cell["protocol"]].format(cell["method"])
             cells.setdefault(row, {})[cell["touches"]] = np.asarray(cell["replicate_by_object"])
     k_max = max(max(v) for v in cells.values())
@@ -64,8 +67,10 @@ def main() -> int:
     for title, columns in groups.items():
         if not columns:
             continue
-        print(f"\n{title} ({len(columns)} of {len(names)} classes), instance protocol, {args.classifier}, "
-              f"{'with' if args.selection else 'no'} selection:\n")
+        print(
+            f"\n{title} ({len(columns)} of {len(names)} classes), instance protocol, {args.classifier}, "
+            f"{'with' if args.selection else 'no'} selection:\n"
+        )
         head = "| points or policy | " + " | ".join(f"{k} touch{'es' if k > 1 else ''} | diff at {k}" for k in shown)
         print(head + " | touches to 95 % |")
         print("|---|" + ":---:|" * (2 * len(shown) + 1))
@@ -78,8 +83,9 @@ def main() -> int:
                 if method == baseline:
                     row.append("baseline")
                 else:
-                    d = stats.paired_difference(rates[k], cells[baseline][k][:, columns], seed,
-                                                [names[c] for c in columns])
+                    d = stats.paired_difference(
+                        rates[k], cells[baseline][k][:, columns], seed, [names[c] for c in columns]
+                    )
                     row.append(format_diff(d.mean, d.ci_low, d.ci_high, d.p_value))
             row.append(_touches_to(rates, k_max))
             print("| " + " | ".join(row) + " |")
@@ -90,12 +96,17 @@ def main() -> int:
 def _stopping(document, classifier, n_objects, columns, seed, who) -> None:
     """Per fixed plan and policy: the touches used at the lowest threshold whose mean accuracy reaches 95 %."""
     levels = document["settings"].get("stop_levels", [])
-    found = [s for s in document.get("stopping_by_object", [])
-             if (s["classifier"], s["n_objects"]) == (classifier, n_objects)]
+    found = [
+        s
+        for s in document.get("stopping_by_object", [])
+        if (s["classifier"], s["n_objects"]) == (classifier, n_objects)
+    ]
     if not found:
         return
-    print("\nStopping rule (stop when the top class's posterior reaches p, or after every point): "
-          "mean touches used [95 % interval] at the lowest p whose mean accuracy reaches 95 %\n")
+    print(
+        "\nStopping rule (stop when the top class's posterior reaches p, or after every point): "
+        "mean touches used [95 % interval] at the lowest p whose mean accuracy reaches 95 %\n"
+    )
     print("| points or policy | p | accuracy | touches used |")
     print("|---|:---:|:---:|:---:|")
     for s in found:
@@ -109,8 +120,10 @@ def _stopping(document, classifier, n_objects, columns, seed, who) -> None:
             continue
         i = reached[0]
         a, u = stats.summarize(correct[:, i], seed, who), stats.summarize(used[:, i], seed, who)
-        print(f"| {name} | {levels[i]:g} | {format_rate(a.mean, a.ci_low, a.ci_high)} | "
-              f"{u.mean:.2f} [{u.ci_low:.2f}, {u.ci_high:.2f}] |")
+        print(
+            f"| {name} | {levels[i]:g} | {format_rate(a.mean, a.ci_low, a.ci_high)} | "
+            f"{u.mean:.2f} [{u.ci_low:.2f}, {u.ci_high:.2f}] |"
+        )
 
 
 if __name__ == "__main__":

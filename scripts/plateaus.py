@@ -18,9 +18,9 @@ import numpy as np
 
 from meshsal.attention import plateau_fraction
 from meshsal.mesh.curvature import mesh_saliency
+from meshsal.mesh.transform import scale_to_principal
 from meshsal.objects import load_ref, resolve_objects
 from meshsal.points import saliency_maps
-from meshsal.mesh.transform import scale_to_principal
 
 #: The fixed combinations ("learned" needs a fitted touch model, which this script does not have).
 COMBINATIONS = ("equal", "itti")

@@ -71,8 +71,10 @@ def main() -> int:
     for r in range(args.replicates):
         for i, name in enumerate(names):
             for m in methods:
-                test, *training = (nominal_positions(settings, name, r, j, stage.samples[SampleKey(r, m, i, j)].positions)
-                                   for j in range(settings.train_instances + 1))
+                test, *training = (
+                    nominal_positions(settings, name, r, j, stage.samples[SampleKey(r, m, i, j)].positions)
+                    for j in range(settings.train_instances + 1)
+                )
                 distances[groups[i], m].append(nearest_training_distances(test, training))
     print("| method | " + " | ".join(f"{s}: median distance (mm) | {s}: within {args.near:g} mm" for s in sets) + " |")
     print("|---|" + ":---:|:---:|" * len(sets))

@@ -14,8 +14,8 @@ import argparse
 import sys
 
 import meshsal
-from meshsal.objects import load_ref, resolve_objects
 from meshsal.mesh.transform import scale_to_principal
+from meshsal.objects import load_ref, resolve_objects
 
 
 def main() -> int:

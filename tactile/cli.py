@@ -11,28 +11,51 @@ def register(subparsers) -> None:
 
     default = Sensor()
     p = subparsers.add_parser(
-        "imprints", help="simulate the tactile imprints at interest points of a mesh",
+        "imprints",
+        help="simulate the tactile imprints at interest points of a mesh",
         description="Scale MESH to --size-mm, press a simulated 16x16 tactile pad at each point of POINTS "
-                    "(the points.json written by 'visuotactile points': positions and normals in the mesh "
-                    "file's units) and write the imprint set (.npz) and imprints.png, a labelled grid of "
-                    "the imprints, beside it.")
-    p.add_argument("mesh", type=Path, metavar="MESH", help="mesh file (OBJ, PLY, OFF, STL) or a toy name (cow, glasses, ...)")
-    p.add_argument("--points", type=Path, required=True, metavar="POINTS",
-                   help="points.json from 'visuotactile points'")
+        "(the points.json written by 'visuotactile points': positions and normals in the mesh "
+        "file's units) and write the imprint set (.npz) and imprints.png, a labelled grid of "
+        "the imprints, beside it.",
+    )
+    p.add_argument(
+        "mesh", type=Path, metavar="MESH", help="mesh file (OBJ, PLY, OFF, STL) or a toy name (cow, glasses, ...)"
+    )
+    p.add_argument(
+        "--points", type=Path, required=True, metavar="POINTS", help="points.json from 'visuotactile points'"
+    )
     p.add_argument("--out", type=Path, required=True, metavar="SET.npz", help="imprint set to write")
-    p.add_argument("--size-mm", type=float, default=150.0,
-                   help="principal-frame box diagonal the mesh is scaled to, in mm, as 'visuotactile points' and the "
-                        "experiment do (default 150)")
-    p.add_argument("--mode", choices=SENSOR_MODES.names(), default=default.mode,
-                   help=f"contour (the paper's image) or pressure (default {default.mode})")
-    p.add_argument("--plane", choices=PLANES, default=default.plane,
-                   help=f"how the pad plane is fitted (default {default.plane})")
-    p.add_argument("--pitch-mm", type=float, default=default.pitch_mm,
-                   help=f"taxel spacing in mm (default {default.pitch_mm})")
-    p.add_argument("--depth-mm", type=float, default=default.depth_mm,
-                   help=f"pressing depth beyond first contact in mm (default {default.depth_mm})")
-    p.add_argument("--supersample", type=int, default=default.supersample,
-                   help=f"rays per taxel side (default {default.supersample})")
+    p.add_argument(
+        "--size-mm",
+        type=float,
+        default=150.0,
+        help="principal-frame box diagonal the mesh is scaled to, in mm, as 'visuotactile points' and the "
+        "experiment do (default 150)",
+    )
+    p.add_argument(
+        "--mode",
+        choices=SENSOR_MODES.names(),
+        default=default.mode,
+        help=f"contour (the paper's image) or pressure (default {default.mode})",
+    )
+    p.add_argument(
+        "--plane", choices=PLANES, default=default.plane, help=f"how the pad plane is fitted (default {default.plane})"
+    )
+    p.add_argument(
+        "--pitch-mm", type=float, default=default.pitch_mm, help=f"taxel spacing in mm (default {default.pitch_mm})"
+    )
+    p.add_argument(
+        "--depth-mm",
+        type=float,
+        default=default.depth_mm,
+        help=f"pressing depth beyond first contact in mm (default {default.depth_mm})",
+    )
+    p.add_argument(
+        "--supersample",
+        type=int,
+        default=default.supersample,
+        help=f"rays per taxel side (default {default.supersample})",
+    )
     p.set_defaults(func=_cmd_imprints)
 
 
@@ -59,17 +82,25 @@ def _cmd_imprints(args) -> int:
 
     if args.out.suffix != ".npz":
         raise ValueError(f"--out must name a .npz file, got {args.out}")
-    sensor = Sensor(pitch_mm=args.pitch_mm, depth_mm=args.depth_mm, mode=args.mode,
-                    supersample=args.supersample, plane=args.plane)
+    sensor = Sensor(
+        pitch_mm=args.pitch_mm, depth_mm=args.depth_mm, mode=args.mode, supersample=args.supersample, plane=args.plane
+    )
     source_positions, normals, ids = read_points(args.points)
     with naming(args.mesh):
         mesh = scale_to_principal(load_object(args.mesh), args.size_mm)
         positions = mesh.transform.apply(source_positions)
         normals = mesh.transform.apply_direction(normals)
         images = imprints(mesh, positions, normals, sensor)
-        result = ImprintSet(imprints=images, labels=[0] * len(images), object_names=(mesh.name or args.mesh.stem,),
-                            point_ids=ids, positions=positions, normals=normals, sensor=sensor,
-                            source=f"{args.mesh} at {args.points}, scaled to {args.size_mm:g} mm")
+        result = ImprintSet(
+            imprints=images,
+            labels=[0] * len(images),
+            object_names=(mesh.name or args.mesh.stem,),
+            point_ids=ids,
+            positions=positions,
+            normals=normals,
+            sensor=sensor,
+            source=f"{args.mesh} at {args.points}, scaled to {args.size_mm:g} mm",
+        )
         result.save(args.out)
         picture = args.out.parent / "imprints.png"
         write_png(picture, imprint_grid(images, [f"#{i}" for i in ids]))

@@ -59,8 +59,12 @@ def polar_fourier(imprints, rings: int = 7, samples: int = 32, harmonics: int = 
     x0 = np.clip(np.floor(xs).astype(int), 0, cols - 2)
     wy, wx = ys - y0, xs - x0
     flat = X.reshape(n, -1)
-    ring = (flat[:, y0 * cols + x0] * ((1 - wy) * (1 - wx)) + flat[:, y0 * cols + x0 + 1] * ((1 - wy) * wx)
-            + flat[:, (y0 + 1) * cols + x0] * (wy * (1 - wx)) + flat[:, (y0 + 1) * cols + x0 + 1] * (wy * wx))
+    ring = (
+        flat[:, y0 * cols + x0] * ((1 - wy) * (1 - wx))
+        + flat[:, y0 * cols + x0 + 1] * ((1 - wy) * wx)
+        + flat[:, (y0 + 1) * cols + x0] * (wy * (1 - wx))
+        + flat[:, (y0 + 1) * cols + x0 + 1] * (wy * wx)
+    )
     spectrum = np.abs(np.fft.rfft(ring.reshape(n, rings, samples), axis=2))[:, :, :harmonics] / samples
     return spectrum.reshape(n, rings * harmonics)
 

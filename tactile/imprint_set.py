@@ -74,8 +74,9 @@ class ImprintSet:
         if not isinstance(self.sensor, Sensor):
             raise ValueError(f"sensor must be a Sensor, got {type(self.sensor).__name__}")
         if imprints.shape[1:] != (self.sensor.rows, self.sensor.cols):
-            raise ValueError(f"imprints are {imprints.shape[1:]} but the sensor is "
-                             f"{(self.sensor.rows, self.sensor.cols)}")
+            raise ValueError(
+                f"imprints are {imprints.shape[1:]} but the sensor is {(self.sensor.rows, self.sensor.cols)}"
+            )
         if self.perturbation is not None and not isinstance(self.perturbation, Perturbation):
             raise ValueError(f"perturbation must be a Perturbation or None, got {type(self.perturbation).__name__}")
         names = tuple(str(name) for name in self.object_names)
@@ -92,8 +93,10 @@ class ImprintSet:
                 raise ValueError(f"{name} must be integers, got {value.dtype}")
             object.__setattr__(self, name, np.ascontiguousarray(value, dtype=dtype))
         if n and (self.labels.min() < 0 or self.labels.max() >= len(names)):
-            raise ValueError(f"labels must index object_names (0..{len(names) - 1}), "
-                             f"got values {self.labels.min()}..{self.labels.max()}")
+            raise ValueError(
+                f"labels must index object_names (0..{len(names) - 1}), "
+                f"got values {self.labels.min()}..{self.labels.max()}"
+            )
         if self.seed is not None and (isinstance(self.seed, bool) or not isinstance(self.seed, (int, np.integer))):
             raise ValueError(f"seed must be an integer or None, got {self.seed!r}")
         object.__setattr__(self, "imprints", imprints)
@@ -109,10 +112,18 @@ class ImprintSet:
         keep = np.asarray(keep)
         if keep.dtype == bool and keep.shape != (len(self),):
             raise ValueError(f"mask must have shape ({len(self)},), got {keep.shape}")
-        return ImprintSet(imprints=self.imprints[keep], labels=self.labels[keep], object_names=self.object_names,
-                          point_ids=self.point_ids[keep], positions=self.positions[keep],
-                          normals=self.normals[keep], sensor=self.sensor, perturbation=self.perturbation,
-                          seed=self.seed, source=self.source)
+        return ImprintSet(
+            imprints=self.imprints[keep],
+            labels=self.labels[keep],
+            object_names=self.object_names,
+            point_ids=self.point_ids[keep],
+            positions=self.positions[keep],
+            normals=self.normals[keep],
+            sensor=self.sensor,
+            perturbation=self.perturbation,
+            seed=self.seed,
+            source=self.source,
+        )
 
     def save(self, path) -> None:
         """Write the set to ``path`` (.npz), atomically."""
@@ -132,8 +143,9 @@ class ImprintSet:
         }
         with atomic_path(path) as tmp:
             with open(tmp, "wb") as fh:
-                np.savez_compressed(fh, meta=np.array(json.dumps(meta)),
-                                    **{name: getattr(self, name) for name in _ARRAYS})
+                np.savez_compressed(
+                    fh, meta=np.array(json.dumps(meta)), **{name: getattr(self, name) for name in _ARRAYS}
+                )
 
     @classmethod
     def load(cls, path) -> ImprintSet:
@@ -149,23 +161,31 @@ class ImprintSet:
         except FileNotFoundError:
             raise FileNotFoundError(f"{path}: no such imprint set file") from None
         if "meta" not in arrays:
-            raise ValueError(f"{path}: not an imprint set (no 'meta' entry; "
-                             f"arrays found: {', '.join(arrays) or 'none'})")
+            raise ValueError(
+                f"{path}: not an imprint set (no 'meta' entry; arrays found: {', '.join(arrays) or 'none'})"
+            )
         meta = parse_json(str(arrays["meta"]), path, "imprint set")
         if not isinstance(meta, dict) or meta.get("format") != FORMAT:
-            raise ValueError(f"{path}: not an imprint set "
-                             f"(format {meta.get('format') if isinstance(meta, dict) else meta!r})")
+            raise ValueError(
+                f"{path}: not an imprint set (format {meta.get('format') if isinstance(meta, dict) else meta!r})"
+            )
         if meta.get("version") != VERSION:
-            raise ValueError(f"{path}: imprint set version {meta.get('version')!r} is not supported "
-                             f"(this toolkit reads version {VERSION})")
+            raise ValueError(
+                f"{path}: imprint set version {meta.get('version')!r} is not supported "
+                f"(this toolkit reads version {VERSION})"
+            )
         missing = [name for name in _ARRAYS if name not in arrays]
         if missing:
             raise ValueError(f"{path}: damaged imprint set, missing {', '.join(missing)}")
         try:
             perturbation = meta.get("perturbation")
-            return cls(sensor=Sensor(**meta["sensor"]),
-                       perturbation=None if perturbation is None else Perturbation(**perturbation),
-                       object_names=tuple(meta["object_names"]), seed=meta.get("seed"),
-                       source=meta.get("source", ""), **{name: arrays[name] for name in _ARRAYS})
+            return cls(
+                sensor=Sensor(**meta["sensor"]),
+                perturbation=None if perturbation is None else Perturbation(**perturbation),
+                object_names=tuple(meta["object_names"]),
+                seed=meta.get("seed"),
+                source=meta.get("source", ""),
+                **{name: arrays[name] for name in _ARRAYS},
+            )
         except (KeyError, TypeError, ValueError) as exc:
             raise ValueError(f"{path}: inconsistent imprint set ({exc})") from None

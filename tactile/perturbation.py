@@ -103,8 +103,16 @@ class Perturbation:
         1 mm placement error, 3 degree tilt, free roll, 10 % gain spread,
         2 % noise, 1 % dead taxels, an 8-bit ADC and a 1 mm elastic cover blur.
         """
-        return cls(jitter_mm=1.0, tilt_deg=3.0, uniform_rotation=True, gain_spread=0.1, noise=0.02,
-                   dead_fraction=0.01, adc_bits=8, blur_mm=1.0)
+        return cls(
+            jitter_mm=1.0,
+            tilt_deg=3.0,
+            uniform_rotation=True,
+            gain_spread=0.1,
+            noise=0.02,
+            dead_fraction=0.01,
+            adc_bits=8,
+            blur_mm=1.0,
+        )
 
     @property
     def is_clean(self) -> bool:
@@ -131,8 +139,16 @@ def _tilt(normals: np.ndarray, sd_deg: float, rng: np.random.Generator) -> np.nd
     return np.cos(theta) * normals + np.sin(theta) * (np.cos(phi) * right + np.sin(phi) * up)
 
 
-def acquire(mesh: Mesh, positions, normals, sensor: Sensor | None = None, perturb: Perturbation | None = None,
-            rng=0, workers: int | None = None, scene=None) -> np.ndarray:
+def acquire(
+    mesh: Mesh,
+    positions,
+    normals,
+    sensor: Sensor | None = None,
+    perturb: Perturbation | None = None,
+    rng=0,
+    workers: int | None = None,
+    scene=None,
+) -> np.ndarray:
     """Simulated sensor readings at k points, with placement and reading errors.
 
     Parameters
@@ -213,6 +229,6 @@ def acquire(mesh: Mesh, positions, normals, sensor: Sensor | None = None, pertur
     if perturb.dead_fraction > 0:
         images = np.where(dead, 0.0, images)
     if perturb.adc_bits > 0:
-        levels = float(2 ** perturb.adc_bits - 1)
+        levels = float(2**perturb.adc_bits - 1)
         images = np.round(images * levels) / levels
     return images.astype(np.float32)

@@ -53,8 +53,9 @@ def imprint_grid(images, captions=None, scale: int = 8, columns: int = 5) -> np.
         gray = np.round(np.clip(images[i], 0.0, 1.0) * 255).astype(np.uint8)
         big = np.repeat(np.repeat(gray, scale, axis=0), scale, axis=1)
         y0 = top + bar
-        canvas[y0:y0 + tile_h, left:left + tile_w] = 110
-        canvas[y0 + 1:y0 + tile_h - 1, left + 1:left + tile_w - 1] = big[:, :, None]
-        cv2.putText(canvas, captions[i], (left, top + bar - 6), cv2.FONT_HERSHEY_SIMPLEX, 0.45,
-                    (255, 220, 90), 1, cv2.LINE_AA)
+        canvas[y0 : y0 + tile_h, left : left + tile_w] = 110
+        canvas[y0 + 1 : y0 + tile_h - 1, left + 1 : left + tile_w - 1] = big[:, :, None]
+        cv2.putText(
+            canvas, captions[i], (left, top + bar - 6), cv2.FONT_HERSHEY_SIMPLEX, 0.45, (255, 220, 90), 1, cv2.LINE_AA
+        )
     return canvas

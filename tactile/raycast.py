@@ -90,10 +90,14 @@ def mesh_scene(mesh: Mesh, scene=None):
     if scene is None:
         return embree_scene(mesh)
     if not callable(getattr(scene, "run", None)):
-        raise ValueError(f"scene must be an Embree scene from meshsal.mesh.embree.embree_scene, got {type(scene).__name__}")
+        raise ValueError(
+            f"scene must be an Embree scene from meshsal.mesh.embree.embree_scene, got {type(scene).__name__}"
+        )
     if not _holds_mesh(scene, mesh):
-        raise ValueError(f"scene does not hold mesh {mesh.name!r}: build it with "
-                         "meshsal.mesh.embree.embree_scene(mesh) from the same mesh, after any scaling")
+        raise ValueError(
+            f"scene does not hold mesh {mesh.name!r}: build it with "
+            "meshsal.mesh.embree.embree_scene(mesh) from the same mesh, after any scaling"
+        )
     return scene
 
 
@@ -102,9 +106,11 @@ def _cast_chunk(scene, poses: Poses, sensor: Sensor, xs: np.ndarray, ys: np.ndar
     f32 = np.float32
     normals = poses.normals.astype(f32)
     start = (poses.centers + sensor.reach_mm * poses.normals).astype(f32)
-    origins = (start[:, None, None, :]
-               + ys.astype(f32)[None, :, None, None] * poses.ups.astype(f32)[:, None, None, :]
-               + xs.astype(f32)[None, None, :, None] * poses.rights.astype(f32)[:, None, None, :])
+    origins = (
+        start[:, None, None, :]
+        + ys.astype(f32)[None, :, None, None] * poses.ups.astype(f32)[:, None, None, :]
+        + xs.astype(f32)[None, None, :, None] * poses.rights.astype(f32)[:, None, None, :]
+    )
     # First contact is no farther than any front-facing hit of the pad's own
     # rays, and hits deeper than depth_mm beyond contact are dropped: so one
     # probe ray per pad bounds how far all its rays need to travel, which
@@ -113,8 +119,9 @@ def _cast_chunk(scene, poses: Poses, sensor: Sensor, xs: np.ndarray, ys: np.ndar
     probe = scene.run(np.ascontiguousarray(origins[:, H // 2, W // 2]), -normals, output=1)
     front = (probe["primID"] >= 0) & ((probe["Ng"] * normals).sum(axis=1) > 0)
     travel = np.where(front, (probe["tfar"] + sensor.depth_mm) * (1 + 1e-4) + 1e-4, np.inf).astype(f32)
-    hit = scene.run(origins.reshape(-1, 3), np.repeat(-normals, H * W, axis=0), dists=np.repeat(travel, H * W),
-                    output=1)
+    hit = scene.run(
+        origins.reshape(-1, 3), np.repeat(-normals, H * W, axis=0), dists=np.repeat(travel, H * W), output=1
+    )
     facing = np.einsum("kpj,kj->kp", hit["Ng"].reshape(k, H * W, 3), normals) > 0
     t = np.where((hit["primID"].reshape(k, H * W) >= 0) & facing, hit["tfar"].reshape(k, H * W), np.inf)
     contact = t.min(axis=1, keepdims=True)
@@ -128,8 +135,15 @@ def _map_chunks(fn, poses: Poses, rays_per_pose: int, workers: int | None) -> li
     workers = (os.cpu_count() or 1) if workers is None else max(1, int(workers))
     # At least one chunk per worker, so that a few imprints use every core too.
     per_chunk = max(1, min(_CHUNK_RAYS // rays_per_pose, -(-k // workers)))
-    chunks = [Poses(poses.centers[a:a + per_chunk], poses.normals[a:a + per_chunk], poses.ups[a:a + per_chunk],
-                    poses.rights[a:a + per_chunk]) for a in range(0, k, per_chunk)]
+    chunks = [
+        Poses(
+            poses.centers[a : a + per_chunk],
+            poses.normals[a : a + per_chunk],
+            poses.ups[a : a + per_chunk],
+            poses.rights[a : a + per_chunk],
+        )
+        for a in range(0, k, per_chunk)
+    ]
     if workers == 1 or len(chunks) == 1:
         return [fn(chunk) for chunk in chunks]
     results = [None] * len(chunks)
@@ -206,8 +220,15 @@ def imprints_at(mesh: Mesh, poses: Poses, sensor: Sensor, workers: int | None = 
     return np.concatenate(_map_chunks(run, poses, xs.size * ys.size, workers))
 
 
-def imprints(mesh: Mesh, positions, normals, sensor: Sensor | None = None, angles_deg=None,
-             workers: int | None = None, scene=None) -> np.ndarray:
+def imprints(
+    mesh: Mesh,
+    positions,
+    normals,
+    sensor: Sensor | None = None,
+    angles_deg=None,
+    workers: int | None = None,
+    scene=None,
+) -> np.ndarray:
     """Simulated tactile imprints at k surface points (fast path).
 
     Fits the pad plane at each point (``sensor.plane``), then casts all the
@@ -258,12 +279,12 @@ def imprints(mesh: Mesh, positions, normals, sensor: Sensor | None = None, angle
     return imprints_at(mesh, sensor_poses(mesh, P, N, sensor, A), sensor, workers, scene)
 
 
-def imprint(mesh: Mesh, position, normal, sensor: Sensor | None = None, angle_deg: float = 0.0,
-            scene=None) -> np.ndarray:
+def imprint(
+    mesh: Mesh, position, normal, sensor: Sensor | None = None, angle_deg: float = 0.0, scene=None
+) -> np.ndarray:
     """The imprint at one point: :func:`imprints` for k = 1, (rows, cols) float32 in [0, 1].
 
     Pass ``scene=meshsal.mesh.embree.embree_scene(mesh)`` when taking imprints one
     at a time on the same mesh, to build its BVH once.
     """
-    return imprints(mesh, np.reshape(position, (1, 3)), np.reshape(normal, (1, 3)), sensor, [angle_deg],
-                    scene=scene)[0]
+    return imprints(mesh, np.reshape(position, (1, 3)), np.reshape(normal, (1, 3)), sensor, [angle_deg], scene=scene)[0]

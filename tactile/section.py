@@ -127,8 +127,9 @@ def imprints_exact_at(mesh: Mesh, poses: Poses, sensor: Sensor) -> np.ndarray:
         raise ValueError(f"mesh {mesh.name!r} has no faces")
     out = np.zeros((len(poses), sensor.rows, sensor.cols), dtype=np.float32)
     for i in range(len(poses)):
-        out[i] = _one(mesh.vertices, mesh.faces, poses.centers[i], poses.normals[i], poses.ups[i],
-                      poses.rights[i], sensor)
+        out[i] = _one(
+            mesh.vertices, mesh.faces, poses.centers[i], poses.normals[i], poses.ups[i], poses.rights[i], sensor
+        )
     return out
 
 

@@ -181,7 +181,9 @@ def check_points(positions, normals, angles_deg=None) -> tuple[np.ndarray, np.nd
         raise ValueError("positions and normals must be finite")
     length = np.linalg.norm(N, axis=1)
     if (length < 1e-12).any():
-        raise ValueError(f"normals must be non-zero (zero normal at rows {np.flatnonzero(length < 1e-12)[:5].tolist()})")
+        raise ValueError(
+            f"normals must be non-zero (zero normal at rows {np.flatnonzero(length < 1e-12)[:5].tolist()})"
+        )
     A = np.zeros(P.shape[0]) if angles_deg is None else np.asarray(angles_deg, dtype=np.float64).reshape(-1)
     if A.shape != (P.shape[0],):
         raise ValueError(f"angles_deg must have shape ({P.shape[0]},), got {np.shape(angles_deg)}")
@@ -194,6 +196,7 @@ def check_points(positions, normals, angles_deg=None) -> tuple[np.ndarray, np.nd
 # their contiguous rows make the gathers and reductions several times faster
 # than on (n, 3) rows of three.
 
+
 def _vertex_area_vectors(Vt: np.ndarray, F: np.ndarray) -> np.ndarray:
     """Per vertex, a third of the area-weighted normals of its faces, (3, n) from (3, n) vertices."""
     Ft = F.T.astype(np.intp)
@@ -201,8 +204,15 @@ def _vertex_area_vectors(Vt: np.ndarray, F: np.ndarray) -> np.ndarray:
     ax, ay, az = x[1] - x[0], y[1] - y[0], z[1] - z[0]
     bx, by, bz = x[2] - x[0], y[2] - y[0], z[2] - z[0]
     corners, n = Ft.reshape(-1), Vt.shape[1]
-    return np.stack([np.bincount(corners, weights=np.tile(c, 3), minlength=n)
-                     for c in (ay * bz - az * by, az * bx - ax * bz, ax * by - ay * bx)]) / 6.0
+    return (
+        np.stack(
+            [
+                np.bincount(corners, weights=np.tile(c, 3), minlength=n)
+                for c in (ay * bz - az * by, az * bx - ax * bz, ax * by - ay * bx)
+            ]
+        )
+        / 6.0
+    )
 
 
 def _cells_near(cell: np.ndarray, P: np.ndarray, origin: np.ndarray, size: float, radius: float):
@@ -218,8 +228,9 @@ def _cells_near(cell: np.ndarray, P: np.ndarray, origin: np.ndarray, size: float
     span = cell.max(axis=1) + 1
     around = (np.floor((P - origin) / size).astype(np.int64)[:, None, :] + steps).reshape(-1, 3)
     around = around[((around >= 0) & (around < span)).all(axis=1)].T
-    return np.isin((cell[0] * span[1] + cell[1]) * span[2] + cell[2],
-                   (around[0] * span[1] + around[1]) * span[2] + around[2])
+    return np.isin(
+        (cell[0] * span[1] + cell[1]) * span[2] + cell[2], (around[0] * span[1] + around[1]) * span[2] + around[2]
+    )
 
 
 def _surface_cells(Vt: np.ndarray, area: np.ndarray, cell: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

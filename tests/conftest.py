@@ -12,7 +12,7 @@ import pytest
 
 from meshsal.util.reproducible import pin_kernels
 
-pin_kernels()   # before anything imports NumPy or OpenCV: the same kernels, hence numbers, on every x86-64 CPU
+pin_kernels()  # before anything imports NumPy or OpenCV: the same kernels, hence numbers, on every x86-64 CPU
 
 _SHARED = Path(__file__).resolve().parents[1].parent / "shared"
 

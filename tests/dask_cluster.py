@@ -36,11 +36,35 @@ def make_certificates(folder: Path, name: str = "dask") -> Certificates:
     def run(*args):
         subprocess.run([openssl, *args], cwd=folder, check=True, capture_output=True)
 
-    run("req", "-x509", *ec, "-keyout", f"{name}-ca-key.pem", "-out", f"{name}-ca.pem", "-days", "2",
-        "-subj", f"/CN={name} test CA")
+    run(
+        "req",
+        "-x509",
+        *ec,
+        "-keyout",
+        f"{name}-ca-key.pem",
+        "-out",
+        f"{name}-ca.pem",
+        "-days",
+        "2",
+        "-subj",
+        f"/CN={name} test CA",
+    )
     run("req", *ec, "-keyout", f"{name}-key.pem", "-out", f"{name}.csr", "-subj", f"/CN={name}")
-    run("x509", "-req", "-in", f"{name}.csr", "-CA", f"{name}-ca.pem", "-CAkey", f"{name}-ca-key.pem",
-        "-CAcreateserial", "-out", f"{name}.pem", "-days", "2")
+    run(
+        "x509",
+        "-req",
+        "-in",
+        f"{name}.csr",
+        "-CA",
+        f"{name}-ca.pem",
+        "-CAkey",
+        f"{name}-ca-key.pem",
+        "-CAcreateserial",
+        "-out",
+        f"{name}.pem",
+        "-days",
+        "2",
+    )
     return Certificates(folder / f"{name}-ca.pem", folder / f"{name}.pem", folder / f"{name}-key.pem")
 
 
@@ -62,9 +86,24 @@ class DaskCluster:
         self.env = env
         host = "127.0.0.1" if certificates is None else "tls://127.0.0.1"
         self.scheduler = subprocess.Popen(
-            [sys.executable, "-m", "distributed.cli.dask_scheduler", "--host", host, "--port", "0",
-             "--no-dashboard", "--scheduler-file", str(self.file), *self.tls],
-            env=env, cwd=cwd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+            [
+                sys.executable,
+                "-m",
+                "distributed.cli.dask_scheduler",
+                "--host",
+                host,
+                "--port",
+                "0",
+                "--no-dashboard",
+                "--scheduler-file",
+                str(self.file),
+                *self.tls,
+            ],
+            env=env,
+            cwd=cwd,
+            stdout=subprocess.DEVNULL,
+            stderr=subprocess.DEVNULL,
+        )
         self._wait(lambda: self.file.exists() and "address" in self.file.read_text(), "the scheduler")
         self.address = json.loads(self.file.read_text())["address"]
         self.workers = [self._worker() for _ in range(2)]
@@ -72,9 +111,25 @@ class DaskCluster:
 
     def _worker(self):
         return subprocess.Popen(
-            [sys.executable, "-m", "distributed.cli.dask_worker", "--scheduler-file", str(self.file),
-             "--nthreads", "1", "--no-nanny", "--no-dashboard", "--host", "127.0.0.1", *self.tls],
-            env=self.env, cwd=self.cwd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+            [
+                sys.executable,
+                "-m",
+                "distributed.cli.dask_worker",
+                "--scheduler-file",
+                str(self.file),
+                "--nthreads",
+                "1",
+                "--no-nanny",
+                "--no-dashboard",
+                "--host",
+                "127.0.0.1",
+                *self.tls,
+            ],
+            env=self.env,
+            cwd=self.cwd,
+            stdout=subprocess.DEVNULL,
+            stderr=subprocess.DEVNULL,
+        )
 
     def security(self):
         """The client's ``distributed.Security`` (None on tcp://)."""

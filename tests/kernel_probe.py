@@ -37,9 +37,19 @@ def results_csv(out_dir) -> str:
     from classify.experiment.samples import Settings
 
     settings = Settings(n_points=6, train_instances=2, train_sessions=1)
-    experiment.run_experiment(list(TOYS), methods=("uniform",), classifiers=("knn", "naive_bayes", "decision_tree"),
-                              settings=settings, replicates=2, repeats=2, folds=3, n_jobs=1, cache_dir=None, quiet=True,
-                              out_dir=out_dir)
+    experiment.run_experiment(
+        list(TOYS),
+        methods=("uniform",),
+        classifiers=("knn", "naive_bayes", "decision_tree"),
+        settings=settings,
+        replicates=2,
+        repeats=2,
+        folds=3,
+        n_jobs=1,
+        cache_dir=None,
+        quiet=True,
+        out_dir=out_dir,
+    )
     return (Path(out_dir) / "results.csv").read_text()
 
 

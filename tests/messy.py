@@ -18,7 +18,6 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
-
 from shapes import _box_points, _orient, _weld
 
 FORMATS = ("obj", "ply", "off", "stl")
@@ -205,17 +204,31 @@ def cases() -> list[Case]:
     Fd = np.where(F == len(V) - 1, len(V) + 1, F)
     out.append(Case("duplicate_vertices", Vd, Fd, _box_counts(merged_vertices=2)))
 
-    out.append(Case("unreferenced_vertices", np.vstack([V, [[50.0, 50, 50], [60.0, 60, 60]]]), F,
-                    _box_counts(unreferenced_vertices=2), formats=("obj", "ply", "off")))
+    out.append(
+        Case(
+            "unreferenced_vertices",
+            np.vstack([V, [[50.0, 50, 50], [60.0, 60, 60]]]),
+            F,
+            _box_counts(unreferenced_vertices=2),
+            formats=("obj", "ply", "off"),
+        )
+    )
 
     Vz, Fz = plant_collinear(V, F, (16, 16, 32))
-    Fz = np.vstack([Fz, [Fz[0][[0, 0, 1]]]])           # a face that repeats a vertex
+    Fz = np.vstack([Fz, [Fz[0][[0, 0, 1]]]])  # a face that repeats a vertex
     out.append(Case("zero_area_faces", Vz, Fz, _box_counts(zero_area_faces=2)))
 
     Vs, Fs = plant_needle(V, F, (16, 32, 14))
     Vs, Fs = plant_cap(Vs, Fs, (16, 0, 18))
-    out.append(Case("sliver_faces", Vs, Fs, _box_counts(sliver_faces=3, collapsed_vertices=1, split_faces=1),
-                    formats=("obj", "ply", "off")))
+    out.append(
+        Case(
+            "sliver_faces",
+            Vs,
+            Fs,
+            _box_counts(sliver_faces=3, collapsed_vertices=1, split_faces=1),
+            formats=("obj", "ply", "off"),
+        )
+    )
 
     dup = plant_faces_near(V, F, (16, 16, 32), 3)
     out.append(Case("duplicate_faces", V, np.vstack([F, F[dup][:, [1, 2, 0]]]), _box_counts(duplicate_faces=3)))
@@ -225,9 +238,19 @@ def cases() -> list[Case]:
     out.append(Case("double_sided_faces", V, np.vstack([F[twin][:, ::-1], F]), _box_counts(double_sided_faces=4)))
 
     Vf, Ff = plant_fin(V, F, (16, 32, 14))
-    out.append(Case("double_sided_fin", Vf, Ff,
-                    {**_box_counts(double_sided_faces=1, nonmanifold_edges=1, nonmanifold_vertices=2, added_vertices=2),
-                     "components": 2, "boundary_edges": 3, "boundary_loops": 1}))
+    out.append(
+        Case(
+            "double_sided_fin",
+            Vf,
+            Ff,
+            {
+                **_box_counts(double_sided_faces=1, nonmanifold_edges=1, nonmanifold_vertices=2, added_vertices=2),
+                "components": 2,
+                "boundary_edges": 3,
+                "boundary_loops": 1,
+            },
+        )
+    )
 
     side = side_faces(V, F, 0, 32.0)
     Fo = F.copy()
@@ -236,8 +259,14 @@ def cases() -> list[Case]:
     out.append(Case("inward_box", V, F[:, ::-1], _box_counts(outward_components=1)))
 
     Ve, Fe = union(box(), box((32, 32, 0), (64, 64, 32)), weld=True)
-    out.append(Case("nonmanifold_edges", Ve, Fe,
-                    _box_counts(2, nonmanifold_edges=SIDE, nonmanifold_vertices=SIDE + 1, added_vertices=SIDE + 1)))
+    out.append(
+        Case(
+            "nonmanifold_edges",
+            Ve,
+            Fe,
+            _box_counts(2, nonmanifold_edges=SIDE, nonmanifold_vertices=SIDE + 1, added_vertices=SIDE + 1),
+        )
+    )
     Vv, Fv = union(box(), box((32, 32, 32), (64, 64, 64)), weld=True)
     out.append(Case("nonmanifold_vertex", Vv, Fv, _box_counts(2, nonmanifold_vertices=1, added_vertices=1)))
 
@@ -249,23 +278,53 @@ def cases() -> list[Case]:
     out.append(Case("interpenetrating_one_inward", Vi, Fi, _box_counts(2, outward_components=1)))
 
     Vc, Fc = cup()
-    out.append(Case("cup", Vc, Fc, {"components": 1, "closed_components": 0, "boundary_edges": 16,
-                                    "boundary_loops": 1}))
+    out.append(
+        Case("cup", Vc, Fc, {"components": 1, "closed_components": 0, "boundary_edges": 16, "boundary_loops": 1})
+    )
     holes = np.concatenate([plant_faces_near(V, F, p, 1) for p in ((16, 16, 32), (16, 16, 0), (0, 16, 16))])
-    out.append(Case("box_with_holes", V, np.delete(F, holes, axis=0),
-                    {"components": 1, "closed_components": 0, "boundary_edges": 9, "boundary_loops": 3}))
+    out.append(
+        Case(
+            "box_with_holes",
+            V,
+            np.delete(F, holes, axis=0),
+            {"components": 1, "closed_components": 0, "boundary_edges": 9, "boundary_loops": 3},
+        )
+    )
 
     Vn, Fn = union(box(), fold())
-    out.append(Case("fold_without_normals", Vn, Fn,
-                    {"components": 2, "closed_components": 1, "boundary_edges": 4, "boundary_loops": 1,
-                     "normalless_vertices": 2}, normalless=fold()[0][[0, 2]]))
+    out.append(
+        Case(
+            "fold_without_normals",
+            Vn,
+            Fn,
+            {
+                "components": 2,
+                "closed_components": 1,
+                "boundary_edges": 4,
+                "boundary_loops": 1,
+                "normalless_vertices": 2,
+            },
+            normalless=fold()[0][[0, 2]],
+        )
+    )
 
     Vx, Fx = union(box(), sphere(), box((18, 10, 6), (50, 42, 38)))
     decal = np.array([[200.0, 0, 0], [216, 0, 0], [200, 16, 0]])
     Vx, Fx = union((Vx, Fx), (decal, np.array([[0, 1, 2], [0, 2, 1]])))
-    out.append(Case("composite_double_sided", Vx, Fx,
-                    {"components": 4, "closed_components": 3, "boundary_edges": 3, "boundary_loops": 1,
-                     "double_sided_faces": 1}))
+    out.append(
+        Case(
+            "composite_double_sided",
+            Vx,
+            Fx,
+            {
+                "components": 4,
+                "closed_components": 3,
+                "boundary_edges": 3,
+                "boundary_loops": 1,
+                "double_sided_faces": 1,
+            },
+        )
+    )
 
     out.append(everything_on_one_box(V, F))
     out.append(everything_apart())
@@ -276,30 +335,53 @@ def normalless_cases() -> list[Case]:
     """Meshes whose repair leaves vertices without a normal, where point methods meet them: a flat fold
     alone, and nine folds beside a box."""
     Vf, Ff = fold()
-    alone = Case("fold_alone", Vf, Ff, {"components": 1, "closed_components": 0, "boundary_edges": 4,
-                                         "boundary_loops": 1, "normalless_vertices": 2}, normalless=Vf[[0, 2]])
+    alone = Case(
+        "fold_alone",
+        Vf,
+        Ff,
+        {"components": 1, "closed_components": 0, "boundary_edges": 4, "boundary_loops": 1, "normalless_vertices": 2},
+        normalless=Vf[[0, 2]],
+    )
     folds = [fold((40 + 20 * i, 20 * j, 0)) for i in range(3) for j in range(3)]
     Vg, Fg = union(box(), *folds)
-    grid = Case("folds_beside_a_box", Vg, Fg,
-                {"components": 10, "closed_components": 1, "boundary_edges": 36, "boundary_loops": 9,
-                 "normalless_vertices": 18}, normalless=np.concatenate([f[0][[0, 2]] for f in folds]))
+    grid = Case(
+        "folds_beside_a_box",
+        Vg,
+        Fg,
+        {
+            "components": 10,
+            "closed_components": 1,
+            "boundary_edges": 36,
+            "boundary_loops": 9,
+            "normalless_vertices": 18,
+        },
+        normalless=np.concatenate([f[0][[0, 2]] for f in folds]),
+    )
     return [alone, grid]
 
 
 def everything_on_one_box(V, F) -> Case:
     """One box with every defect that a box can hold, each on its own side."""
     Fo = F.copy()
-    side = side_faces(V, F, 0, 32.0)                                        # +x side flipped
+    side = side_faces(V, F, 0, 32.0)  # +x side flipped
     Fo[side] = Fo[side][:, ::-1]
-    twins = plant_faces_near(V, F, (0, 16, 16), 2)                          # -x side: twins first
-    dups = plant_faces_near(V, F, (16, 16, 32), 2)                          # +z side: copies after
+    twins = plant_faces_near(V, F, (0, 16, 16), 2)  # -x side: twins first
+    dups = plant_faces_near(V, F, (16, 16, 32), 2)  # +z side: copies after
     Fo = np.vstack([Fo[twins][:, ::-1], Fo, Fo[dups][:, [2, 0, 1]]])
-    Vo, Fo = plant_needle(V, Fo, (16, 32, 14))                              # +y side
-    Vo, Fo = plant_cap(Vo, Fo, (16, 0, 18))                                 # -y side
-    Vo, Fo = plant_collinear(Vo, Fo, (16, 16, 0))                           # -z side
-    Vo = np.vstack([Vo, [[90.0, 90, 90]]])                                  # unreferenced
-    expected = _box_counts(flipped_faces=2 * SIDE * SIDE, double_sided_faces=2, duplicate_faces=2, sliver_faces=3,
-                           collapsed_vertices=1, split_faces=1, zero_area_faces=1, unreferenced_vertices=1)
+    Vo, Fo = plant_needle(V, Fo, (16, 32, 14))  # +y side
+    Vo, Fo = plant_cap(Vo, Fo, (16, 0, 18))  # -y side
+    Vo, Fo = plant_collinear(Vo, Fo, (16, 16, 0))  # -z side
+    Vo = np.vstack([Vo, [[90.0, 90, 90]]])  # unreferenced
+    expected = _box_counts(
+        flipped_faces=2 * SIDE * SIDE,
+        double_sided_faces=2,
+        duplicate_faces=2,
+        sliver_faces=3,
+        collapsed_vertices=1,
+        split_faces=1,
+        zero_area_faces=1,
+        unreferenced_vertices=1,
+    )
     return Case("everything_on_one_box", Vo, Fo, expected, formats=("obj", "ply", "off"))
 
 
@@ -311,20 +393,29 @@ def everything_apart() -> Case:
     Fo[side] = Fo[side][:, ::-1]
     twins = plant_faces_near(V, F, (0, 16, 16), 3)
     parts = [
-        (V, np.vstack([Fo, F[twins][:, ::-1]])),                             # flipped side, three twins
-        sphere(),                                                            # stuck into the box
-        (lambda b: (b[0], b[1][:, ::-1]))(box((18, 10, 6), (50, 42, 38))),   # interpenetrating, inward
-        cup(),                                                               # open
+        (V, np.vstack([Fo, F[twins][:, ::-1]])),  # flipped side, three twins
+        sphere(),  # stuck into the box
+        (lambda b: (b[0], b[1][:, ::-1]))(box((18, 10, 6), (50, 42, 38))),  # interpenetrating, inward
+        cup(),  # open
         union(box((0, 0, -100), (32, 32, -68)), box((32, 32, -100), (64, 64, -68)), weld=True),  # an edge shared
-        fold(),                                                              # no normal at two vertices
+        fold(),  # no normal at two vertices
     ]
     Vn, Fn = plant_fin(*box((0, 100, 0), (32, 132, 32)), (16, 132, 14))
-    parts.append((Vn, Fn))                                                   # a double-sided fin
+    parts.append((Vn, Fn))  # a double-sided fin
     Va, Fa = union(*parts)
-    expected = {"flipped_faces": 2 * SIDE * SIDE, "double_sided_faces": 3 + 1, "outward_components": 1,
-                "nonmanifold_edges": SIDE + 1, "nonmanifold_vertices": SIDE + 1 + 2, "added_vertices": SIDE + 1 + 2,
-                "components": 1 + 1 + 1 + 1 + 2 + 1 + 2, "closed_components": 1 + 1 + 1 + 2 + 1,
-                "boundary_edges": 16 + 4 + 3, "boundary_loops": 3, "normalless_vertices": 2}
+    expected = {
+        "flipped_faces": 2 * SIDE * SIDE,
+        "double_sided_faces": 3 + 1,
+        "outward_components": 1,
+        "nonmanifold_edges": SIDE + 1,
+        "nonmanifold_vertices": SIDE + 1 + 2,
+        "added_vertices": SIDE + 1 + 2,
+        "components": 1 + 1 + 1 + 1 + 2 + 1 + 2,
+        "closed_components": 1 + 1 + 1 + 2 + 1,
+        "boundary_edges": 16 + 4 + 3,
+        "boundary_loops": 3,
+        "normalless_vertices": 2,
+    }
     return Case("everything_apart", Va, Fa, expected, normalless=fold()[0][[0, 2]])
 
 
@@ -344,9 +435,11 @@ def write_case(case: Case, folder, fmt: str) -> Path:
         lines += [f"3 {a} {b} {c}" for a, b, c in F.tolist()]
         path.write_text("\n".join(lines) + "\n")
     elif fmt == "ply":
-        header = ("ply\nformat binary_little_endian 1.0\n"
-                  f"element vertex {len(V)}\nproperty double x\nproperty double y\nproperty double z\n"
-                  f"element face {len(F)}\nproperty list uchar int vertex_indices\nend_header\n")
+        header = (
+            "ply\nformat binary_little_endian 1.0\n"
+            f"element vertex {len(V)}\nproperty double x\nproperty double y\nproperty double z\n"
+            f"element face {len(F)}\nproperty list uchar int vertex_indices\nend_header\n"
+        )
         faces = np.zeros(len(F), dtype=[("n", "u1"), ("i", "<i4", (3,))])
         faces["n"], faces["i"] = 3, F
         path.write_bytes(header.encode() + V.astype("<f8").tobytes() + faces.tobytes())

@@ -7,12 +7,43 @@ from meshsal.mesh import Mesh
 
 def icosphere(radius: float = 1.0, subdivisions: int = 3, center=(0.0, 0.0, 0.0)) -> Mesh:
     """A closed sphere: an icosahedron split ``subdivisions`` times, vertices pushed to the sphere."""
-    t = (1.0 + 5 ** 0.5) / 2.0
-    V = [[-1, t, 0], [1, t, 0], [-1, -t, 0], [1, -t, 0], [0, -1, t], [0, 1, t],
-         [0, -1, -t], [0, 1, -t], [t, 0, -1], [t, 0, 1], [-t, 0, -1], [-t, 0, 1]]
-    F = [[0, 11, 5], [0, 5, 1], [0, 1, 7], [0, 7, 10], [0, 10, 11], [1, 5, 9], [5, 11, 4],
-         [11, 10, 2], [10, 7, 6], [7, 1, 8], [3, 9, 4], [3, 4, 2], [3, 2, 6], [3, 6, 8],
-         [3, 8, 9], [4, 9, 5], [2, 4, 11], [6, 2, 10], [8, 6, 7], [9, 8, 1]]
+    t = (1.0 + 5**0.5) / 2.0
+    V = [
+        [-1, t, 0],
+        [1, t, 0],
+        [-1, -t, 0],
+        [1, -t, 0],
+        [0, -1, t],
+        [0, 1, t],
+        [0, -1, -t],
+        [0, 1, -t],
+        [t, 0, -1],
+        [t, 0, 1],
+        [-t, 0, -1],
+        [-t, 0, 1],
+    ]
+    F = [
+        [0, 11, 5],
+        [0, 5, 1],
+        [0, 1, 7],
+        [0, 7, 10],
+        [0, 10, 11],
+        [1, 5, 9],
+        [5, 11, 4],
+        [11, 10, 2],
+        [10, 7, 6],
+        [7, 1, 8],
+        [3, 9, 4],
+        [3, 4, 2],
+        [3, 2, 6],
+        [3, 6, 8],
+        [3, 8, 9],
+        [4, 9, 5],
+        [2, 4, 11],
+        [6, 2, 10],
+        [8, 6, 7],
+        [9, 8, 1],
+    ]
     V = np.asarray(V, dtype=np.float64)
     F = np.asarray(F, dtype=np.int64)
     for _ in range(subdivisions):
@@ -25,6 +56,7 @@ def icosphere(radius: float = 1.0, subdivisions: int = 3, center=(0.0, 0.0, 0.0)
         F = np.concatenate([np.stack(x, 1) for x in ([a, ab, ca], [ab, b, bc], [ca, bc, c], [ab, bc, ca])])
     V = V / np.linalg.norm(V, axis=1, keepdims=True) * radius + np.asarray(center, dtype=np.float64)
     return Mesh(vertices=V, faces=F, name="icosphere")
+
 
 def _grid(n: int) -> tuple[np.ndarray, np.ndarray]:
     """Unit square split into n x n quads: (n+1)^2 (u, v) points and 2 n^2 triangles."""

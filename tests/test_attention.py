@@ -124,8 +124,11 @@ def dense_display(seed, spacing, odd_deg, base_deg):
     img = gray(ground)
     n = SIZE // spacing
     offset = (SIZE - n * spacing) / 2 + spacing / 2
-    cells = [(offset + i * spacing + rng.uniform(-2, 2), offset + j * spacing + rng.uniform(-2, 2))
-             for i in range(n) for j in range(n)]
+    cells = [
+        (offset + i * spacing + rng.uniform(-2, 2), offset + j * spacing + rng.uniform(-2, 2))
+        for i in range(n)
+        for j in range(n)
+    ]
     k = int(rng.integers(len(cells)))
     for i, c in enumerate(cells):
         img[bar(img.shape, c, length, width, odd_deg if i == k else base_deg)] = ground + 0.6
@@ -196,13 +199,26 @@ def test_contrast_high_variance_region(seed):
 # ----------------------------------------------------- contracts and details
 
 
-IMAGE_FUNCTIONS = [attention.intensity, attention.color, attention.orientation, attention.dkl,
-                   attention.entropy, attention.contrast]
+IMAGE_FUNCTIONS = [
+    attention.intensity,
+    attention.color,
+    attention.orientation,
+    attention.dkl,
+    attention.entropy,
+    attention.contrast,
+]
 
 
 def test_channels_constant():
     assert attention.CHANNELS == (
-        "intensity", "color", "orientation", "dkl", "symmetry", "curvature", "entropy", "contrast",
+        "intensity",
+        "color",
+        "orientation",
+        "dkl",
+        "symmetry",
+        "curvature",
+        "entropy",
+        "contrast",
     )
 
 

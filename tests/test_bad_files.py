@@ -37,8 +37,8 @@ def declare_size(path, size: int):
     """Make a one-member zip's directory and local header claim ``size`` inflated bytes."""
     data = bytearray(path.read_bytes())
     local, central = data.index(b"PK\x03\x04"), data.index(b"PK\x01\x02")
-    data[local + 22:local + 26] = size.to_bytes(4, "little")
-    data[central + 24:central + 28] = size.to_bytes(4, "little")
+    data[local + 22 : local + 26] = size.to_bytes(4, "little")
+    data[central + 24 : central + 28] = size.to_bytes(4, "little")
     path.write_bytes(bytes(data))
 
 
@@ -54,7 +54,7 @@ def peak_bytes(function, *args, **kwargs):
     tracemalloc.start()
     try:
         function(*args, **kwargs)
-    except Exception as exc:                                  # noqa: BLE001 - returned to the test
+    except Exception as exc:  # noqa: BLE001 - returned to the test
         error = exc
     else:
         error = None
@@ -66,10 +66,16 @@ def peak_bytes(function, *args, **kwargs):
 
 # ---------------------------------------------------------------- read_npz: what numpy wrote reads back
 
+
 def test_read_npz_gives_what_np_load_gives(tmp_path):
-    arrays = {"c": np.arange(24.0).reshape(2, 3, 4), "f": np.asfortranarray(np.arange(6).reshape(2, 3)),
-              "meta": np.array(json.dumps({"format": "x"})), "empty": np.zeros((0, 16, 16), np.float32),
-              "rec": np.ones(3, dtype=[("a", "<f4"), ("b", ">i2")]), "flag": np.array(True)}
+    arrays = {
+        "c": np.arange(24.0).reshape(2, 3, 4),
+        "f": np.asfortranarray(np.arange(6).reshape(2, 3)),
+        "meta": np.array(json.dumps({"format": "x"})),
+        "empty": np.zeros((0, 16, 16), np.float32),
+        "rec": np.ones(3, dtype=[("a", "<f4"), ("b", ">i2")]),
+        "flag": np.array(True),
+    }
     for save in (np.savez, np.savez_compressed):
         path = tmp_path / f"{save.__name__}.npz"
         save(path, **arrays)
@@ -84,18 +90,22 @@ def test_read_npz_gives_what_np_load_gives(tmp_path):
 
 # ---------------------------------------------------------------- read_npz: caps before allocating or inflating
 
+
 def test_a_header_declaring_a_huge_array_is_refused_without_allocating_it(tmp_path):
     path = write_zip(tmp_path / "huge.npz", {"x.npy": npy_header((10**12,))})
     peak, error = peak_bytes(read_npz, path, "cache entry")
     assert isinstance(error, NpzError) and error.path == path
-    assert re.search(r"huge.npz: cache entry too large: 'x' is \(1000000000000,\) float64 = 7.3 TiB, more than "
-                     r"the cap of 256.0 MiB per array", str(error)), error
+    assert re.search(
+        r"huge.npz: cache entry too large: 'x' is \(1000000000000,\) float64 = 7.3 TiB, more than "
+        r"the cap of 256.0 MiB per array",
+        str(error),
+    ), error
     assert peak < 1 << 20
 
 
 def test_arrays_are_capped_one_by_one_and_together(tmp_path):
     path = tmp_path / "two.npz"
-    np.savez(path, a=np.zeros(1000), b=np.zeros(1000))               # 8000 bytes each
+    np.savez(path, a=np.zeros(1000), b=np.zeros(1000))  # 8000 bytes each
     assert len(read_npz(path, "x", max_bytes=16000, max_array_bytes=8000)) == 2
     with pytest.raises(NpzError, match="'a' is .* more than the cap of 7.8 KiB per array"):
         read_npz(path, "x", max_array_bytes=7999)
@@ -105,8 +115,8 @@ def test_arrays_are_capped_one_by_one_and_together(tmp_path):
 
 def test_a_zip_bomb_is_stopped_by_the_declared_size_before_inflating(tmp_path):
     path = write_zip(tmp_path / "bomb.npz", {"x.npy": npy_header((2_500_000,)) + bytes(20_000_000)})
-    assert path.stat().st_size < 25_000                                   # 20 MB of zeros in 20 kB
-    assert read_npz(path, "x")["x"].shape == (2_500_000,)                 # under the default caps: fine
+    assert path.stat().st_size < 25_000  # 20 MB of zeros in 20 kB
+    assert read_npz(path, "x")["x"].shape == (2_500_000,)  # under the default caps: fine
     peak, error = peak_bytes(read_npz, path, "imprint set", max_bytes=1 << 20)
     assert isinstance(error, NpzError) and "members declare 19.1 MiB inflated, more than the cap" in str(error)
     assert peak < 1 << 20
@@ -143,6 +153,7 @@ def test_python_objects_are_never_unpickled(tmp_path):
 
 # ---------------------------------------------------------------- read_npz: every damage is one error naming the file
 
+
 def small_archive(path, save=np.savez_compressed):
     save(path, x=np.random.default_rng(0).random(20), meta=np.array('{"format": "t"}'))
     return path
@@ -173,11 +184,11 @@ def test_every_flipped_byte_is_an_npz_error_or_harmless(tmp_path, save):
             back = read_npz(path, "test archive")
         except NpzError as error:
             assert str(error).startswith(f"{path}: ")
-        else:                                     # a timestamp, an attribute, an unchecked field: same arrays
+        else:  # a timestamp, an attribute, an unchecked field: same arrays
             harmless.append(i)
             np.testing.assert_array_equal(back["x"], x)
     assert len(harmless) < len(whole) // 3
-    if save is np.savez:                          # stored, not deflated: every flip of the array's bytes is caught
+    if save is np.savez:  # stored, not deflated: every flip of the array's bytes is caught
         start = whole.index(x.tobytes())
         assert not [i for i in harmless if start <= i < start + x.nbytes]
 
@@ -194,10 +205,12 @@ def test_foreign_files_are_refused_by_name(tmp_path):
     np.save(tmp_path / "bare.npy", np.zeros(3))
     write_zip(tmp_path / "docs.npz", {"readme.txt": b"hi"})
     (tmp_path / "folder.npz").mkdir()
-    cases = {"text.npz": "not an imprint set: not an .npz (zip) archive",
-             "bare.npy": "not an imprint set: a bare .npy array, not an .npz archive",
-             "docs.npz": "not an imprint set: member 'readme.txt' is not a NumPy array (.npy)",
-             "folder.npz": "not an imprint set: a directory"}
+    cases = {
+        "text.npz": "not an imprint set: not an .npz (zip) archive",
+        "bare.npy": "not an imprint set: a bare .npy array, not an .npz archive",
+        "docs.npz": "not an imprint set: member 'readme.txt' is not a NumPy array (.npy)",
+        "folder.npz": "not an imprint set: a directory",
+    }
     for name, problem in cases.items():
         with pytest.raises(NpzError) as caught:
             read_npz(tmp_path / name, "imprint set")
@@ -208,11 +221,15 @@ def test_foreign_files_are_refused_by_name(tmp_path):
 
 # ---------------------------------------------------------------- JSON: size, nesting, long integers
 
+
 def test_json_nested_100000_deep_is_refused_before_parsing(tmp_path):
     path = tmp_path / "deep.json"
     path.write_text("[" * 100_000 + "]" * 100_000)
-    with pytest.raises(ValueError, match=r"deep.json: not a valid points file: arrays and objects nested more "
-                                         r"than 100 deep"):
+    with pytest.raises(
+        ValueError,
+        match=r"deep.json: not a valid points file: arrays and objects nested more "
+        r"than 100 deep",
+    ):
         read_json(path, "points file")
     path.write_text('{"a": ' * 100_000 + "1" + "}" * 100_000)
     with pytest.raises(ValueError, match="deep.json: .* nested more than 100 deep"):
@@ -226,7 +243,7 @@ def test_the_nesting_cap_is_exact_and_ignores_brackets_in_strings(tmp_path):
     path.write_text("[" * 101 + "]" * 101)
     with pytest.raises(ValueError, match="nested more than 100 deep"):
         read_json(path, "x")
-    tricky = {"a": ["[[[[", "\\\"{{{{", "\\", "\"]]]]"], "b": "[" * 500, "é": "{" * 500}
+    tricky = {"a": ["[[[[", '\\"{{{{', "\\", '"]]]]'], "b": "[" * 500, "é": "{" * 500}
     text = json.dumps(tricky, ensure_ascii=False)
     assert parse_json(text, "t.json", "x", max_depth=2) == tricky
     with pytest.raises(ValueError, match="t.json: not a valid x: arrays and objects nested more than 1 deep"):
@@ -251,7 +268,7 @@ def test_json_larger_than_the_cap_is_refused_before_it_is_read(tmp_path):
 
 def test_a_file_without_a_size_is_read_no_further_than_the_cap():
     with pytest.raises(ValueError, match="^/dev/zero: not a valid x: larger than the cap of 1000 bytes$"):
-        read_json("/dev/zero", "x", max_bytes=1000)                  # stat says 0 bytes; it never ends
+        read_json("/dev/zero", "x", max_bytes=1000)  # stat says 0 bytes; it never ends
 
 
 # ---------------------------------------------------------------- every reader, and the command line
@@ -267,8 +284,10 @@ def _cli(argv, capsys):
     return status, capsys.readouterr().err
 
 
-@pytest.mark.parametrize("content,problem", [(DEEP, "arrays and objects nested more than 100 deep"),
-                                             (LONG_INTEGER, "an integer of more than")])
+@pytest.mark.parametrize(
+    "content,problem",
+    [(DEEP, "arrays and objects nested more than 100 deep"), (LONG_INTEGER, "an integer of more than")],
+)
 def test_imprints_refuses_a_hostile_points_file_by_name(tmp_path, capsys, content, problem):
     shapes.write_obj(tmp_path / "ball.obj", shapes.sphere(radius=1.0, n=4))
     points = tmp_path / "points.json"
@@ -280,23 +299,34 @@ def test_imprints_refuses_a_hostile_points_file_by_name(tmp_path, capsys, conten
     assert not out.exists()
 
 
-@pytest.mark.parametrize("content,problem", [(DEEP, "arrays and objects nested more than 100 deep"),
-                                             (LONG_INTEGER, "an integer of more than")])
+@pytest.mark.parametrize(
+    "content,problem",
+    [(DEEP, "arrays and objects nested more than 100 deep"), (LONG_INTEGER, "an integer of more than")],
+)
 def test_points_refuses_a_hostile_touch_model_by_name(tmp_path, capsys, content, problem):
     model = tmp_path / "model.json"
     model.write_text(content)
-    status, err = _cli(["points", "cup", "--method", "learned", "--model", str(model), "--quiet",
-                        "--out", str(tmp_path / "o")], capsys)
+    status, err = _cli(
+        ["points", "cup", "--method", "learned", "--model", str(model), "--quiet", "--out", str(tmp_path / "o")], capsys
+    )
     assert status == 1
     assert f"visuotactile points: error: {model}: not a valid touch model file: {problem}" in err
     assert not (tmp_path / "o").exists()
 
 
-@pytest.mark.parametrize("error,message", [(MemoryError(), "out of memory (MemoryError)"),
-                                           (RecursionError("maximum recursion depth exceeded"),
-                                            "recursion too deep (RecursionError: maximum recursion depth exceeded)")])
-def test_the_command_line_turns_recursion_and_memory_errors_into_a_message(tmp_path, capsys, monkeypatch, error,
-                                                                         message):
+@pytest.mark.parametrize(
+    "error,message",
+    [
+        (MemoryError(), "out of memory (MemoryError)"),
+        (
+            RecursionError("maximum recursion depth exceeded"),
+            "recursion too deep (RecursionError: maximum recursion depth exceeded)",
+        ),
+    ],
+)
+def test_the_command_line_turns_recursion_and_memory_errors_into_a_message(
+    tmp_path, capsys, monkeypatch, error, message
+):
     def fail(path):
         raise error
 
@@ -307,9 +337,15 @@ def test_the_command_line_turns_recursion_and_memory_errors_into_a_message(tmp_p
 
 def imprint_set(path):
     rng = np.random.default_rng(0)
-    tactile.ImprintSet(imprints=rng.random((6, 16, 16)), labels=[0, 0, 0, 1, 1, 1], object_names=("a", "b"),
-                       point_ids=[0, 1, 2, 0, 1, 2], positions=np.zeros((6, 3)), normals=[[0, 0, 1.0]] * 6,
-                       sensor=tactile.Sensor()).save(path)
+    tactile.ImprintSet(
+        imprints=rng.random((6, 16, 16)),
+        labels=[0, 0, 0, 1, 1, 1],
+        object_names=("a", "b"),
+        point_ids=[0, 1, 2, 0, 1, 2],
+        positions=np.zeros((6, 3)),
+        normals=[[0, 0, 1.0]] * 6,
+        sensor=tactile.Sensor(),
+    ).save(path)
     return path
 
 
@@ -323,18 +359,25 @@ def _deflate(path):
 
 
 def _huge(path):
-    write_zip(path, {"meta.npy": npy_header((), "<U20") + "x".encode("utf-32-le") * 20,
-                     "imprints.npy": npy_header((10**9, 16, 16), "<f4")})
+    write_zip(
+        path,
+        {
+            "meta.npy": npy_header((), "<U20") + "x".encode("utf-32-le") * 20,
+            "imprints.npy": npy_header((10**9, 16, 16), "<f4"),
+        },
+    )
 
 
 def _deep_meta(path):
     np.savez(path, meta=np.array(DEEP))
 
 
-DAMAGE = {"truncated": (_truncate, "damaged or truncated imprint set"),
-          "corrupt deflate": (_deflate, "damaged or truncated imprint set"),
-          "huge header": (_huge, "imprint set too large: 'imprints' is (1000000000, 16, 16) float32 = 953.7 GiB"),
-          "deep meta": (_deep_meta, "not a valid imprint set: arrays and objects nested more than 100 deep")}
+DAMAGE = {
+    "truncated": (_truncate, "damaged or truncated imprint set"),
+    "corrupt deflate": (_deflate, "damaged or truncated imprint set"),
+    "huge header": (_huge, "imprint set too large: 'imprints' is (1000000000, 16, 16) float32 = 953.7 GiB"),
+    "deep meta": (_deep_meta, "not a valid imprint set: arrays and objects nested more than 100 deep"),
+}
 
 
 @pytest.mark.parametrize("damage", DAMAGE, ids=list(DAMAGE))

@@ -112,9 +112,27 @@ sys.exit(main(argv))
 
 def _driver(after: int, action: str, corpus: Path, store: Path, *options: str) -> subprocess.Popen:
     options = options or ("--methods", "attention,uniform", "--n-points", "6", "--view-size", "32")
-    return subprocess.Popen([sys.executable, "-c", DRIVER, str(after), action, "batch", str(corpus), "--out",
-                             str(store), "--workers", "1", "--quiet", *options],
-                            stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    return subprocess.Popen(
+        [
+            sys.executable,
+            "-c",
+            DRIVER,
+            str(after),
+            action,
+            "batch",
+            str(corpus),
+            "--out",
+            str(store),
+            "--workers",
+            "1",
+            "--quiet",
+            *options,
+        ],
+        stdin=subprocess.PIPE,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
 
 
 def _in_flight(store: Path) -> list[Path]:
@@ -123,7 +141,8 @@ def _in_flight(store: Path) -> list[Path]:
 
 
 def test_entries_are_the_same_in_process_on_a_local_cluster_and_on_a_tls_cluster_started_elsewhere(
-        corpus, serial_store, tmp_path, tls_dask_cluster, monkeypatch):
+    corpus, serial_store, tmp_path, tls_dask_cluster, monkeypatch
+):
     local = tmp_path / "local"
     with open_executor(workers=2) as executor:
         summary = batch.run_batch(corpus, local, SETTINGS, executor, quiet=True)
@@ -137,7 +156,7 @@ def test_entries_are_the_same_in_process_on_a_local_cluster_and_on_a_tls_cluster
         summary = batch.run_batch(os.path.relpath(corpus), "remote", SETTINGS, executor, quiet=True)
     assert (summary.done, summary.failed) == (8, 0)
     remote = client_cwd / "remote"
-    assert not list(tls_dask_cluster.cwd.rglob("*"))                 # nothing written beside the workers
+    assert not list(tls_dask_cluster.cwd.rglob("*"))  # nothing written beside the workers
     reference = _entries(serial_store)
     assert len(reference) == 8 and "meshes/sub/m03.npz" in reference
     _assert_same(reference, _entries(local))
@@ -156,7 +175,7 @@ def test_a_tls_cluster_refuses_clients_without_its_certificates(tls_dask_cluster
     with pytest.raises(OSError, match="cannot reach the Dask scheduler"):
         with open_executor(scheduler=address.replace("tls://", "tcp://")):
             pass
-    intruder = make_certificates(tmp_path, "intruder")              # a certificate another authority signed
+    intruder = make_certificates(tmp_path, "intruder")  # a certificate another authority signed
     with pytest.raises(OSError, match="cannot reach the Dask scheduler"):
         with open_executor(scheduler=address, security=tls_security(intruder.ca_file, intruder.cert, intruder.key)):
             pass
@@ -179,7 +198,7 @@ def test_a_killed_worker_loses_nothing_and_every_mesh_is_stored_once(corpus, ser
         end = time.monotonic() + 120
         while not _finished(store):
             if time.monotonic() > end:
-                return                                              # nothing finished: no kill, the test fails
+                return  # nothing finished: no kill, the test fails
             time.sleep(0.05)
         victim.send_signal(signal.SIGKILL)
         victim.wait(timeout=30)
@@ -191,12 +210,12 @@ def test_a_killed_worker_loses_nothing_and_every_mesh_is_stored_once(corpus, ser
     with open_executor(scheduler=dask_cluster.address) as executor:
         summary = batch.run_batch(corpus, store, SETTINGS, executor, quiet=True)
     killer.join()
-    assert victim.returncode == -signal.SIGKILL                      # alive until our kill, killed by it
+    assert victim.returncode == -signal.SIGKILL  # alive until our kill, killed by it
     # A task whose worker died after writing its entry finds it complete when it runs again elsewhere.
     assert summary.done + summary.skipped == 8 and summary.skipped <= 1 and summary.failed == 0
     finished = _finished(store)
-    assert at_kill and len(at_kill) < len(finished) == 8             # entries finished before and after the kill
-    assert {p: p.stat().st_mtime_ns for p in at_kill} == at_kill     # none of them written again
+    assert at_kill and len(at_kill) < len(finished) == 8  # entries finished before and after the kill
+    assert {p: p.stat().st_mtime_ns for p in at_kill} == at_kill  # none of them written again
     assert not _in_flight(store)
     _assert_same(_entries(serial_store), _entries(store))
 
@@ -206,11 +225,10 @@ def test_a_run_killed_mid_write_resumes_where_it_stopped(corpus, serial_store, t
     run = _driver(3, "kill", corpus, store)
     run.communicate(timeout=300)
     assert run.returncode == -signal.SIGKILL
-    assert [p.relative_to(store / "meshes").as_posix() for p in _finished(store)] == ["m00.npz", "m01.npz",
-                                                                                       "m02.npz"]
+    assert [p.relative_to(store / "meshes").as_posix() for p in _finished(store)] == ["m00.npz", "m01.npz", "m02.npz"]
     cut_short = _in_flight(store)
     assert len(cut_short) == 1 and cut_short[0].name.startswith(".m04.")
-    summary = batch.run_batch(corpus, store, SETTINGS, quiet=True)   # the killed run's lock died with it
+    summary = batch.run_batch(corpus, store, SETTINGS, quiet=True)  # the killed run's lock died with it
     assert (summary.skipped, summary.done, summary.redone, summary.failed) == (3, 5, 0, 0)
     assert not _in_flight(store)
     _assert_same(_entries(serial_store), _entries(store))
@@ -229,8 +247,10 @@ def test_one_batch_per_store_a_second_fails_at_once_naming_the_holder(tmp_path, 
     assert len(_finished(store)) == 2 and len(in_flight) == 1
     assert main(["batch", str(corpus), "--out", str(store), "--workers", "1", "--quiet", *options]) == 1
     err = capsys.readouterr().err
-    assert (f"visuotactile batch: error: {store}: in use by another batch (process {holder.pid} on "
-            f"{socket.gethostname()}, since ") in err
+    assert (
+        f"visuotactile batch: error: {store}: in use by another batch (process {holder.pid} on "
+        f"{socket.gethostname()}, since "
+    ) in err
     with pytest.raises(batch.StoreInUseError, match="in use by another batch"):
         batch.run_batch(corpus, store, batch.BatchSettings(methods=("random",)), quiet=True)
     # Neither touched the holder's header or its write in flight.
@@ -278,7 +298,7 @@ def test_an_edited_mesh_is_computed_again_and_an_unchanged_one_is_not(tmp_path):
     summary = batch.run_batch(corpus, store, settings, quiet=True)
     assert (summary.done, summary.skipped, summary.failed) == (0, 2, 1)
     assert sorted(batch.load_store(store)) == ["m00", "m02"]
-    failure, = [json.loads(line) for line in (store / "failures.jsonl").read_text().splitlines()]
+    (failure,) = [json.loads(line) for line in (store / "failures.jsonl").read_text().splitlines()]
     assert failure["name"] == "m01" and failure["error"].endswith("its entry from an earlier run was removed")
 
 
@@ -305,10 +325,11 @@ def test_an_entry_the_client_cannot_read_is_a_failure(tmp_path):
     assert (summary.done, summary.failed) == (2, 2)
     failures = {f["name"]: f["error"] for f in map(json.loads, (store / "failures.jsonl").read_text().splitlines())}
     assert failures.keys() == {"m01", "m02"}
-    assert failures["m01"].startswith(f"{store / 'meshes' / 'm01.npz'}: the task reported the entry written but "
-                                      f"it is not there")
+    assert failures["m01"].startswith(
+        f"{store / 'meshes' / 'm01.npz'}: the task reported the entry written but it is not there"
+    )
     assert failures["m02"].startswith(f"{store / 'meshes' / 'm02.npz'}: damaged or truncated batch entry")
-    assert sorted(batch.load_store(store)) == ["m00", "sub/m03"]     # the damaged entry is gone
+    assert sorted(batch.load_store(store)) == ["m00", "sub/m03"]  # the damaged entry is gone
     again = batch.run_batch(corpus, store, settings, quiet=True)
     assert (again.done, again.skipped, again.failed) == (2, 2, 0)
 
@@ -317,8 +338,24 @@ def test_a_broken_mesh_is_recorded_and_does_not_stop_the_batch(tmp_path, capsys)
     corpus = _corpus(tmp_path / "corpus", 3)
     (corpus / "broken.obj").write_text("v 0 0 0\nv 1 0 0\nf 1 2 9\n")
     store = tmp_path / "store"
-    assert main(["batch", str(corpus), "--out", str(store), "--workers", "1", "--methods", "uniform",
-                 "--n-points", "4", "--quiet"]) == 0
+    assert (
+        main(
+            [
+                "batch",
+                str(corpus),
+                "--out",
+                str(store),
+                "--workers",
+                "1",
+                "--methods",
+                "uniform",
+                "--n-points",
+                "4",
+                "--quiet",
+            ]
+        )
+        == 0
+    )
     out, err = capsys.readouterr()
     assert "| 3 | 0 | 1 | 0 |" in out and "failures.jsonl" in err
     failures = [json.loads(line) for line in (store / "failures.jsonl").read_text().splitlines()]
@@ -328,7 +365,7 @@ def test_a_broken_mesh_is_recorded_and_does_not_stop_the_batch(tmp_path, capsys)
     entry = entries["m01"]
     assert len(entry.points["uniform"]) == 4 and entry.imprints["uniform"].imprints.shape == (4, 16, 16)
     source = entry.transform.to_source(entry.points["uniform"].positions)
-    assert np.abs(source).max() < 10.0                               # back in the file's own units
+    assert np.abs(source).max() < 10.0  # back in the file's own units
 
 
 def test_a_store_refuses_other_settings(corpus, serial_store):

@@ -31,10 +31,11 @@ class Counter:
 
 # ---------------------------------------------------------------- cached(): hit and miss
 
+
 def test_the_second_call_reads_the_entry_and_computes_nothing(tmp_path):
     compute = Counter()
     first = cache.cached(tmp_path, "k", compute)
-    again = cache.cached(tmp_path, "k", Counter(value=9.0))      # would give other numbers if it ran
+    again = cache.cached(tmp_path, "k", Counter(value=9.0))  # would give other numbers if it ran
     assert compute.calls == 1
     for name in ("x", "ids"):
         np.testing.assert_array_equal(again[name], first[name])
@@ -54,6 +55,7 @@ def test_another_key_computes_and_no_directory_always_computes(tmp_path):
 
 # ---------------------------------------------------------------- the parts of a key
 
+
 def test_cache_key_changes_with_every_part_and_not_with_dict_order():
     parts = ("mesh-hash", "cow", "attention", {"n": 15, "size": 150.0}, [0, 1], "code", {"numpy": "2.0"})
     key = cache.cache_key("paper", *parts)
@@ -61,7 +63,7 @@ def test_cache_key_changes_with_every_part_and_not_with_dict_order():
     assert key.startswith("paper-") and cache.cache_key("instance", *parts) != key
     changed = ["other-hash", "cup", "uniform", {"n": 16, "size": 150.0}, [0, 2], "code2", {"numpy": "2.1"}]
     for i, value in enumerate(changed):
-        assert cache.cache_key("paper", *parts[:i], value, *parts[i + 1:]) != key, f"part {i} is not in the key"
+        assert cache.cache_key("paper", *parts[:i], value, *parts[i + 1 :]) != key, f"part {i} is not in the key"
 
 
 def test_hash_arrays_changes_with_one_vertex_the_dtype_or_a_missing_array():
@@ -70,8 +72,18 @@ def test_hash_arrays_changes_with_one_vertex_the_dtype_or_a_missing_array():
     moved[7, 2] += 1e-12
     h = cache.hash_arrays(V, None)
     assert h == cache.hash_arrays(V.copy(), None)
-    assert len({h, cache.hash_arrays(moved, None), cache.hash_arrays(V.astype(np.float32), None),
-                cache.hash_arrays(V, np.zeros(0)), cache.hash_arrays(V.reshape(45, 2), None)}) == 5
+    assert (
+        len(
+            {
+                h,
+                cache.hash_arrays(moved, None),
+                cache.hash_arrays(V.astype(np.float32), None),
+                cache.hash_arrays(V, np.zeros(0)),
+                cache.hash_arrays(V.reshape(45, 2), None),
+            }
+        )
+        == 5
+    )
 
 
 def test_code_fingerprint_changes_when_a_source_file_changes(tmp_path, monkeypatch):
@@ -150,10 +162,11 @@ def test_the_experiment_misses_when_a_setting_the_mesh_the_code_or_a_library_cha
     monkeypatch.setattr(metadata, "version", lambda name: "999.0" if name == "numpy" else real_version(name))
     assert run()[1] == 1 and run()[1] == 0
     monkeypatch.undo()
-    assert run()[1] == 0                                           # the original entry is still there
+    assert run()[1] == 0  # the original entry is still there
 
 
 # ---------------------------------------------------------------- damaged entries
+
 
 def _npy_header(shape, descr="<f8") -> bytes:
     text = repr({"descr": descr, "fortran_order": False, "shape": tuple(shape)})
@@ -178,7 +191,7 @@ def _corrupt_deflate(path):
 
 def _huge_header(path):
     with zipfile.ZipFile(path, "w") as archive:
-        archive.writestr("x.npy", _npy_header((10**12,)))      # 8 TB of float64, declared in 128 bytes
+        archive.writestr("x.npy", _npy_header((10**12,)))  # 8 TB of float64, declared in 128 bytes
 
 
 def _foreign(path):
@@ -199,7 +212,7 @@ def test_a_damaged_entry_is_recomputed_and_overwritten(tmp_path, damage):
     again = cache.cached(tmp_path, "k", compute)
     assert compute.calls == 2
     np.testing.assert_array_equal(again["x"], np.ones(4))
-    healed = cache.load(tmp_path, "k")                             # the damaged file was replaced
+    healed = cache.load(tmp_path, "k")  # the damaged file was replaced
     np.testing.assert_array_equal(healed["x"], np.ones(4))
     assert cache.cached(tmp_path, "k", compute) and compute.calls == 2
 
@@ -234,12 +247,13 @@ cache.store(sys.argv[1], "k", {"x": np.full(4, -1.0)})
 
 
 def test_a_killed_writers_temporary_file_is_never_read(tmp_path):
-    done = subprocess.run([sys.executable, "-c", _KILLED_WRITER, str(tmp_path)], cwd=Path(__file__).parents[1],
-                          capture_output=True)
+    done = subprocess.run(
+        [sys.executable, "-c", _KILLED_WRITER, str(tmp_path)], cwd=Path(__file__).parents[1], capture_output=True
+    )
     assert done.returncode == -signal.SIGKILL, done.stderr.decode()
     leftovers = [p for p in tmp_path.iterdir()]
     assert len(leftovers) == 1 and leftovers[0].name.startswith(".k.") and leftovers[0].suffix == ".npz"
-    np.testing.assert_array_equal(np.load(leftovers[0])["x"], np.full(4, -1.0))   # whole, and poisoned
+    np.testing.assert_array_equal(np.load(leftovers[0])["x"], np.full(4, -1.0))  # whole, and poisoned
     assert cache.load(tmp_path, "k") is None
     compute = Counter()
     np.testing.assert_array_equal(cache.cached(tmp_path, "k", compute)["x"], np.ones(4))
@@ -248,9 +262,14 @@ def test_a_killed_writers_temporary_file_is_never_read(tmp_path):
 
 
 def test_an_entry_reads_back_exactly(tmp_path):
-    arrays = {"f": np.asfortranarray(np.arange(12.0).reshape(3, 4)), "i": np.arange(5, dtype=np.int16),
-              "text": np.array(json.dumps({"a": 1})), "empty": np.zeros((0, 16, 16), np.float32),
-              "scalar": np.float64(2.5), "rec": np.zeros(2, dtype=[("a", "<f4"), ("b", "<i8")])}
+    arrays = {
+        "f": np.asfortranarray(np.arange(12.0).reshape(3, 4)),
+        "i": np.arange(5, dtype=np.int16),
+        "text": np.array(json.dumps({"a": 1})),
+        "empty": np.zeros((0, 16, 16), np.float32),
+        "scalar": np.float64(2.5),
+        "rec": np.zeros(2, dtype=[("a", "<f4"), ("b", "<i8")]),
+    }
     cache.store(tmp_path, "k", arrays)
     back = cache.load(tmp_path, "k")
     reference = dict(np.load(io.BytesIO((tmp_path / "k.npz").read_bytes())))

@@ -18,7 +18,7 @@ def _separable_imprints(n_per_class=30, n_classes=4, seed=0):
     for c in range(n_classes):
         img = rng.uniform(0, 0.2, (n_per_class, 16, 16))
         r, q = divmod(c, 4)
-        img[:, 4 * r:4 * r + 4, 4 * q:4 * q + 4] += rng.uniform(0.6, 0.8, (n_per_class, 4, 4))
+        img[:, 4 * r : 4 * r + 4, 4 * q : 4 * q + 4] += rng.uniform(0.6, 0.8, (n_per_class, 4, 4))
         X.append(img)
         y.append(np.full(n_per_class, c))
     return np.concatenate(X).astype(np.float32), np.concatenate(y)
@@ -28,7 +28,7 @@ def _separable_imprints(n_per_class=30, n_classes=4, seed=0):
 def test_each_classifier_separates_planted_classes(name):
     X, y = _separable_imprints(seed=1)
     Xt, yt = _separable_imprints(n_per_class=20, seed=2)
-    model = classify.make(name).fit(X, y)           # (N, 16, 16) accepted as is
+    model = classify.make(name).fit(X, y)  # (N, 16, 16) accepted as is
     assert model.score(Xt.reshape(len(Xt), -1), yt) >= 0.99
     proba = model.predict_proba(Xt)
     assert proba.shape == (len(Xt), 4)
@@ -45,7 +45,7 @@ def test_estimator_contract_clone_and_params(name):
     X, y = _separable_imprints(n_per_class=12, n_classes=3, seed=3)
     a = clone(model).fit(X, y).predict(X)
     b = clone(model).fit(X, y).predict(X)
-    np.testing.assert_array_equal(a, b)             # seeded: same input, same output
+    np.testing.assert_array_equal(a, b)  # seeded: same input, same output
 
 
 def test_make_rejects_unknown_names_and_parameters():
@@ -111,8 +111,9 @@ def test_bad_inputs_have_clear_messages():
 def test_evolutionary_svm_matches_svc_on_digits():
     digits = load_digits()
     idx = np.random.default_rng(0).permutation(len(digits.target))[:500]
-    Xtr, Xte, ytr, yte = train_test_split(digits.data[idx], digits.target[idx], test_size=0.4,
-                                          random_state=0, stratify=digits.target[idx])
+    Xtr, Xte, ytr, yte = train_test_split(
+        digits.data[idx], digits.target[idx], test_size=0.4, random_state=0, stratify=digits.target[idx]
+    )
     svc = SVC(kernel="rbf", C=1.0, gamma="scale").fit(Xtr, ytr).score(Xte, yte)
     es = classify.make("evolutionary_svm", C=1.0, gamma="scale").fit(Xtr, ytr).score(Xte, yte)
     assert abs(es - svc) <= 0.02, (es, svc)
@@ -132,9 +133,9 @@ def test_evolution_strategy_reaches_the_dual_optimum_of_svc():
     assert np.all(alpha >= 0) and np.all(alpha <= C)
     assert abs(alpha[0] @ y) < 1e-9
     w_check = alpha[0].sum() - 0.5 * (alpha[0] * y) @ K @ (alpha[0] * y)
-    assert w[0] == pytest.approx(w_check, rel=1e-9)    # incremental fitness stays exact
+    assert w[0] == pytest.approx(w_check, rel=1e-9)  # incremental fitness stays exact
     assert w[0] >= 0.995 * w_svc
-    assert w[0] <= w_svc + 1e-6                        # SVC's optimum bounds every feasible point
+    assert w[0] <= w_svc + 1e-6  # SVC's optimum bounds every feasible point
 
 
 def test_evolutionary_svm_two_classes_decision_sign_follows_classes():

@@ -3,10 +3,10 @@
 import cv2
 import numpy as np
 import pytest
+from shapes import icosphere
 
 from classify.cli import main
 from meshsal.mesh.io import save_ply
-from shapes import icosphere
 
 
 @pytest.fixture

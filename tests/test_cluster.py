@@ -5,17 +5,21 @@ import shutil
 
 import psutil
 import pytest
+from conftest import missing
 
 from classify.cli import main
 from classify.runtime.cluster import LOOPBACK, open_executor, tls_security
-from conftest import missing
 
 
 def _listening() -> set:
     """(pid, ip, port) of every listening TCP socket of this process and its children."""
     me = psutil.Process()
-    return {(p.pid, c.laddr.ip, c.laddr.port) for p in [me, *me.children(recursive=True)]
-            for c in p.net_connections(kind="inet") if c.status == psutil.CONN_LISTEN}
+    return {
+        (p.pid, c.laddr.ip, c.laddr.port)
+        for p in [me, *me.children(recursive=True)]
+        for c in p.net_connections(kind="inet")
+        if c.status == psutil.CONN_LISTEN
+    }
 
 
 def _addresses(_):
@@ -87,17 +91,33 @@ def test_mixed_up_cluster_options_are_clear_errors(certificates, tmp_path):
     with pytest.raises(ValueError, match="nowhere.pem: no such TLS certificate"):
         tls_security(certificates.ca_file, tmp_path / "nowhere.pem")
     with pytest.raises(ValueError, match="not a PEM certificate and its private key"):
-        tls_security(certificates.ca_file, certificates.cert, certificates.ca_file)   # the wrong key
+        tls_security(certificates.ca_file, certificates.cert, certificates.ca_file)  # the wrong key
 
 
 def test_the_command_line_refuses_tls_without_certificates(tmp_path, capsys, certificates):
     args = ["batch", str(tmp_path), "--out", str(tmp_path / "store")]
     assert main([*args, "--scheduler", "tls://127.0.0.1:8786"]) == 1
-    assert "tls://127.0.0.1:8786: a tls:// scheduler needs a CA file and a client certificate (--tls-ca-file, " \
-           "--tls-cert, --tls-key" in capsys.readouterr().err
+    assert (
+        "tls://127.0.0.1:8786: a tls:// scheduler needs a CA file and a client certificate (--tls-ca-file, "
+        "--tls-cert, --tls-key" in capsys.readouterr().err
+    )
     assert main([*args, "--scheduler", "tls://127.0.0.1:8786", "--tls-cert", str(certificates.cert)]) == 1
     assert "TLS needs both --tls-ca-file and --tls-cert; only --tls-cert was given" in capsys.readouterr().err
-    assert main(["experiment", "--tls-ca-file", str(certificates.ca_file), "--tls-cert", str(certificates.cert),
-                 "--tls-key", str(certificates.key), "--out", str(tmp_path / "results")]) == 1
+    assert (
+        main(
+            [
+                "experiment",
+                "--tls-ca-file",
+                str(certificates.ca_file),
+                "--tls-cert",
+                str(certificates.cert),
+                "--tls-key",
+                str(certificates.key),
+                "--out",
+                str(tmp_path / "results"),
+            ]
+        )
+        == 1
+    )
     assert "certificates are for a Dask cluster" in capsys.readouterr().err
     assert not (tmp_path / "store").exists()

@@ -3,12 +3,11 @@
 import igl
 import numpy as np
 import pytest
+import shapes
 from scipy.spatial import cKDTree
 
-from meshsal.mesh.curvature import gaussian_average, mean_curvature, mesh_saliency, vertex_areas
 from meshsal.mesh import Mesh
-
-import shapes
+from meshsal.mesh.curvature import gaussian_average, mean_curvature, mesh_saliency, vertex_areas
 
 
 def icosphere(level):
@@ -20,16 +19,20 @@ def bumpy_sphere(direction, level=5, height=0.12, width=0.08):
     V, F = icosphere(level)
     d = np.asarray(direction, float) / np.linalg.norm(direction)
     angle = np.arccos(np.clip(V @ d, -1, 1))
-    V = V * (1 + height * np.exp(-angle ** 2 / (2 * width ** 2)))[:, None]
+    V = V * (1 + height * np.exp(-(angle**2) / (2 * width**2)))[:, None]
     return V, F, angle
 
 
 def rotation(seed):
     q = np.random.default_rng(seed).normal(size=4)
     w, x, y, z = q / np.linalg.norm(q)
-    return np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
-                     [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
-                     [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)]])
+    return np.array(
+        [
+            [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+            [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+            [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
+        ]
+    )
 
 
 @pytest.mark.parametrize("radius", [0.5, 1.0, 40.0])
@@ -75,7 +78,7 @@ def brute_force_average(V, f, w, sigma, max_cells=None):
     ``max_cells`` is ignored: it is there so this can stand in for ``gaussian_average``.
     """
     D = cKDTree(V).sparse_distance_matrix(cKDTree(V), 2 * sigma, output_type="coo_matrix")
-    k = np.exp(-D.data ** 2 / (2 * sigma ** 2)) * w[D.col]
+    k = np.exp(-(D.data**2) / (2 * sigma**2)) * w[D.col]
     return np.bincount(D.row, k * f[D.col], len(V)) / np.bincount(D.row, k, len(V))
 
 
@@ -101,7 +104,7 @@ def test_mesh_saliency_agrees_with_the_definition(monkeypatch):
     rng = np.random.default_rng(8)
     for d in rng.normal(size=(3, 3)):
         angle = np.arccos(np.clip(V @ (d / np.linalg.norm(d)), -1, 1))
-        V = V * (1 + rng.uniform(0.05, 0.15) * np.exp(-angle ** 2 / (2 * 0.15 ** 2)))[:, None]
+        V = V * (1 + rng.uniform(0.05, 0.15) * np.exp(-(angle**2) / (2 * 0.15**2)))[:, None]
     mesh = Mesh(vertices=V, faces=F)
     fast = mesh_saliency(mesh)
     monkeypatch.setattr(meshsal.mesh.curvature, "gaussian_average", brute_force_average)
@@ -144,7 +147,7 @@ def test_two_bumps_both_stand_out_over_the_sphere():
     bumps = [np.array([0.0, 1.0, 0.0]), np.array([1.0, 0.0, 0.0])]
     r = np.ones(len(V))
     for d in bumps:
-        r += 0.12 * np.exp(-np.arccos(np.clip(V @ d, -1, 1)) ** 2 / (2 * 0.08 ** 2))
+        r += 0.12 * np.exp(-(np.arccos(np.clip(V @ d, -1, 1)) ** 2) / (2 * 0.08**2))
     s = mesh_saliency(Mesh(vertices=V * r[:, None], faces=F))
     far = np.all([np.arccos(np.clip(V @ d, -1, 1)) > 0.3 for d in bumps], axis=0)
     for d in bumps:

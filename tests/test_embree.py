@@ -6,10 +6,10 @@ from types import SimpleNamespace
 
 import numpy as np
 import pytest
+from shapes import bumps, icosphere
 
 from meshsal.mesh.embree import _attach_directly, _scene_handle, embree_device, embree_scene, is_robust
 from meshsal.util.reproducible import EMBREE_VARIABLE, cpu_flags
-from shapes import bumps, icosphere
 
 
 def _embreex_scene(mesh, robust):
@@ -69,7 +69,7 @@ def test_every_scene_is_created_in_one_device_made_with_the_configuration(monkey
     monkeypatch.setenv(EMBREE_VARIABLE, "isa=sse2")
     assert embree_device() is not None and embree_device() is embree_device()
     monkeypatch.setenv(EMBREE_VARIABLE, "")
-    assert embree_device() is None                                   # embreex's own device per scene
+    assert embree_device() is None  # embreex's own device per scene
 
 
 @pytest.mark.skipif("avx2" not in (cpu_flags() or ()), reason="needs a CPU whose own choice is above SSE2")
@@ -85,7 +85,7 @@ def test_the_configuration_reaches_embree_sse2_kernels_round_differently_from_av
     assert hit.sum() > 500
     assert not np.array_equal(sse2["tfar"][hit], native["tfar"][hit])  # FMA or not: the last bits differ
     for key in ("primID", "tfar", "u", "v"):
-        np.testing.assert_array_equal(avx2[key], native[key])        # this CPU's own choice is AVX2
+        np.testing.assert_array_equal(avx2[key], native[key])  # this CPU's own choice is AVX2
 
 
 @pytest.mark.skipif("avx512f" in (cpu_flags() or ()), reason="needs a CPU without AVX-512")

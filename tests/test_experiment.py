@@ -26,27 +26,55 @@ def _cup(name, turn=None):
 
 def test_two_copies_of_one_mesh_cannot_be_told_apart_but_two_objects_can():
     twins = [_cup("cup_a"), _cup("cup_b", random_rotation(np.random.default_rng(9)))]
-    r = experiment.run_experiment(twins, methods=("uniform",), protocols=("instance",), classifiers=("knn",),
-                                  settings=SMALL, replicates=4, cache_dir=None, quiet=True)
+    r = experiment.run_experiment(
+        twins,
+        methods=("uniform",),
+        protocols=("instance",),
+        classifiers=("knn",),
+        settings=SMALL,
+        replicates=4,
+        cache_dir=None,
+        quiet=True,
+    )
     chance = r.cell("uniform", "instance", "knn", 2, False, 1)
-    assert chance.ci_low <= 50.0 <= chance.ci_high, chance          # a leak of pose or point would show here
+    assert chance.ci_low <= 50.0 <= chance.ci_high, chance  # a leak of pose or point would show here
     fused = r.cell("uniform", "instance", "knn", 2, False, 6)
     assert fused.ci_low <= 50.0 <= fused.ci_high, fused
     other = [_cup("cup_a"), shapes.sphere(radius=50.0, n=24).replace(name="ball")]
-    r = experiment.run_experiment(other, methods=("uniform",), protocols=("instance",), classifiers=("knn",),
-                                  settings=SMALL, replicates=4, cache_dir=None, quiet=True)
+    r = experiment.run_experiment(
+        other,
+        methods=("uniform",),
+        protocols=("instance",),
+        classifiers=("knn",),
+        settings=SMALL,
+        replicates=4,
+        cache_dir=None,
+        quiet=True,
+    )
     assert r.cell("uniform", "instance", "knn", 2, False, 1).mean > 65.0
     assert r.cell("uniform", "instance", "knn", 2, False, 6).ci_low > 80.0
 
 
 def _objects():
-    return [shapes.box(half=40.0, n=20).replace(name="box"), shapes.sphere(radius=50.0, n=24).replace(name="ball"),
-            shapes.cylinder(radius=25.0, length=120.0, around=48, along=8).replace(name="rod")]
+    return [
+        shapes.box(half=40.0, n=20).replace(name="box"),
+        shapes.sphere(radius=50.0, n=24).replace(name="ball"),
+        shapes.cylinder(radius=25.0, length=120.0, around=48, along=8).replace(name="rod"),
+    ]
 
 
 def test_the_rates_of_an_object_set_do_not_depend_on_the_order_objects_are_given_in():
-    kwargs = dict(methods=("random",), classifiers=("knn", "naive_bayes"), settings=SMALL, replicates=2,
-                  repeats=2, folds=3, cache_dir=None, quiet=True, n_jobs=1)
+    kwargs = dict(
+        methods=("random",),
+        classifiers=("knn", "naive_bayes"),
+        settings=SMALL,
+        replicates=2,
+        repeats=2,
+        folds=3,
+        cache_dir=None,
+        quiet=True,
+        n_jobs=1,
+    )
     given = experiment.run_experiment(_objects(), **kwargs)
     flipped = experiment.run_experiment(_objects()[::-1], **kwargs)
     for protocol, k in (("paper", 1), ("instance", 1), ("instance", 4)):
@@ -56,12 +84,21 @@ def test_the_rates_of_an_object_set_do_not_depend_on_the_order_objects_are_given
 
 
 def test_results_csv_does_not_depend_on_the_order_objects_are_given_in(tmp_path):
-    kwargs = dict(methods=("random", "uniform"), classifiers=("knn",), settings=SMALL, replicates=3, repeats=2,
-                  folds=3, cache_dir=None, quiet=True, n_jobs=1)
+    kwargs = dict(
+        methods=("random", "uniform"),
+        classifiers=("knn",),
+        settings=SMALL,
+        replicates=3,
+        repeats=2,
+        folds=3,
+        cache_dir=None,
+        quiet=True,
+        n_jobs=1,
+    )
     experiment.run_experiment(_objects(), out_dir=tmp_path / "given", **kwargs)
     experiment.run_experiment(_objects()[::-1], out_dir=tmp_path / "flipped", **kwargs)
     given = (tmp_path / "given" / "results.csv").read_text()
-    assert given == (tmp_path / "flipped" / "results.csv").read_text()      # means, intervals, comparisons
+    assert given == (tmp_path / "flipped" / "results.csv").read_text()  # means, intervals, comparisons
 
 
 def test_results_csv_is_identical_for_one_and_two_jobs(tmp_path):
@@ -73,9 +110,18 @@ def test_results_csv_is_identical_for_one_and_two_jobs(tmp_path):
 
 
 def test_every_rate_has_an_interval_and_methods_a_paired_comparison(tmp_path):
-    r = experiment.run_experiment(_objects(), methods=("random", "uniform"), settings=SMALL, replicates=3,
-                                  repeats=2, folds=3, classifiers=("knn", "naive_bayes"), cache_dir=None,
-                                  quiet=True, out_dir=tmp_path)
+    r = experiment.run_experiment(
+        _objects(),
+        methods=("random", "uniform"),
+        settings=SMALL,
+        replicates=3,
+        repeats=2,
+        folds=3,
+        classifiers=("knn", "naive_bayes"),
+        cache_dir=None,
+        quiet=True,
+        out_dir=tmp_path,
+    )
     for c in r.cells:
         assert c.ci_low <= c.mean <= c.ci_high and 0.0 <= c.ci_low and c.ci_high <= 100.0
         assert c.replicates == (3 if c.protocol == "instance" else 2)
@@ -91,7 +137,7 @@ def test_every_rate_has_an_interval_and_methods_a_paired_comparison(tmp_path):
     assert all(row["baseline"] == "uniform" for row in rows if row["method"] == "random")
     assert all(row["diff"] == "" for row in rows if row["method"] == "uniform")
     sets = {int(row["touches"]): int(row["touch_sets"]) for row in rows if row["protocol"] == "instance"}
-    assert sets[6] == 1 and sets[5] == 6                            # C(6, 6) and C(6, 5): all there are
+    assert sets[6] == 1 and sets[5] == 6  # C(6, 6) and C(6, 5): all there are
     printed = experiment.format_tables(r)
     assert "paired difference" in printed and "fewer distinct sets" in printed
 
@@ -105,9 +151,30 @@ def test_cli_experiment_writes_every_file_and_a_cached_rerun_equals_a_fresh_run(
     cache = tmp_path / "cache"
 
     def argv(out_dir, cache_dir):
-        return ["experiment", "--objects", *files, "--n-points", "6", "--repeats", "2", "--folds", "3",
-                "--replicates", "2", "--train-instances", "2", "--train-sessions", "1",
-                "--methods", "uniform", "--out", str(out_dir), "--cache-dir", str(cache_dir), "--quiet"]
+        return [
+            "experiment",
+            "--objects",
+            *files,
+            "--n-points",
+            "6",
+            "--repeats",
+            "2",
+            "--folds",
+            "3",
+            "--replicates",
+            "2",
+            "--train-instances",
+            "2",
+            "--train-sessions",
+            "1",
+            "--methods",
+            "uniform",
+            "--out",
+            str(out_dir),
+            "--cache-dir",
+            str(cache_dir),
+            "--quiet",
+        ]
 
     assert main(argv(tmp_path / "first", cache)) == 0
     printed = capsys.readouterr().out
@@ -115,14 +182,15 @@ def test_cli_experiment_writes_every_file_and_a_cached_rerun_equals_a_fresh_run(
     assert "uniform points, paper protocol" in printed and "uniform points, instance protocol" in printed
     out = tmp_path / "first"
     assert {"results.json", "results.csv", "touches.png"} <= {p.name for p in out.iterdir()}
-    assert {f"confusion_{c}.png" for c in ("knn", "naive_bayes", "decision_tree", "evolutionary_svm",
-                                            "deep")} <= {p.name for p in out.iterdir()}
+    assert {f"confusion_{c}.png" for c in ("knn", "naive_bayes", "decision_tree", "evolutionary_svm", "deep")} <= {
+        p.name for p in out.iterdir()
+    }
     document = json.loads((out / "results.json").read_text())
     assert document["settings"]["objects"] == ["box", "ball"] and document["settings"]["replicates"] == 2
     assert set(document["settings"]["libraries"]) >= {"numpy", "scikit-learn", "embreex", "libigl", "pymeshlab"}
     assert any(len(entry["replicate_by_object"]) == 2 for entry in document["rates"])
-    assert main(argv(tmp_path / "cached", cache)) == 0                # read back from the cache
-    assert main(argv(tmp_path / "fresh", "none")) == 0                # computed from nothing
+    assert main(argv(tmp_path / "cached", cache)) == 0  # read back from the cache
+    assert main(argv(tmp_path / "fresh", "none")) == 0  # computed from nothing
     fresh = (tmp_path / "fresh" / "results.csv").read_text()
     assert (tmp_path / "cached" / "results.csv").read_text() == fresh == (out / "results.csv").read_text()
 
@@ -152,11 +220,19 @@ def test_real_imprint_set_gives_table_2_with_folds_grouped_by_point(tmp_path, ca
     labels = np.repeat(np.arange(3), 10)
     imprints = rng.uniform(0, 0.2, (30, 16, 16)).astype(np.float32)
     for i, c in enumerate(labels):
-        imprints[i, 4 * c:4 * c + 4, 4:8] = 0.9                      # each object presses its own patch
-    sset = tactile.ImprintSet(imprints=imprints, labels=labels.astype(np.int64),
-                              object_names=("mug", "ball", "box"), point_ids=np.tile(np.arange(10), 3),
-                              positions=np.zeros((30, 3)), normals=np.tile([0.0, 0.0, 1.0], (30, 1)),
-                              sensor=tactile.Sensor(), perturbation=None, seed=None, source="test")
+        imprints[i, 4 * c : 4 * c + 4, 4:8] = 0.9  # each object presses its own patch
+    sset = tactile.ImprintSet(
+        imprints=imprints,
+        labels=labels.astype(np.int64),
+        object_names=("mug", "ball", "box"),
+        point_ids=np.tile(np.arange(10), 3),
+        positions=np.zeros((30, 3)),
+        normals=np.tile([0.0, 0.0, 1.0], (30, 1)),
+        sensor=tactile.Sensor(),
+        perturbation=None,
+        seed=None,
+        source="test",
+    )
     path = tmp_path / "real.npz"
     sset.save(path)
     out = tmp_path / "real_out"
@@ -173,8 +249,16 @@ def test_real_imprint_set_gives_table_2_with_folds_grouped_by_point(tmp_path, ca
 def test_results_csv_is_identical_in_process_on_a_local_cluster_and_on_a_tcp_cluster(tmp_path, dask_cluster):
     from classify.runtime.cluster import open_executor
 
-    kwargs = dict(methods=("uniform",), classifiers=("knn", "naive_bayes", "decision_tree"), settings=SMALL,
-                  replicates=2, repeats=2, folds=3, cache_dir=None, quiet=True)
+    kwargs = dict(
+        methods=("uniform",),
+        classifiers=("knn", "naive_bayes", "decision_tree"),
+        settings=SMALL,
+        replicates=2,
+        repeats=2,
+        folds=3,
+        cache_dir=None,
+        quiet=True,
+    )
     experiment.run_experiment(_objects(), n_jobs=1, out_dir=tmp_path / "serial", **kwargs)
     with open_executor(workers=2) as executor:
         experiment.run_experiment(_objects(), executor=executor, out_dir=tmp_path / "local", **kwargs)
@@ -202,9 +286,20 @@ def test_real_size_keeps_the_objects_own_millimetres_and_refuses_a_file_without_
 
 
 def test_touch_policies_run_paired_with_the_fixed_plans_and_write_their_rows(tmp_path):
-    r = experiment.run_experiment(_objects()[:2], methods=("uniform", "mesh_saliency"), policies=("info_gain", "random"),
-                                  protocols=("instance",), classifiers=("knn",), features="polar", settings=SMALL,
-                                  replicates=2, cache_dir=None, quiet=True, n_jobs=1, out_dir=tmp_path)
+    r = experiment.run_experiment(
+        _objects()[:2],
+        methods=("uniform", "mesh_saliency"),
+        policies=("info_gain", "random"),
+        protocols=("instance",),
+        classifiers=("knn",),
+        features="polar",
+        settings=SMALL,
+        replicates=2,
+        cache_dir=None,
+        quiet=True,
+        n_jobs=1,
+        out_dir=tmp_path,
+    )
     with open(tmp_path / "results.csv") as fh:
         rows = list(csv.DictReader(fh))
     sequential = [row for row in rows if row["protocol"] == "sequential"]
@@ -226,7 +321,8 @@ def test_touch_policies_run_paired_with_the_fixed_plans_and_write_their_rows(tmp
 def test_every_method_and_classifier_of_a_replicate_meets_the_same_instances_devices_and_touch_sets(monkeypatch):
     from collections import Counter, defaultdict
 
-    from classify.experiment import protocols, run as run_module, stages
+    from classify.experiment import protocols, stages
+    from classify.experiment import run as run_module
     from classify.runtime import cache as cache_module
 
     acquired, touch_sets, current = Counter(), defaultdict(list), {}
@@ -256,9 +352,17 @@ def test_every_method_and_classifier_of_a_replicate_meets_the_same_instances_dev
     monkeypatch.setattr(stages, "instance_job", spy_job)
     monkeypatch.setattr(protocols, "touch_sets", spy_sets)
     methods = ("uniform", "mesh_saliency")
-    experiment.run_experiment(_objects()[:2], methods=methods, protocols=("instance",),
-                              classifiers=("knn", "naive_bayes"), settings=SMALL, replicates=2, cache_dir=None,
-                              quiet=True, n_jobs=1)
+    experiment.run_experiment(
+        _objects()[:2],
+        methods=methods,
+        protocols=("instance",),
+        classifiers=("knn", "naive_bayes"),
+        settings=SMALL,
+        replicates=2,
+        cache_dir=None,
+        quiet=True,
+        n_jobs=1,
+    )
     # 2 objects x 2 replicates x (1 test + 2 training sessions) session streams, each met once by every method.
     assert len(acquired) == 2 * 2 * 3 and set(acquired.values()) == {len(methods)}
     runs = list(touch_sets.values())

@@ -29,15 +29,16 @@ def test_a_cylinder_touched_at_any_roll_looks_the_same_to_the_descriptor_not_to_
     raw, polar = describe(images), describe(images, "polar")
     raw_change = np.linalg.norm(raw[1:] - raw[0], axis=1) / np.linalg.norm(raw[0])
     polar_change = np.linalg.norm(polar[1:] - polar[0], axis=1) / np.linalg.norm(polar[0])
-    assert raw_change.min() > 0.3                                   # the taxels see a turned groove
+    assert raw_change.min() > 0.3  # the taxels see a turned groove
     assert polar_change.max() < 0.1 and polar_change.max() < raw_change.min() / 4
 
 
 def test_a_sphere_and_a_cylinder_differ_to_the_descriptor():
     sensor = tactile.Sensor(mode="pressure")
     ball = tactile.imprints(shapes.sphere(radius=12.0, n=64), [[0.0, 12.0, 0.0]], [[0.0, 1.0, 0.0]], sensor)
-    rod = tactile.imprints(shapes.cylinder(radius=12.0, length=120.0, around=256, along=12),
-                           [[0.0, 12.0, 0.0]], [[0.0, 1.0, 0.0]], sensor)
+    rod = tactile.imprints(
+        shapes.cylinder(radius=12.0, length=120.0, around=256, along=12), [[0.0, 12.0, 0.0]], [[0.0, 1.0, 0.0]], sensor
+    )
     a, b = describe(ball, "polar")[0], describe(rod, "polar")[0]
     assert np.linalg.norm(a - b) > 0.2 * np.linalg.norm(a)
 

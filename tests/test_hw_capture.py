@@ -50,8 +50,12 @@ def sim_thread(imprints, seed=0, disconnect_after=None, **kw):
     sim = SimulatedSensor(imprints, np.random.default_rng(seed), **options)
     master, path = open_pty()
     stop = threading.Event()
-    thread = threading.Thread(target=serve, args=(master, sim, options["rate"]),
-                              kwargs={"stop": stop, "disconnect_after": disconnect_after}, daemon=True)
+    thread = threading.Thread(
+        target=serve,
+        args=(master, sim, options["rate"]),
+        kwargs={"stop": stop, "disconnect_after": disconnect_after},
+        daemon=True,
+    )
     thread.start()
     # Should a capture wait for a press that never comes, pulling the cable makes it fail instead of hang.
     watchdog = threading.Timer(60.0, stop.set)
@@ -70,8 +74,10 @@ def stored(session_path):
         return []
     con = sqlite3.connect(f"file:{session_path}?mode=ro", uri=True)
     try:
-        return [(pid, np.frombuffer(blob, np.float32)) for pid, blob in
-                con.execute("SELECT point_id, imprint FROM presses ORDER BY id")]
+        return [
+            (pid, np.frombuffer(blob, np.float32))
+            for pid, blob in con.execute("SELECT point_id, imprint FROM presses ORDER BY id")
+        ]
     except sqlite3.OperationalError:
         return []
     finally:
@@ -143,7 +149,7 @@ def test_bit_flips_through_a_pty_no_corrupt_frame_accepted():
 def _write_all(fd, data):
     while data:
         try:
-            data = data[os.write(fd, data[:4096]):]
+            data = data[os.write(fd, data[:4096]) :]
         except BlockingIOError:
             time.sleep(0.001)
 
@@ -204,8 +210,7 @@ def test_disconnect_keeps_the_presses_made_before(tmp_path):
 
 
 def _capture_cmd(port, session, *extra):
-    return [sys.executable, "-m", "hw.capture", "--port", port, "--session", str(session), "--object", "blobs",
-            *extra]
+    return [sys.executable, "-m", "hw.capture", "--port", port, "--session", str(session), "--object", "blobs", *extra]
 
 
 def _wait_for(predicate, timeout=30.0):
@@ -247,7 +252,7 @@ def test_killed_capture_keeps_every_completed_press_and_resumes(tmp_path):
         assert "resuming" in err and "interrupted" in err
     after = stored(session)
     assert [p for p, _ in after] == list(range(len(after)))
-    for _, imprint in after[len(before):]:
+    for _, imprint in after[len(before) :]:
         assert max(ncc(imprint, sent) for sent in imprints) >= 0.99
 
 
@@ -255,10 +260,18 @@ def test_plan_ids_in_order_and_resume_skips_recorded_points(tmp_path):
     from hw.plan import Plan, ProbePoint
     from meshsal.mesh import Similarity
 
-    points = tuple(ProbePoint(pid, np.array([pid, 0.0, 0.0]), np.array([0.0, 0.0, -1.0]),
-                              np.array([1.0, 0.0, 0.0, 0.0])) for pid in (7, 3, 9))
-    plan = Plan(points=points, sensor={}, mesh="m", size_mm=150.0, method="random",
-                frame=Similarity(2.0, np.array([1.0, 0.0, 0.0])))
+    points = tuple(
+        ProbePoint(pid, np.array([pid, 0.0, 0.0]), np.array([0.0, 0.0, -1.0]), np.array([1.0, 0.0, 0.0, 0.0]))
+        for pid in (7, 3, 9)
+    )
+    plan = Plan(
+        points=points,
+        sensor={},
+        mesh="m",
+        size_mm=150.0,
+        method="random",
+        frame=Similarity(2.0, np.array([1.0, 0.0, 0.0])),
+    )
     imprints = blobs(3, seed=9)
     # Captures follow each other faster than the device notices, so it does not restart its
     # lead-in: rest between presses must be long enough for a new baseline.
@@ -279,6 +292,10 @@ def test_plan_ids_in_order_and_resume_skips_recorded_points(tmp_path):
 def test_visuotactile_capture_reports_errors(tmp_path, capsys):
     from classify.cli import main as cli_main
 
-    assert cli_main(["capture", "--port", str(tmp_path / "ttyNONE"), "--session", str(tmp_path / "s.sqlite"),
-                     "--object", "x"]) == 1
+    assert (
+        cli_main(
+            ["capture", "--port", str(tmp_path / "ttyNONE"), "--session", str(tmp_path / "s.sqlite"), "--object", "x"]
+        )
+        == 1
+    )
     assert "visuotactile capture: error:" in capsys.readouterr().err

@@ -5,11 +5,11 @@ import json
 
 import numpy as np
 import pytest
+from shapes import icosphere
 
-from meshsal.mesh.transform import principal_diagonal
 from hw.plan import load_plan, make_plan, matrix_from_quaternion, quaternion_from_matrix, save_plan
 from meshsal.mesh import Similarity
-from shapes import icosphere
+from meshsal.mesh.transform import principal_diagonal
 
 
 def test_quaternion_round_trip_on_random_rotations():
@@ -30,7 +30,7 @@ def test_plan_on_a_sphere_in_metres(tmp_path):
     mesh = icosphere(radius=0.05, center=center)
     plan = make_plan(mesh, n=6, method="uniform", size_mm=150.0, source="ball.obj")
     assert len(plan.points) == 6 and plan.mesh == "ball.obj"
-    diagonal_m = principal_diagonal(mesh.vertices, mesh.faces)[1]       # the experiment's sizing rule
+    diagonal_m = principal_diagonal(mesh.vertices, mesh.faces)[1]  # the experiment's sizing rule
     assert plan.frame.scale == pytest.approx(150.0 / diagonal_m)
     assert plan.sensor["width"] == pytest.approx(plan.sensor["width_mm"] / plan.frame.scale)
     for p in plan.points:
@@ -73,9 +73,14 @@ def test_plan_file_errors(tmp_path):
     path.write_text(json.dumps({"format": "something else"}))
     with pytest.raises(ValueError, match="not a probe plan"):
         load_plan(path)
-    good = {"format": "visuotactile-probe-plan", "version": 1, "size_mm": 150, "sensor": {},
-            "planning_frame": {"scale": 1.0, "offset": [0, 0, 0]},
-            "points": [{"id": 0, "position": [0, 0, 0], "approach": [0, 0, 2], "quaternion": [1, 0, 0, 0]}]}
+    good = {
+        "format": "visuotactile-probe-plan",
+        "version": 1,
+        "size_mm": 150,
+        "sensor": {},
+        "planning_frame": {"scale": 1.0, "offset": [0, 0, 0]},
+        "points": [{"id": 0, "position": [0, 0, 0], "approach": [0, 0, 2], "quaternion": [1, 0, 0, 0]}],
+    }
     path.write_text(json.dumps(good))
     with pytest.raises(ValueError, match="damaged probe plan.*non-unit"):
         load_plan(path)

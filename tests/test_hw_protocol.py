@@ -98,8 +98,7 @@ def test_sequence_wrap_is_not_a_gap_and_restart_is_not_counted():
 
 def test_text_lines_malformed_rejected():
     parser = FrameParser(protocol="text")
-    data = (b"1,2,3,4,5,6\n" b"x,1,2\n" b"2,3,-1,2,3,4\n" b"3,4,1,2,3\n" b"4,5,70000,1,1,1\n"
-            b"5,6,7,8,9,10\r\n")
+    data = b"1,2,3,4,5,6\nx,1,2\n2,3,-1,2,3,4\n3,4,1,2,3\n4,5,70000,1,1,1\n5,6,7,8,9,10\r\n"
     got = parser.feed(data)
     assert [f.seq for f in got] == [1, 5]
     assert got[0].values.tolist() == [[3, 4], [5, 6]]
@@ -108,14 +107,25 @@ def test_text_lines_malformed_rejected():
 
 def _frames_strategy():
     return st.lists(
-        st.tuples(st.integers(0, 2**32 - 1), st.integers(0, 2**32 - 1), st.integers(1, 4), st.integers(1, 4),
-                  st.integers(0, 2**16 - 1)),
-        min_size=1, max_size=6)
+        st.tuples(
+            st.integers(0, 2**32 - 1),
+            st.integers(0, 2**32 - 1),
+            st.integers(1, 4),
+            st.integers(1, 4),
+            st.integers(0, 2**16 - 1),
+        ),
+        min_size=1,
+        max_size=6,
+    )
 
 
 @settings(max_examples=300, deadline=None)
-@given(st.binary(max_size=2000), st.sampled_from(["binary", "text"]), st.sampled_from([None, (2, 3)]),
-       st.lists(st.integers(1, 50), max_size=10))
+@given(
+    st.binary(max_size=2000),
+    st.sampled_from(["binary", "text"]),
+    st.sampled_from([None, (2, 3)]),
+    st.lists(st.integers(1, 50), max_size=10),
+)
 def test_fuzz_arbitrary_bytes_never_raise(data, protocol, shape, cuts):
     rows, cols = shape if shape else (None, None)
     parser = FrameParser(rows, cols, protocol=protocol)
@@ -149,10 +159,13 @@ def test_fuzz_valid_frames_split_anywhere_with_garbage_between(specs, garbage, d
 
 
 @settings(max_examples=200, deadline=None)
-@given(_frames_strategy(),
-       st.lists(st.binary(max_size=30).filter(lambda g: b"\n" not in g and g.strip(b"0123456789,\r")),
-                min_size=7, max_size=7),
-       st.data())
+@given(
+    _frames_strategy(),
+    st.lists(
+        st.binary(max_size=30).filter(lambda g: b"\n" not in g and g.strip(b"0123456789,\r")), min_size=7, max_size=7
+    ),
+    st.data(),
+)
 def test_fuzz_text_frames_split_anywhere_with_garbage_lines_between(specs, garbage, data):
     encoded, expected = [], []
     for seq, t_us, _, _, seed in specs:

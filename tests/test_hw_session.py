@@ -16,8 +16,18 @@ from hw.session import Session, resample
 def _press(value: float, shape=(16, 16)) -> Press:
     imprint = np.zeros(shape, np.float32)
     imprint[2, 3] = value
-    return Press(imprint=imprint, raw=(imprint + 100).astype(np.uint16), peak_sum=value, seq_start=1, seq_peak=2,
-                 seq_end=3, t_start_us=10, t_peak_us=20, t_end_us=30, frames=3)
+    return Press(
+        imprint=imprint,
+        raw=(imprint + 100).astype(np.uint16),
+        peak_sum=value,
+        seq_start=1,
+        seq_peak=2,
+        seq_end=3,
+        t_start_us=10,
+        t_peak_us=20,
+        t_end_us=30,
+        frames=3,
+    )
 
 
 def _baseline(shape=(16, 16)) -> Baseline:
@@ -95,10 +105,9 @@ def test_resample_area_average():
 
 
 def test_export_resamples_normalizes_and_labels(tmp_path):
-    from tactile import ImprintSet
-
     from classify.cli import main
     from hw.session import export_imprints
+    from tactile import ImprintSet
 
     path = tmp_path / "s.sqlite"
     with Session(path) as s:
@@ -107,8 +116,15 @@ def test_export_resamples_normalizes_and_labels(tmp_path):
         for obj, pid, value in (("mug", 0, 400.0), ("cup", 3, 800.0), ("mug", 1, 200.0)):
             press = _press(value, (32, 32))
             press.imprint[20:22, 10:12] = value
-            s.add_press(run, obj, pid, press, COUNTERS, position=[pid, 0, 0] if obj == "cup" else None,
-                        approach=[0, -1, 0] if obj == "cup" else None)
+            s.add_press(
+                run,
+                obj,
+                pid,
+                press,
+                COUNTERS,
+                position=[pid, 0, 0] if obj == "cup" else None,
+                approach=[0, -1, 0] if obj == "cup" else None,
+            )
     exported = export_imprints(path)
     assert exported.object_names == ("cup", "mug") and exported.labels.tolist() == [1, 0, 1]
     assert exported.point_ids.tolist() == [0, 3, 1] and exported.imprints.shape == (3, 16, 16)
@@ -145,8 +161,10 @@ def _copy(name: str, tmp_path: Path) -> Path:
 def _indexes(path: Path) -> dict:
     con = sqlite3.connect(path)
     try:
-        return {name: sql for name, sql in con.execute("SELECT name, sql FROM sqlite_master WHERE type = 'index'"
-                                                       " AND sql IS NOT NULL")}
+        return {
+            name: sql
+            for name, sql in con.execute("SELECT name, sql FROM sqlite_master WHERE type = 'index' AND sql IS NOT NULL")
+        }
     finally:
         con.close()
 
@@ -156,24 +174,30 @@ def test_a_version_1_session_is_migrated_to_one_press_per_point(tmp_path):
     assert list(_indexes(path)) == ["presses_object"]
     with Session(path) as s:
         assert s._meta()["version"] == "2"
-        assert [(p.object, p.point_id, p.imprint[2, 3]) for p in s.presses()] == [("cup", 0, 500.0), ("cup", 1, 600.0),
-                                                                                 ("mug", 5, 700.0)]
+        assert [(p.object, p.point_id, p.imprint[2, 3]) for p in s.presses()] == [
+            ("cup", 0, 500.0),
+            ("cup", 1, 600.0),
+            ("mug", 5, 700.0),
+        ]
         with pytest.raises(ValueError, match=r"session_v1.sqlite: point 1 of 'cup' is already recorded"):
             s.add_press(1, "cup", 1, _press(1.0), COUNTERS)
         assert s.add_next_press(1, "cup", _press(2.0), COUNTERS) == (4, 2)
     assert _indexes(path) == {"presses_point": "CREATE UNIQUE INDEX presses_point ON presses(object, point_id)"}
-    with Session(path) as s:                                         # already version 2
+    with Session(path) as s:  # already version 2
         assert s.point_ids("cup") == [0, 1, 2]
 
 
 def test_a_version_1_session_whose_presses_share_a_point_is_refused_naming_them(tmp_path):
     path = _copy("session_v1_duplicates.sqlite", tmp_path)
     before = path.read_bytes()
-    with pytest.raises(ValueError, match=r"session_v1_duplicates.sqlite: presses share a point id: 'cup' point 3 "
-                                         r"\(presses 1, 3\)\."):
+    with pytest.raises(
+        ValueError,
+        match=r"session_v1_duplicates.sqlite: presses share a point id: 'cup' point 3 "
+        r"\(presses 1, 3\)\.",
+    ):
         Session(path)
     con = sqlite3.connect(path)
-    assert con.execute("SELECT value FROM meta WHERE key = 'version'").fetchone() == ("1",)   # rolled back
+    assert con.execute("SELECT value FROM meta WHERE key = 'version'").fetchone() == ("1",)  # rolled back
     con.execute("UPDATE presses SET point_id = 4 WHERE id = 3")
     con.commit()
     con.close()
@@ -192,7 +216,7 @@ def test_next_point_ids_count_up_or_follow_the_plan(tmp_path):
         plan = [(7, [1, 2, 3], [0, 0, -1]), (11, [4, 5, 6], [0, -1, 0]), (3, [7, 8, 9], [-1, 0, 0])]
         assert s.next_point("cup", planned=plan) == 7
         assert s.add_next_press(run, "cup", _press(1.0), COUNTERS, planned=plan)[1] == 7
-        assert s.add_next_press(run, "cup", _press(1.0), COUNTERS, planned=plan)[1] == 3   # 11 is recorded
+        assert s.add_next_press(run, "cup", _press(1.0), COUNTERS, planned=plan)[1] == 3  # 11 is recorded
         assert s.next_point("cup", planned=plan) is None
         assert s.add_next_press(run, "cup", _press(1.0), COUNTERS, planned=plan) is None
         three = s.presses("cup")[-1]
@@ -227,8 +251,9 @@ def test_processes_creating_and_filling_one_session_at_once_never_share_a_point_
     n, presses = 4, 30
     plan = [(int(i), [float(i), 0.0, 1.0], [0.0, 0.0, -1.0]) for i in np.random.default_rng(0).permutation(80)]
     start, results = ctx.Barrier(n), ctx.Queue()
-    workers = [ctx.Process(target=_hammer, args=(path, start, results, presses, plan if planned else None))
-               for _ in range(n)]
+    workers = [
+        ctx.Process(target=_hammer, args=(path, start, results, presses, plan if planned else None)) for _ in range(n)
+    ]
     for w in workers:
         w.start()
     stored = [results.get(timeout=120) for _ in workers]
@@ -240,11 +265,11 @@ def test_processes_creating_and_filling_one_session_at_once_never_share_a_point_
     assert len(set(rows)) == len(rows) and len(set(ids)) == len(ids)
     with Session(path) as s:
         records = s.presses("cup")
-        assert len(s._con.execute("SELECT * FROM meta WHERE key = 'format'").fetchall()) == 1   # one schema
+        assert len(s._con.execute("SELECT * FROM meta WHERE key = 'format'").fetchall()) == 1  # one schema
         assert len(s._con.execute("SELECT * FROM runs").fetchall()) == n
     assert sorted(r.id for r in records) == rows
     if planned:
-        assert sorted(ids) == list(range(80))                        # every planned point once, then no more
+        assert sorted(ids) == list(range(80))  # every planned point once, then no more
         assert all(r.position.tolist() == [r.point_id, 0.0, 1.0] for r in records)
     else:
         assert sorted(ids) == list(range(n * presses))
@@ -253,10 +278,12 @@ def test_processes_creating_and_filling_one_session_at_once_never_share_a_point_
 def test_a_filesystem_without_a_write_ahead_log_is_refused(tmp_path, monkeypatch):
     connect = sqlite3.connect
     # SQLite's VFS for filesystems without POSIX locks has no shared memory, so WAL mode is refused there.
-    monkeypatch.setattr(sqlite3, "connect",
-                        lambda path, **kw: connect(f"file:{path}?vfs=unix-dotfile", uri=True, **kw))
-    with pytest.raises(OSError, match=r"s.sqlite: SQLite cannot keep a write-ahead log here \(journal mode "
-                                      r"stays 'delete'\).*keep the session on a local disk"):
+    monkeypatch.setattr(sqlite3, "connect", lambda path, **kw: connect(f"file:{path}?vfs=unix-dotfile", uri=True, **kw))
+    with pytest.raises(
+        OSError,
+        match=r"s.sqlite: SQLite cannot keep a write-ahead log here \(journal mode "
+        r"stays 'delete'\).*keep the session on a local disk",
+    ):
         Session(tmp_path / "s.sqlite")
 
 
@@ -265,7 +292,7 @@ def test_a_file_created_by_another_opener_between_look_and_lock_is_taken_as_it_i
     transaction, first = Session._transaction, []
 
     def another_opener_first(self):
-        if not first:                                                # once: this opener has seen no tables
+        if not first:  # once: this opener has seen no tables
             first.append(self)
             with Session(path) as other:
                 other.ensure_sensor(16, 16)

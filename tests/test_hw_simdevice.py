@@ -17,8 +17,9 @@ def _frames(sim, n):
 
 def test_peak_frame_is_rest_plus_full_scale_imprint():
     imprints = np.random.default_rng(0).random((2, 4, 5))
-    sim = SimulatedSensor(imprints, np.random.default_rng(1), noise=0.0, lead_frames=3, press_frames=5,
-                          idle_frames=2, full_scale=1000.0)
+    sim = SimulatedSensor(
+        imprints, np.random.default_rng(1), noise=0.0, lead_frames=3, press_frames=5, idle_frames=2, full_scale=1000.0
+    )
     frames = _frames(sim, 3 + 2 * (5 + 2))
     rest = frames[0].values.astype(float)
     assert all(np.array_equal(f.values, frames[0].values) for f in frames[:3])
@@ -43,8 +44,16 @@ def test_restart_redoes_an_interrupted_press_after_a_lead_in():
 
 def test_faults_drop_flip_and_garbage():
     imprints = np.ones((3, 4, 4))
-    sim = SimulatedSensor(imprints, np.random.default_rng(2), drop=0.2, bitflips=0.2, garbage=0.2,
-                          lead_frames=5, press_frames=5, idle_frames=5)
+    sim = SimulatedSensor(
+        imprints,
+        np.random.default_rng(2),
+        drop=0.2,
+        bitflips=0.2,
+        garbage=0.2,
+        lead_frames=5,
+        press_frames=5,
+        idle_frames=5,
+    )
     parser = FrameParser()
     frames = parser.feed(b"".join(sim.next_bytes() for _ in range(400)))
     assert 200 < len(frames) < 330
@@ -55,8 +64,12 @@ def test_faults_drop_flip_and_garbage():
 
 
 def test_bad_object_is_a_clear_error():
-    proc = subprocess.run([sys.executable, "-m", "hw.simdevice", "--object", "/nonexistent/thing.obj"],
-                          capture_output=True, text=True, timeout=60)
+    proc = subprocess.run(
+        [sys.executable, "-m", "hw.simdevice", "--object", "/nonexistent/thing.obj"],
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
     assert proc.returncode == 1 and "simdevice: error:" in proc.stderr and "thing.obj" in proc.stderr
 
 
@@ -69,28 +82,67 @@ def ncc(a, b):
 def test_plan_simdevice_capture_export_chain(tmp_path):
     """15 tactile imprints of a toy pressed through a pty come back as an ImprintSet matching what was sent."""
     from classify.cli import main
-    from tactile import ImprintSet
-
     from hw.plan import load_plan
+    from tactile import ImprintSet
 
     plan_path, truth, session, out = (tmp_path / n for n in ("plan.json", "truth.npz", "s.sqlite", "real.npz"))
     assert main(["plan", "cup", "--method", "random", "--n", "15", "--out", str(plan_path)]) == 0
     sim = subprocess.Popen(
-        [sys.executable, "-m", "hw.simdevice", "--object", "cup", "--points", str(plan_path), "--rate", "1000",
-         "--press-frames", "7", "--idle-frames", "8", "--lead-frames", "60", "--dump", str(truth),
-         "--garbage", "0.02", "--bitflips", "0.02", "--drop", "0.02"],
-        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        [
+            sys.executable,
+            "-m",
+            "hw.simdevice",
+            "--object",
+            "cup",
+            "--points",
+            str(plan_path),
+            "--rate",
+            "1000",
+            "--press-frames",
+            "7",
+            "--idle-frames",
+            "8",
+            "--lead-frames",
+            "60",
+            "--dump",
+            str(truth),
+            "--garbage",
+            "0.02",
+            "--bitflips",
+            "0.02",
+            "--drop",
+            "0.02",
+        ],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
     try:
         port = sim.stdout.readline().strip()
         assert port.startswith("/dev/"), sim.stderr.read()
-        cap = subprocess.run([sys.executable, "-m", "hw.capture", "--port", port, "--session", str(session),
-                              "--object", "cup", "--points", str(plan_path)],
-                             capture_output=True, text=True, timeout=120)
+        cap = subprocess.run(
+            [
+                sys.executable,
+                "-m",
+                "hw.capture",
+                "--port",
+                port,
+                "--session",
+                str(session),
+                "--object",
+                "cup",
+                "--points",
+                str(plan_path),
+            ],
+            capture_output=True,
+            text=True,
+            timeout=120,
+        )
         assert cap.returncode == 0, cap.stderr
         assert "15 presses stored" in cap.stderr
     finally:
         sim.terminate()
-        sim.communicate(timeout=10)                                   # reaps it and closes its pipes
+        sim.communicate(timeout=10)  # reaps it and closes its pipes
     assert main(["export", str(session), "--out", str(out)]) == 0
     real = ImprintSet.load(out)
     with np.load(truth) as data:

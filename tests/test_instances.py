@@ -5,9 +5,9 @@ import pytest
 import shapes
 
 import meshsal
-from meshsal.objects import instances
 from meshsal.mesh import Similarity
 from meshsal.mesh.transform import principal_diagonal, scale_to_principal
+from meshsal.objects import instances
 
 
 def test_random_rotations_are_proper_and_uniform():
@@ -59,7 +59,7 @@ def test_instance_turns_resizes_and_recolours_and_leads_back_to_the_file():
     assert np.allclose(inst.transform.to_source(inst.vertices), base.transform.to_source(base.vertices))
     assert not np.allclose(inst.vertex_colors, base.vertex_colors)
     grey = instances.recolor(np.array([[0.4, 0.4, 0.4]]), spec.hue_deg, 1.0)
-    assert np.allclose(grey, 0.4)                                 # a hue turn leaves grey alone
+    assert np.allclose(grey, 0.4)  # a hue turn leaves grey alone
 
 
 def test_toy_instances_take_a_new_paint_not_a_hue_turn():

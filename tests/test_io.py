@@ -10,9 +10,9 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
+from meshsal.mesh import Mesh, MeshError, face_areas
 from meshsal.mesh.io import MAX_MESH_BYTES, MeshRepairWarning, load_mesh, load_vertex_quality, save_ply
 from meshsal.mesh.texture import image_size, read_texture
-from meshsal.mesh import Mesh, MeshError, face_areas
 
 SQUARE = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], dtype=np.float64)
 TETRA_V = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]], dtype=np.float64)
@@ -139,8 +139,7 @@ def test_two_texture_images_warn_and_load_untextured(tmp_path):
         cv2.imwrite(str(tmp_path / name), np.zeros((2, 2, 3), np.uint8))
     write(tmp_path / "two.mtl", "newmtl a\nmap_Kd a.png\nnewmtl b\nmap_Kd b.png\n")
     text = (
-        "mtllib two.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nv 1 1 0\nvt 0 0\n"
-        "usemtl a\nf 1/1 2/1 3/1\nusemtl b\nf 2/1 4/1 3/1\n"
+        "mtllib two.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nv 1 1 0\nvt 0 0\nusemtl a\nf 1/1 2/1 3/1\nusemtl b\nf 2/1 4/1 3/1\n"
     )
     with pytest.warns(MeshRepairWarning, match="2 texture images"):
         m = load_mesh(write(tmp_path / "two.obj", text))
@@ -384,7 +383,13 @@ def test_faces_lost_by_pymeshlab_raise(tmp_path):
 # --------------------------------------------------------------------------- garbage never crashes
 
 EXTENSIONS = (".obj", ".ply", ".off", ".stl")
-PREFIXES = (b"", b"ply\nformat binary_little_endian 1.0\nelement vertex 3\n", b"OFF\n3 1 0\n", b"solid x\n", b"v 1 2 3\nf ")
+PREFIXES = (
+    b"",
+    b"ply\nformat binary_little_endian 1.0\nelement vertex 3\n",
+    b"OFF\n3 1 0\n",
+    b"solid x\n",
+    b"v 1 2 3\nf ",
+)
 
 
 @settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
@@ -557,8 +562,11 @@ def test_a_texture_over_the_pixel_cap_is_dropped_before_it_is_decoded(tmp_path, 
     path = textured_obj(tmp_path, image=False)
     (tmp_path / "tex.png").write_bytes(png_header(100_000, 50_000))
     monkeypatch.setattr(cv2, "imread", lambda *a, **k: pytest.fail("the texture was decoded"))
-    with pytest.warns(MeshRepairWarning, match=r"t\.obj: texture image 'tex\.png' has 100000 x 50000 = "
-                                               r"5,000,000,000 pixels, over the cap of 67,108,864"):
+    with pytest.warns(
+        MeshRepairWarning,
+        match=r"t\.obj: texture image 'tex\.png' has 100000 x 50000 = "
+        r"5,000,000,000 pixels, over the cap of 67,108,864",
+    ):
         m = load_mesh(path)
     assert m.texture is None and m.uv is None and m.n_faces == 2
 
@@ -570,12 +578,13 @@ def test_texture_sizes_from_headers_or_after_decoding(tmp_path, suffix):
     assert image_size(tmp_path / f"im{suffix}") == (None if suffix == ".tiff" else (50, 30))
     assert read_texture(tmp_path / f"im{suffix}", max_pixels=1500)[0].shape == (30, 50, 3)
     texture, note = read_texture(tmp_path / f"im{suffix}", max_pixels=1499)
-    assert texture is None and note == (f"texture image 'im{suffix}' has 50 x 30 = 1,500 pixels, over the cap of "
-                                        "1,499; loaded without texture")
+    assert texture is None and note == (
+        f"texture image 'im{suffix}' has 50 x 30 = 1,500 pixels, over the cap of 1,499; loaded without texture"
+    )
 
 
 def test_load_mesh_passes_its_texture_cap_on(tmp_path):
-    path = textured_obj(tmp_path)                       # a 4 x 2 texture
+    path = textured_obj(tmp_path)  # a 4 x 2 texture
     assert load_mesh(path, max_texture_pixels=8).texture.shape == (2, 4, 3)
     with pytest.warns(MeshRepairWarning, match="8 pixels, over the cap of 7"):
         assert load_mesh(path, max_texture_pixels=7).texture is None

@@ -4,21 +4,20 @@ import json
 
 import numpy as np
 import pytest
+from models import one_feature_model
+from shapes import icosphere
 
 from classify.experiment import samples as dataset
 from classify.experiment.stages import ObjectSet, Runtime, SampleKey, instance_stage
 from classify.experiment.survey import Survey, distinctiveness, fit_replicate_model
-from meshsal.objects import toys, ycb
+from classify.runtime.cluster import Inline
 from meshsal.attention import CHANNELS
 from meshsal.mesh.curvature import mesh_saliency
+from meshsal.objects import toys, ycb
 from meshsal.objects.instances import InstanceSpec, make_instance, random_rotation
-from meshsal.points.learned import FEATURES, POOL_FACTOR, TouchModel, candidate_pool, fit_touch_model, point_features
 from meshsal.points import attention_maps, interest_points, learned_points, points_by_method, view_channels
+from meshsal.points.learned import FEATURES, POOL_FACTOR, TouchModel, candidate_pool, fit_touch_model, point_features
 from meshsal.points.touch import touchable
-from classify.runtime.cluster import Inline
-
-from models import one_feature_model
-from shapes import icosphere
 
 
 def bumpy_sphere():
@@ -27,11 +26,12 @@ def bumpy_sphere():
     V = mesh.vertices.copy()
     direction = V / np.linalg.norm(V, axis=1, keepdims=True)
     top = np.array([0.0, 0.0, 1.0])
-    bump = 8.0 * np.exp(-(np.arccos(np.clip(direction @ top, -1, 1)) / 0.12) ** 2)
+    bump = 8.0 * np.exp(-((np.arccos(np.clip(direction @ top, -1, 1)) / 0.12) ** 2))
     return mesh.replace(vertices=V + direction * bump[:, None]), top
 
 
 # ---------------------------------------------------------------- the model
+
 
 def test_ridge_recovers_a_planted_linear_rule_and_weights_pick_the_channel():
     rng = np.random.default_rng(1)
@@ -48,16 +48,19 @@ def test_ridge_recovers_a_planted_linear_rule_and_weights_pick_the_channel():
 def test_no_channel_predicts_anything_gives_equal_weights():
     rng = np.random.default_rng(2)
     X = rng.random((100, len(FEATURES)))
-    y = -X[:, :len(CHANNELS)].sum(axis=1)            # every channel hurts: no non-negative weight helps
+    y = -X[:, : len(CHANNELS)].sum(axis=1)  # every channel hurts: no non-negative weight helps
     assert fit_touch_model(X, y).channel_weights == dict.fromkeys(CHANNELS, 1.0)
 
 
-@pytest.mark.parametrize("features, target, message", [
-    (np.zeros((5, 3)), np.zeros(5), "shape"),
-    (np.zeros((5, len(FEATURES))), np.zeros(4), "target"),
-    (np.zeros((1, len(FEATURES))), np.zeros(1), "at least 2"),
-    (np.full((3, len(FEATURES)), np.nan), np.zeros(3), "finite"),
-])
+@pytest.mark.parametrize(
+    "features, target, message",
+    [
+        (np.zeros((5, 3)), np.zeros(5), "shape"),
+        (np.zeros((5, len(FEATURES))), np.zeros(4), "target"),
+        (np.zeros((1, len(FEATURES))), np.zeros(1), "at least 2"),
+        (np.full((3, len(FEATURES)), np.nan), np.zeros(3), "finite"),
+    ],
+)
 def test_bad_training_data_is_refused(features, target, message):
     with pytest.raises(ValueError, match=message):
         fit_touch_model(features, target)
@@ -84,6 +87,7 @@ def test_model_file_round_trip_and_bad_files(tmp_path):
 
 # ---------------------------------------------------------------- distinctiveness
 
+
 def test_distinctiveness_leaves_the_instance_out():
     # Object 0's instance 1 has an exact twin of each touch on the same instance: that must not count.
     D = np.array([[0.0], [0.0], [1.0], [3.0], [3.2]])
@@ -99,16 +103,17 @@ def test_distinctiveness_leaves_the_instance_out():
 def test_a_confusable_touch_has_a_negative_margin():
     D = np.array([[0.0], [5.0], [0.1], [5.1]])
     m = distinctiveness(D, np.array([0, 0, 1, 1]), np.array([1, 2, 1, 2]))
-    assert (m < 0).all()            # each touch lies nearer the other object's touch than its own object's
+    assert (m < 0).all()  # each touch lies nearer the other object's touch than its own object's
 
 
 # ---------------------------------------------------------------- features and points
+
 
 def test_pool_spreads_over_the_surface_from_its_farthest_vertex():
     mesh, top = bumpy_sphere()
     pool = candidate_pool(mesh, n=5)
     assert pool.size == POOL_FACTOR * 5 == np.unique(pool).size
-    assert mesh.vertices[pool[0]] @ top == pytest.approx(np.abs(mesh.vertices @ top).max())   # the bump's tip
+    assert mesh.vertices[pool[0]] @ top == pytest.approx(np.abs(mesh.vertices @ top).max())  # the bump's tip
     # Farthest points: no two of the first 12 closer than a third of the radius.
     P = mesh.vertices[pool[:12]]
     d = np.linalg.norm(P[:, None] - P[None], axis=2) + np.eye(12) * 1e9
@@ -131,7 +136,7 @@ def test_point_features_know_the_bump():
     F = point_features(mesh, seen.views, seen.results, attention_maps(seen), vs, ids, spacing=5.0)
     assert F.shape == (2, len(FEATURES)) and np.isfinite(F).all()
     col = {name: F[:, k] for k, name in enumerate(FEATURES)}
-    assert col["curvature"][0] > 5 * col["curvature"][1]            # the bump's tip against the sphere's bottom
+    assert col["curvature"][0] > 5 * col["curvature"][1]  # the bump's tip against the sphere's bottom
     assert col["mesh_saliency"][0] > col["mesh_saliency"][1]
     assert ((col["views"] >= 1) & (col["views"] <= 72)).all()
     assert all(0.0 <= col[f"{c}_mean"].min() and col[f"{c}_mean"].max() <= 1.0 for c in CHANNELS)
@@ -143,7 +148,7 @@ def test_learned_points_go_where_the_model_says():
     pool = candidate_pool(mesh, n=6)
     height = mesh.vertices[pool] @ top
     features = np.zeros((pool.size, len(FEATURES)))
-    features[:, FEATURES.index("votes")] = height              # a model that wants the top
+    features[:, FEATURES.index("votes")] = height  # a model that wants the top
     pts = learned_points(mesh, pool, features, one_feature_model("votes"), vs, n=6)
     assert pts.method == "learned" and len(pts) == 6
     assert mesh.vertices[pts.vertex_ids[0]] @ top == pytest.approx(height.max())
@@ -160,8 +165,9 @@ def test_model_methods_need_a_model_and_share_one_render():
     with pytest.raises(ValueError, match="needs channel weights"):
         interest_points(mesh, method="attention", combination="learned")
     model = one_feature_model("curvature")
-    many = points_by_method(mesh, ["attention", "learned", "attention_learned", "uniform"], n=5, size=48,
-                            threads=1, model=model)
+    many = points_by_method(
+        mesh, ["attention", "learned", "attention_learned", "uniform"], n=5, size=48, threads=1, model=model
+    )
     for method, pts in many.items():
         alone = interest_points(mesh, n=5, method=method, size=48, threads=1, model=model)
         assert alone.vertex_ids.tolist() == pts.vertex_ids.tolist(), method
@@ -171,6 +177,7 @@ def test_model_methods_need_a_model_and_share_one_render():
 
 
 # ---------------------------------------------------------------- no test instance trains the model
+
 
 def test_replicate_model_ignores_whatever_the_test_instance_holds():
     rng = np.random.default_rng(4)
@@ -196,22 +203,26 @@ def test_the_instance_stage_trains_each_model_on_training_instances_only():
     assert len(models) == 2
     for model in models:
         assert sorted(model.trained_on) == ["cow/1", "cow/2", "cup/1", "cup/2"]
-    assert models[0].coef.tolist() != models[1].coef.tolist()          # each replicate its own instances
+    assert models[0].coef.tolist() != models[1].coef.tolist()  # each replicate its own instances
     for r in range(2):
         for i in range(2):
             for j in range(3):
                 imprints = samples[SampleKey(r, "learned", i, j)].imprints
                 assert imprints.shape[:2] == (1, 3)
     # The test instance's survey is never touched: it has no descriptors to train on.
-    test_survey = dataset.instance_samples(dataset.SampleTask(nominal[0], "cow", (), settings, 0, 0, survey=True)).survey
+    test_survey = dataset.instance_samples(
+        dataset.SampleTask(nominal[0], "cow", (), settings, 0, 0, survey=True)
+    ).survey
     assert test_survey.descriptors is None and test_survey.features.shape[1] == len(FEATURES)
 
 
 def test_every_instance_of_an_object_offers_the_same_candidates():
     settings = dataset.Settings(n_points=3, view_size=32)
     nominal = dataset.nominal_mesh(ycb.load("banana"), settings)
-    pools = [dataset.instance_samples(dataset.SampleTask(nominal, "banana", (), settings, r, j, survey=True)).survey.pool
-             for r, j in [(0, 0), (0, 1), (1, 2)]]
+    pools = [
+        dataset.instance_samples(dataset.SampleTask(nominal, "banana", (), settings, r, j, survey=True)).survey.pool
+        for r, j in [(0, 0), (0, 1), (1, 2)]
+    ]
     assert pools[0].size == 3 * POOL_FACTOR
     assert pools[0].tolist() == pools[1].tolist() == pools[2].tolist()
 
@@ -226,19 +237,71 @@ def test_a_batch_of_single_meshes_refuses_the_learned_methods():
 def test_cli_learned_points_from_a_model_file(tmp_path, capsys):
     from classify.cli import main
 
-    assert main(["points", "cup", "--method", "learned", "--n", "4", "--size", "32", "--quiet",
-                 "--out", str(tmp_path / "none")]) != 0
+    assert (
+        main(
+            [
+                "points",
+                "cup",
+                "--method",
+                "learned",
+                "--n",
+                "4",
+                "--size",
+                "32",
+                "--quiet",
+                "--out",
+                str(tmp_path / "none"),
+            ]
+        )
+        != 0
+    )
     assert "--model" in capsys.readouterr().err
     assert not (tmp_path / "none" / "points.json").exists()
     model_path = tmp_path / "model.json"
     one_feature_model("curvature").save(model_path)
-    assert main(["points", "cup", "--method", "learned", "--model", str(model_path), "--n", "4", "--size", "32",
-                 "--quiet", "--out", str(tmp_path / "o")]) == 0
+    assert (
+        main(
+            [
+                "points",
+                "cup",
+                "--method",
+                "learned",
+                "--model",
+                str(model_path),
+                "--n",
+                "4",
+                "--size",
+                "32",
+                "--quiet",
+                "--out",
+                str(tmp_path / "o"),
+            ]
+        )
+        == 0
+    )
     document = json.loads((tmp_path / "o" / "points.json").read_text())
     assert document["method"] == "learned" and len(document["points"]) == 4
     assert document["settings"]["model"] == str(model_path)
-    assert main(["points", "cup", "--combination", "learned", "--model", str(model_path), "--n", "4", "--size",
-                 "32", "--quiet", "--out", str(tmp_path / "w")]) == 0
+    assert (
+        main(
+            [
+                "points",
+                "cup",
+                "--combination",
+                "learned",
+                "--model",
+                str(model_path),
+                "--n",
+                "4",
+                "--size",
+                "32",
+                "--quiet",
+                "--out",
+                str(tmp_path / "w"),
+            ]
+        )
+        == 0
+    )
     document = json.loads((tmp_path / "w" / "points.json").read_text())
     assert document["combination"] == "learned"
     assert document["settings"]["channel_weights"] == dict.fromkeys(CHANNELS, 1.0)
@@ -248,8 +311,18 @@ def test_a_learned_baseline_runs_both_protocols_and_compares_where_it_can():
     from classify.experiment import run_experiment
 
     settings = dataset.Settings(n_points=3, view_size=48, train_instances=2, train_sessions=1)
-    result = run_experiment(["cow", "cup"], methods=("learned", "uniform"), baseline="learned", replicates=1,
-                            folds=2, repeats=1, classifiers=("knn",), settings=settings, cache_dir=None, quiet=True,
-                            n_jobs=1)
+    result = run_experiment(
+        ["cow", "cup"],
+        methods=("learned", "uniform"),
+        baseline="learned",
+        replicates=1,
+        folds=2,
+        repeats=1,
+        classifiers=("knn",),
+        settings=settings,
+        cache_dir=None,
+        quiet=True,
+        n_jobs=1,
+    )
     assert {c.method for c in result.cells if c.protocol == "paper"} == {"uniform"}
     assert {(c.method, c.protocol) for c in result.comparisons} == {("uniform", "instance")}

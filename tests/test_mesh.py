@@ -1,11 +1,10 @@
 """Derived mesh quantities against known answers."""
 
 import numpy as np
-
 import pytest
+from shapes import icosphere, plane
 
 from meshsal.mesh import closed_orientation, vertex_normals
-from shapes import icosphere, plane
 
 
 def test_sphere_vertex_normals_point_radially_outwards():
@@ -47,8 +46,9 @@ def test_closed_orientation_tells_outward_from_inward_normals():
     assert closed_orientation(*_two_spheres()) == 1
 
 
-@pytest.mark.parametrize("damage", ["a face missing", "a face flipped", "a face doubled", "a fin on an edge",
-                                    "a repeated corner", "a plane"])
+@pytest.mark.parametrize(
+    "damage", ["a face missing", "a face flipped", "a face doubled", "a fin on an edge", "a repeated corner", "a plane"]
+)
 def test_closed_orientation_is_zero_for_anything_but_a_consistently_oriented_closed_surface(damage):
     sphere = icosphere(subdivisions=2)
     V, F = sphere.vertices, sphere.faces.copy()

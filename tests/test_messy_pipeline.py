@@ -9,12 +9,12 @@ nearest corner has none.
 import json
 import warnings
 
+import messy
 import numpy as np
 import pytest
+import shapes
 
 import meshsal
-import messy
-import shapes
 import tactile
 from classify import batch, experiment
 from classify.cli import main
@@ -25,8 +25,13 @@ from meshsal.mesh.io import MeshRepairWarning, load_mesh
 METHODS = ("attention", "attention_itti", "random", "uniform", "mesh_saliency", "curvature")
 CASES = {c.name: c for c in messy.cases()}
 # The other shapes are parts of "everything_apart", which every method meets one by one.
-COMPOSITES = ("composite_double_sided", "double_sided_fin", "nonmanifold_edges", "box_with_sphere",
-              "everything_on_one_box")
+COMPOSITES = (
+    "composite_double_sided",
+    "double_sided_fin",
+    "nonmanifold_edges",
+    "box_with_sphere",
+    "everything_on_one_box",
+)
 NORMALLESS = [(name, m) for name in ("fold_alone", "folds_beside_a_box") for m in METHODS]
 
 
@@ -73,11 +78,38 @@ def test_point_methods_never_choose_a_vertex_without_a_normal(files, name, metho
 def test_the_issue_composite_no_longer_stops_the_points_command(files, tmp_path, capsys):
     # A composite with a double-sided triangle: the farthest-point baseline proposed a corner whose only faces
     # were the triangle and its twin, and the touch check raised "normals must be non-zero", naming no file.
-    assert main(["points", str(files["composite_double_sided"]), "--out", str(tmp_path), "--method", "uniform",
-                 "--n", "6", "--size", "32", "--quiet"]) == 0
+    assert (
+        main(
+            [
+                "points",
+                str(files["composite_double_sided"]),
+                "--out",
+                str(tmp_path),
+                "--method",
+                "uniform",
+                "--n",
+                "6",
+                "--size",
+                "32",
+                "--quiet",
+            ]
+        )
+        == 0
+    )
     assert len(json.loads((tmp_path / "points.json").read_text())["points"]) == 6
-    assert main(["imprints", str(files["composite_double_sided"]), "--points", str(tmp_path / "points.json"),
-                 "--out", str(tmp_path / "set.npz")]) == 0
+    assert (
+        main(
+            [
+                "imprints",
+                str(files["composite_double_sided"]),
+                "--points",
+                str(tmp_path / "points.json"),
+                "--out",
+                str(tmp_path / "set.npz"),
+            ]
+        )
+        == 0
+    )
     assert tactile.ImprintSet.load(tmp_path / "set.npz").imprints.shape == (6, 16, 16)
 
 
@@ -109,9 +141,19 @@ def test_the_experiment_runs_on_messy_objects(files, tmp_path):
     small = Settings(n_points=6, train_instances=2, train_sessions=1, view_size=32)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", MeshRepairWarning)
-        r = experiment.run_experiment(objects, methods=("uniform", "random"), classifiers=("knn",), settings=small,
-                                      replicates=2, repeats=2, folds=3, cache_dir=None, quiet=True, n_jobs=1,
-                                      out_dir=tmp_path)
+        r = experiment.run_experiment(
+            objects,
+            methods=("uniform", "random"),
+            classifiers=("knn",),
+            settings=small,
+            replicates=2,
+            repeats=2,
+            folds=3,
+            cache_dir=None,
+            quiet=True,
+            n_jobs=1,
+            out_dir=tmp_path,
+        )
     cell = r.cell("uniform", "instance", "knn", 2, False, 1)
     assert 0.0 <= cell.ci_low <= cell.mean <= cell.ci_high <= 100.0
     assert (tmp_path / "results.csv").exists()
@@ -122,9 +164,17 @@ def test_meshes_built_in_memory_are_repaired_as_files_are(tmp_path):
     mesh = Mesh(vertices=composite.vertices, faces=composite.faces, name="composite")
     small = Settings(n_points=4, train_instances=2, train_sessions=1, view_size=32)
     with pytest.warns(MeshRepairWarning, match="composite: .*double-sided"):
-        r = experiment.run_experiment([mesh, shapes.box(half=30.0, n=12).replace(name="box")], methods=("uniform",),
-                                      protocols=("instance",), classifiers=("knn",), settings=small, replicates=2,
-                                      cache_dir=None, quiet=True, n_jobs=1)
+        r = experiment.run_experiment(
+            [mesh, shapes.box(half=30.0, n=12).replace(name="box")],
+            methods=("uniform",),
+            protocols=("instance",),
+            classifiers=("knn",),
+            settings=small,
+            replicates=2,
+            cache_dir=None,
+            quiet=True,
+            n_jobs=1,
+        )
     assert 0.0 <= r.cell("uniform", "instance", "knn", 2, False, 1).mean <= 100.0
 
 
@@ -155,13 +205,19 @@ def test_an_error_deep_in_a_command_names_the_mesh(files, tmp_path, capsys, monk
 
 def test_an_error_in_imprints_names_the_mesh(files, tmp_path, capsys, monkeypatch):
     path = files["cup"]
-    assert main(["points", str(path), "--out", str(tmp_path), "--method", "uniform", "--n", "3", "--size", "32",
-                 "--quiet"]) == 0
+    assert (
+        main(
+            ["points", str(path), "--out", str(tmp_path), "--method", "uniform", "--n", "3", "--size", "32", "--quiet"]
+        )
+        == 0
+    )
     import tactile.raycast as raycast
 
     monkeypatch.setattr(raycast, "imprints", lambda *a, **k: (_ for _ in ()).throw(ValueError("pad fell off")))
-    assert main(["imprints", str(path), "--points", str(tmp_path / "points.json"), "--out",
-                 str(tmp_path / "set.npz")]) == 1
+    assert (
+        main(["imprints", str(path), "--points", str(tmp_path / "points.json"), "--out", str(tmp_path / "set.npz")])
+        == 1
+    )
     assert f"visuotactile imprints: error: {path}: pad fell off" in capsys.readouterr().err
 
 
@@ -175,7 +231,15 @@ def test_a_bug_deep_in_a_command_keeps_its_traceback_and_names_the_mesh(files, t
 def test_an_error_in_the_experiment_names_the_object(files, monkeypatch):
     fail_in_curvature(monkeypatch, ValueError("curvature went wrong"))
     with pytest.raises(ValueError, match=r"(composite_double_sided|cup)"):
-        experiment.run_experiment([str(files["composite_double_sided"]), str(files["cup"])], methods=("uniform",),
-                                  classifiers=("knn",), settings=Settings(n_points=4, train_instances=2,
-                                                                          train_sessions=1),
-                                  replicates=2, repeats=2, folds=3, cache_dir=None, quiet=True, n_jobs=1)
+        experiment.run_experiment(
+            [str(files["composite_double_sided"]), str(files["cup"])],
+            methods=("uniform",),
+            classifiers=("knn",),
+            settings=Settings(n_points=4, train_instances=2, train_sessions=1),
+            replicates=2,
+            repeats=2,
+            folds=3,
+            cache_dir=None,
+            quiet=True,
+            n_jobs=1,
+        )

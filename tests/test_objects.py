@@ -24,8 +24,8 @@ def test_baked_colours_are_the_textures_own(shared_mesh):
     embedded = ycb.load("banana")
     assert np.allclose(embedded.vertices, source.vertices, atol=1e-9)
     banana = embedded.vertex_colors.mean(axis=0)
-    assert banana[0] > 2 * banana[2] and banana[1] > 2 * banana[2]             # yellow: the texture's, not grey
-    assert embedded.vertex_colors.std(axis=0).max() > 0.02                     # and its spots, not one colour
+    assert banana[0] > 2 * banana[2] and banana[1] > 2 * banana[2]  # yellow: the texture's, not grey
+    assert embedded.vertex_colors.std(axis=0).max() > 0.02  # and its spots, not one colour
 
 
 def test_sets_names_and_files_resolve_in_order(tmp_path):
@@ -39,17 +39,36 @@ def test_sets_names_and_files_resolve_in_order(tmp_path):
     assert objects.load_ref(refs[1]).n_faces == 15728
 
 
-@pytest.mark.parametrize("specs, message", [
-    (["unicorn"], "'unicorn' is neither a set"),
-    (["cow", "toys"], "given more than once: cow"),
-    ([" , "], "no objects given"),
-])
+@pytest.mark.parametrize(
+    "specs, message",
+    [
+        (["unicorn"], "'unicorn' is neither a set"),
+        (["cow", "toys"], "given more than once: cow"),
+        ([" , "], "no objects given"),
+    ],
+)
 def test_bad_object_lists_are_refused_by_name(specs, message):
     with pytest.raises(ValueError, match=message):
         objects.resolve_objects(specs)
 
 
 def test_every_command_taking_a_mesh_takes_a_ycb_name(tmp_path, capsys):
-    assert main(["points", "foam_brick", "--out", str(tmp_path), "--n", "3", "--method", "uniform",
-                 "--size", "32", "--quiet"]) == 0
+    assert (
+        main(
+            [
+                "points",
+                "foam_brick",
+                "--out",
+                str(tmp_path),
+                "--n",
+                "3",
+                "--method",
+                "uniform",
+                "--size",
+                "32",
+                "--quiet",
+            ]
+        )
+        == 0
+    )
     assert (tmp_path / "points.json").exists()

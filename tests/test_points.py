@@ -5,6 +5,7 @@ import json
 import igl
 import numpy as np
 import pytest
+import shapes
 
 from meshsal.mesh import Mesh
 from meshsal.points import (
@@ -18,10 +19,13 @@ from meshsal.points import (
     project_pixel_paper,
     saliency_maps,
 )
-from meshsal.points.sampling import (farthest_points, field_peaks, non_maximum_suppression, random_surface_points,
-                                     suppress)
-
-import shapes
+from meshsal.points.sampling import (
+    farthest_points,
+    field_peaks,
+    non_maximum_suppression,
+    random_surface_points,
+    suppress,
+)
 
 SIZE = 64
 
@@ -45,7 +49,7 @@ def planted_sphere(radius=50.0):
     V, F = icosphere(4)
     to_bump = np.arccos(np.clip(V @ BUMP, -1, 1))
     to_spot = np.arccos(np.clip(V @ SPOT, -1, 1))
-    V = V * (1 + 0.15 * np.exp(-to_bump ** 2 / (2 * 0.1 ** 2)))[:, None]
+    V = V * (1 + 0.15 * np.exp(-(to_bump**2) / (2 * 0.1**2)))[:, None]
     C = np.full(V.shape, 0.6, np.float32)
     C[to_spot < 0.2] = [0.9, 0.1, 0.1]
     return Mesh(vertices=V * radius, faces=F, vertex_colors=C, name="planted"), to_bump, to_spot
@@ -63,15 +67,15 @@ def pairwise_min(P):
 
 
 def distance_to_surface(points, mesh):
-    d2 = igl.point_mesh_squared_distance(np.asarray(points, float), mesh.vertices,
-                                         mesh.faces.astype(np.int64))[0]
+    d2 = igl.point_mesh_squared_distance(np.asarray(points, float), mesh.vertices, mesh.faces.astype(np.int64))[0]
     return np.sqrt(d2)
 
 
 # ---------------------------------------------------------------- sampling blocks
 
+
 def test_random_surface_points_follow_area():
-    V = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1], [3, 0, 1], [0, 2, 1.]])
+    V = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1], [3, 0, 1], [0, 2, 1.0]])
     F = np.array([[0, 1, 2], [3, 4, 5]])  # areas 0.5 and 3
     faces, bary = random_surface_points(V, F, 20000, seed=4)
     assert abs(np.mean(faces == 1) - 3 / 3.5) < 0.01
@@ -91,7 +95,8 @@ def test_farthest_points_spread_over_a_line():
 def test_field_peaks_finds_every_local_maximum():
     GV, F = igl.triangulated_grid(20, 20)
     f = np.exp(-np.sum((GV - [0.25, 0.25]) ** 2, axis=1) / 0.01) + 0.5 * np.exp(
-        -np.sum((GV - [0.75, 0.7]) ** 2, axis=1) / 0.01)
+        -np.sum((GV - [0.75, 0.7]) ** 2, axis=1) / 0.01
+    )
     peaks = field_peaks(f, F)
     assert len(peaks) == 2
     assert np.allclose(GV[peaks[0]], [0.25, 0.25], atol=0.06)
@@ -111,7 +116,7 @@ def test_non_maximum_suppression_keeps_order_and_spacing():
 
 
 def test_non_maximum_suppression_respects_taken_points_and_ids():
-    P = np.array([[0, 0, 0], [1, 0, 0], [2, 0, 0], [3, 0, 0.]])
+    P = np.array([[0, 0, 0], [1, 0, 0], [2, 0, 0], [3, 0, 0.0]])
     keep = non_maximum_suppression(P, 0.5, ids=[7, 7, 8, 9], taken_points=[[3.1, 0, 0]], taken_ids=[8])
     assert keep.tolist() == [0]
     with pytest.raises(ValueError, match="min_spacing"):
@@ -139,7 +144,7 @@ def test_suppress_batches_change_nothing_but_the_calls(seed):
     k = 600
     P = rng.random((k, 3)) * 4.0
     ids = rng.integers(0, 500, k)
-    ok = rng.random(k) < (0.05 if seed % 2 else 0.5)   # mostly refused, or half
+    ok = rng.random(k) < (0.05 if seed % 2 else 0.5)  # mostly refused, or half
     asked = []
 
     def accept(batch):
@@ -151,7 +156,7 @@ def test_suppress_batches_change_nothing_but_the_calls(seed):
     chosen, refused = greedy_one_by_one(P, 0.6, n, ids, ok)
     assert got.chosen.tolist() == chosen and got.refused == refused
     everyone = np.concatenate(asked)
-    assert np.unique(everyone).size == everyone.size        # each candidate asked once
+    assert np.unique(everyone).size == everyone.size  # each candidate asked once
     if seed % 2:
         # Hundreds refused on the way, asked in batches that grow with the refusals.
         assert refused > 100 and len(asked) < 25
@@ -166,6 +171,7 @@ def test_suppress_asks_about_a_long_refused_run_in_few_calls():
 
 
 # ---------------------------------------------------------------- the attention pipeline
+
 
 def test_planted_bump_and_red_spot_are_among_top_three(planted):
     mesh, to_bump, to_spot, pts = planted
@@ -209,8 +215,9 @@ def test_translation_and_uniform_scale_keep_the_points(planted):
     assert same.sum() >= 13 and len(other) == len(pts)
     where = {v: k for k, v in enumerate(pts.vertex_ids.tolist())}
     mine = [where[v] for v in other.vertex_ids[same].tolist()]
-    np.testing.assert_allclose(other.positions[same], pts.positions[mine] * 7.5 + [300.0, -120.0, 45.0],
-                               atol=1e-4 * 375)
+    np.testing.assert_allclose(
+        other.positions[same], pts.positions[mine] * 7.5 + [300.0, -120.0, 45.0], atol=1e-4 * 375
+    )
     np.testing.assert_allclose(other.normals[same], pts.normals[mine], atol=1e-4)
 
 
@@ -239,6 +246,7 @@ def test_wide_spacing_fills_from_saliency_and_never_duplicates():
 
 # ---------------------------------------------------------------- baselines
 
+
 @pytest.mark.parametrize("method", [m for m in METHODS if not m.startswith("attention") and m not in MODEL_METHODS])
 def test_baselines_return_n_distinct_spaced_points(method):
     mesh, _, _ = planted_sphere()
@@ -250,8 +258,7 @@ def test_baselines_return_n_distinct_spaced_points(method):
     assert np.allclose(np.linalg.norm(pts.normals, axis=1), 1.0)
     same = interest_points(mesh, n=12, method=method, seed=3, vertex_saliency=pts.vertex_saliency)
     assert same.vertex_ids.tolist() == pts.vertex_ids.tolist()
-    spaced = interest_points(mesh, n=6, method=method, seed=3, min_spacing=30.0,
-                             vertex_saliency=pts.vertex_saliency)
+    spaced = interest_points(mesh, n=6, method=method, seed=3, min_spacing=30.0, vertex_saliency=pts.vertex_saliency)
     assert len(spaced) == 6 and pairwise_min(spaced.positions) >= 30.0
 
 
@@ -284,10 +291,11 @@ def test_bad_arguments_are_rejected():
 
 # ---------------------------------------------------------------- map helpers
 
+
 def test_best_view_set_picks_the_most_salient_set():
     maps = np.zeros((72, 8, 8), np.float32)
     maps[4 * 11 + 2] = 0.9
-    maps[4 * 5:4 * 5 + 4, :4] = 0.4  # 0.2 average per view: less than 0.9 / 4
+    maps[4 * 5 : 4 * 5 + 4, :4] = 0.4  # 0.2 average per view: less than 0.9 / 4
     assert best_view_set(maps) == 11
     with pytest.raises(ValueError):
         best_view_set(maps[:70])
@@ -306,14 +314,14 @@ def test_map_peaks_thresholds_relative_to_the_maximum():
 
 # ---------------------------------------------------------------- the paper's analytic projection
 
+
 @pytest.mark.parametrize("projection", ["orthographic", "perspective"])
 def test_project_pixel_paper_matches_face_id_mapping(projection):
     from meshsal.views.cameras import Camera, view_rig
     from meshsal.views.render import render, surface_points
 
     mesh, _, _ = planted_sphere()
-    cameras = [view_rig()[0][0], view_rig()[9][3], view_rig()[17][1],
-               Camera(direction=[0.2, -0.9, 0.3], up=[0, 0, 1])]
+    cameras = [view_rig()[0][0], view_rig()[9][3], view_rig()[17][1], Camera(direction=[0.2, -0.9, 0.3], up=[0, 0, 1])]
     for cam in cameras:
         cam = Camera(direction=cam.direction, up=cam.up, projection=projection)
         view = render(mesh, cam, size=48)
@@ -327,6 +335,7 @@ def test_project_pixel_paper_matches_face_id_mapping(projection):
 
 
 # ---------------------------------------------------------------- the command line
+
 
 def test_cli_writes_every_file_in_the_source_frame(tmp_path, capsys):
     from classify.cli import main
@@ -351,12 +360,12 @@ def test_cli_writes_every_file_in_the_source_frame(tmp_path, capsys):
     positions = np.array([p["position"] for p in pts])
     assert distance_to_surface(positions, source).max() < 1e-6
     assert np.allclose(np.linalg.norm([p["normal"] for p in pts], axis=1), 1.0)
-    from meshsal.mesh.transform import principal_diagonal     # the experiment's sizing rule
+    from meshsal.mesh.transform import principal_diagonal  # the experiment's sizing rule
 
     np.testing.assert_allclose(doc["min_spacing"], 16.0 / 150.0 * principal_diagonal(source.vertices, source.faces)[1])
     assert doc["combination"] == "equal" and doc["untouchable"] >= 0
     assert (doc["format"], doc["version"]) == ("visuotactile.points", 1)
-    again = InterestPoints.load(out / "points.json")             # the versioned format round-trips
+    again = InterestPoints.load(out / "points.json")  # the versioned format round-trips
     np.testing.assert_allclose(again.positions, positions)
     assert again.method == "attention" and len(again.vertex_saliency) == source.n_vertices
     assert again.ids.tolist() == list(range(1, 7)) and again.votes.tolist() == [p["votes"] for p in pts]
@@ -373,8 +382,10 @@ def test_cli_baseline_and_progress(tmp_path, capsys):
     mesh, _, _ = planted_sphere()
     path = tmp_path / "s.ply"
     save_ply(path, mesh)
-    assert main(["points", str(path), "--method", "uniform", "--n", "5", "--size", "32",
-                 "--out", str(tmp_path / "o")]) == 0
+    assert (
+        main(["points", str(path), "--method", "uniform", "--n", "5", "--size", "32", "--out", str(tmp_path / "o")])
+        == 0
+    )
     assert "saliency" in capsys.readouterr().err
     assert len(json.loads((tmp_path / "o" / "points.json").read_text())["points"]) == 5
 
@@ -392,8 +403,10 @@ def test_cli_bad_mesh_fails_with_the_loader_message(tmp_path, capsys):
 
 def test_a_points_file_of_a_newer_version_or_another_format_is_refused(tmp_path):
     path = tmp_path / "points.json"
-    for document, message in (({"format": "visuotactile.points", "version": 99, "points": []}, "version 99"),
-                              ({"format": "something.else", "points": []}, "something.else")):
+    for document, message in (
+        ({"format": "visuotactile.points", "version": 99, "points": []}, "version 99"),
+        ({"format": "something.else", "points": []}, "something.else"),
+    ):
         path.write_text(json.dumps(document))
         with pytest.raises(ValueError, match=message):
             InterestPoints.load(path)

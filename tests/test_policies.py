@@ -6,9 +6,18 @@ import shapes
 
 from classify.experiment.config import Settings
 from classify.experiment.samples import SampleTask, instance_samples, instance_spec, nominal_mesh
-from classify.policies import (POLICIES, Forecast, InfoGainPolicy, LookaheadPolicy, PlanPolicy, RandomPolicy,
-                               TouchPolicy,
-                               expected_entropy, fit_knowledge, run_episode, stopping_curve)
+from classify.policies import (
+    POLICIES,
+    Forecast,
+    InfoGainPolicy,
+    LookaheadPolicy,
+    RandomPolicy,
+    TouchPolicy,
+    expected_entropy,
+    fit_knowledge,
+    run_episode,
+    stopping_curve,
+)
 from classify.recognizers.touches import Recognizer
 from meshsal.mesh import Mesh, Similarity
 from meshsal.points.places import POOL_FACTOR
@@ -21,7 +30,7 @@ def _ball_and_domed():
     """Two objects that differ in one place only: a ball, and the same ball with a dome on it."""
     ball = shapes.sphere(radius=50.0, n=24).replace(name="ball")
     angle = np.arccos(np.clip(ball.vertices @ APEX / 50.0, -1.0, 1.0))
-    domed = Mesh(ball.vertices * (1.0 + 0.25 * np.exp(-(angle / 0.25) ** 2))[:, None], ball.faces, name="domed")
+    domed = Mesh(ball.vertices * (1.0 + 0.25 * np.exp(-((angle / 0.25) ** 2)))[:, None], ball.faces, name="domed")
     return ball, domed
 
 
@@ -29,8 +38,11 @@ def _ball_and_domed():
 def world():
     """Both objects' instances 0 (test), 1, 2 (training) of replicate 0 with their places, and the knowledge."""
     nominal = {m.name: nominal_mesh(m, SETTINGS) for m in _ball_and_domed()}
-    samples = {(name, j): instance_samples(SampleTask(mesh, name, (), SETTINGS, 0, j, places=True)).places
-               for name, mesh in nominal.items() for j in range(3)}
+    samples = {
+        (name, j): instance_samples(SampleTask(mesh, name, (), SETTINGS, 0, j, places=True)).places
+        for name, mesh in nominal.items()
+        for j in range(3)
+    }
     knowledge = fit_knowledge({k: v for k, v in samples.items() if k[1] >= 1}, Recognizer("knn", features="polar"))
     return nominal, samples, knowledge
 
@@ -47,14 +59,20 @@ def test_info_gain_touches_where_the_objects_differ_within_two_touches(world):
 
     for name in knowledge.names:
         episode = run_episode(InfoGainPolicy(), samples[name, 0], knowledge, 2, 8.0, np.random.default_rng(0))
-        assert under_domed(episode, name).min() < 25.0, name           # "if domed, on the dome" (about 25 mm across)
+        assert under_domed(episode, name).min() < 25.0, name  # "if domed, on the dome" (about 25 mm across)
     # On the domed instance itself the touch is on its dome (its vertex ids are the nominal mesh's).
     episode = run_episode(InfoGainPolicy(), samples["domed", 0], knowledge, 2, 8.0, np.random.default_rng(0))
     assert np.linalg.norm(nominal["domed"].vertices[episode.vertex_ids] - apex, axis=1).min() < 25.0
     # Control: touches drawn at random rarely find the dome within two (pool rank 0, the farthest vertex from
     # the centroid, is the apex itself, so a fixed pool plan would not be one).
-    hits = [under_domed(run_episode(RandomPolicy(), samples[name, 0], knowledge, 2, 8.0, np.random.default_rng(s)),
-                        name).min() < 25.0 for name in knowledge.names for s in range(20)]
+    hits = [
+        under_domed(
+            run_episode(RandomPolicy(), samples[name, 0], knowledge, 2, 8.0, np.random.default_rng(s)), name
+        ).min()
+        < 25.0
+        for name in knowledge.names
+        for s in range(20)
+    ]
     assert np.mean(hits) < 0.5, np.mean(hits)
 
 
@@ -64,13 +82,13 @@ def test_a_place_on_a_turned_resized_copy_matches_the_same_place_of_the_object(w
     j, name = knowledge.names.index("domed"), "domed"
     test = samples[name, 0].places
     spec = instance_spec(SETTINGS, name, 0, 0)
-    assert not np.allclose(spec.rotation, np.eye(3)) and spec.scale != 1.0        # a turned, resized copy
+    assert not np.allclose(spec.rotation, np.eye(3)) and spec.scale != 1.0  # a turned, resized copy
     back = Similarity(spec.scale, np.zeros(3), spec.rotation).inverse().apply(test.positions)
     matched = nominal[name].vertices[knowledge.place_ids[j][knowledge.match(j, test)]]
     distance = np.linalg.norm(matched - back, axis=1)
     # The pool is found exactly, and so is every mesh-saliency peak training touched too, in whatever order the
     # instance ranks them; a peak of this instance's own (a resized tessellation) is matched to the nearest one.
-    assert len(test) > POOL_FACTOR * SETTINGS.n_points and distance[:POOL_FACTOR * SETTINGS.n_points].max() < 1e-6
+    assert len(test) > POOL_FACTOR * SETTINGS.n_points and distance[: POOL_FACTOR * SETTINGS.n_points].max() < 1e-6
     assert np.median(distance) < 1e-6 and distance.max() < 0.5 * SETTINGS.sensor.width_mm
 
 
@@ -112,14 +130,15 @@ def test_expected_entropy_is_the_belief_entropy_where_no_hypothesis_knows_the_pl
     posteriors = np.full((2, 3, 1, 2), 0.5)
     posteriors[0, 0, 0], posteriors[1, 0, 0] = [0.99, 0.01], [0.01, 0.99]
     weights = np.ones((2, 3, 1))
-    weights[:, 2] = 0.0                                                 # place 2: nothing known
+    weights[:, 2] = 0.0  # place 2: nothing known
     h = expected_entropy(np.array([0.5, 0.5]), Forecast(posteriors, weights))
     assert h[0] < 0.1 and h[1] == pytest.approx(np.log(2)) and h[2] == pytest.approx(np.log(2))
 
 
 def test_the_stopping_rule_stops_at_the_first_touch_whose_belief_reaches_the_level():
     beliefs = [np.array([[0.6, 0.4], [0.9, 0.1], [0.99, 0.01]]), np.array([[0.3, 0.7], [0.96, 0.04]])]
-    correct, used = stopping_curve(beliefs, np.array([0, 0]), (0.5, 0.95, 0.999), [np.random.default_rng(e)
-                                                                                  for e in range(2)])
+    correct, used = stopping_curve(
+        beliefs, np.array([0, 0]), (0.5, 0.95, 0.999), [np.random.default_rng(e) for e in range(2)]
+    )
     assert used.tolist() == [[1, 1], [3, 2], [3, 2]]
     assert correct.tolist() == [[1, 0], [1, 1], [1, 1]]

@@ -16,7 +16,7 @@ def _tagged_pool(n_objects=3, per_object=20, seed=0):
     rng = np.random.default_rng(seed)
     y = np.repeat(np.arange(n_objects), per_object)
     X = rng.uniform(0, 1, (len(y), 16, 16)).astype(np.float32)
-    X[np.arange(len(y)), 4, 4] += 3 * y                 # a class signal
+    X[np.arange(len(y)), 4, 4] += 3 * y  # a class signal
     X[:, 0, 0] = np.arange(len(y))
     return X, y
 
@@ -29,10 +29,10 @@ def test_paper_splits_partition_each_repeat_keep_groups_whole_and_reshuffle():
     for r in range(3):
         mine = [s for s in splits if s.repeat == r]
         tests = np.concatenate([s.test for s in mine])
-        assert sorted(tests.tolist()) == list(range(len(y)))          # each imprint tested once per repeat
+        assert sorted(tests.tolist()) == list(range(len(y)))  # each imprint tested once per repeat
         for s in mine:
-            assert not set(groups[s.train].tolist()) & set(groups[s.test].tolist())   # no point on both sides
-            assert np.all(np.bincount(y[s.test], minlength=3) >= 1)   # stratified over objects
+            assert not set(groups[s.train].tolist()) & set(groups[s.test].tolist())  # no point on both sides
+            assert np.all(np.bincount(y[s.test], minlength=3) >= 1)  # stratified over objects
     first = [s.test.tolist() for s in splits if s.repeat == 0]
     second = [s.test.tolist() for s in splits if s.repeat == 1]
     assert first != second
@@ -52,7 +52,7 @@ def test_paper_job_never_trains_or_selects_on_a_test_imprint(monkeypatch):
 
     def spy_select(Xs, ys, threshold=0.85):
         selected.append(Xs[:, 0, 0].astype(int))
-        return Xs[:, 0, 0].astype(int) % 3 != 0                     # drop some training imprints
+        return Xs[:, 0, 0].astype(int) % 3 != 0  # drop some training imprints
 
     real_fit = touches.fit
 
@@ -68,7 +68,7 @@ def test_paper_job_never_trains_or_selects_on_a_test_imprint(monkeypatch):
     for rows, trained, split in zip(selected, fits, splits):
         assert sorted(rows.tolist()) == sorted(split.train.tolist())  # selection saw the training fold only
         assert not set(trained.tolist()) & set(split.test.tolist())
-        assert np.all(trained % 3 != 0)                              # the fit used the selected fold
+        assert np.all(trained % 3 != 0)  # the fit used the selected fold
     assert out.confusion.sum() == len(y) and out.rates.shape == (3,)
     assert out.kept == pytest.approx(2 / 3, abs=0.05)
 
@@ -82,7 +82,7 @@ def _instance_data(n_objects=3, train_instances=3, sessions=2, k=5, seed=0):
         for j in range(1, train_instances + 1):
             for _ in range(sessions):
                 img = rng.uniform(0, 0.2, (k, 16, 16))
-                img[:, 3 * o:3 * o + 3, 5:9] = 0.9
+                img[:, 3 * o : 3 * o + 3, 5:9] = 0.9
                 X.append(img)
                 y += [o] * k
                 inst += [j] * k
@@ -92,11 +92,12 @@ def _instance_data(n_objects=3, train_instances=3, sessions=2, k=5, seed=0):
     test = []
     for o in range(n_objects):
         img = rng.uniform(0, 0.2, (k, 16, 16)).astype(np.float32)
-        img[:, 3 * o:3 * o + 3, 5:9] = 0.9
+        img[:, 3 * o : 3 * o + 3, 5:9] = 0.9
         img[:, 0, 0] = (10000 + 100 * o + np.arange(k)) * 1e-6
         test.append(img)
-    return InstanceData(X, np.array(y), np.array(inst), np.array(point), tuple(test),
-                        tuple(f"obj{o}" for o in range(n_objects)))
+    return InstanceData(
+        X, np.array(y), np.array(inst), np.array(point), tuple(test), tuple(f"obj{o}" for o in range(n_objects))
+    )
 
 
 def _tag(X):
@@ -120,16 +121,15 @@ def test_instance_job_calibrates_on_held_out_instances_and_never_trains_on_the_t
     monkeypatch.setattr(touches, "fit", spy_fit)
     monkeypatch.setattr(touches, "posteriors", spy_proba)
     out = protocols.instance_job(InstanceJob(data, Recognizer("knn", False, {}, 0.85), 5, 50, 0, 0))
-    assert len(fits) == 4                                           # 3 held-out instances, then all of them
+    assert len(fits) == 4  # 3 held-out instances, then all of them
     for trained, held in zip(fits[:3], scored[:3]):
         trained_instances = set(data.train_instance[trained].tolist())
         held_instances = set(data.train_instance[held].tolist())
         assert len(held_instances) == 1 and not trained_instances & held_instances
-    assert all(np.all(f < 10000) for f in fits)                    # no test imprint ever trains
-    assert sorted(np.concatenate(scored[3:]).tolist()) == sorted(
-        np.concatenate([_tag(t) for t in data.test]).tolist())
+    assert all(np.all(f < 10000) for f in fits)  # no test imprint ever trains
+    assert sorted(np.concatenate(scored[3:]).tolist()) == sorted(np.concatenate([_tag(t) for t in data.test]).tolist())
     assert out.rates.shape == (5, 3) and np.all(out.rates[0] == 100.0)
-    assert out.sets.tolist() == [5, 10, 10, 5, 1]                   # C(5, k): fewer than 50 exist
+    assert out.sets.tolist() == [5, 10, 10, 5, 1]  # C(5, k): fewer than 50 exist
 
 
 def test_instance_job_is_paired_and_deterministic():
@@ -146,7 +146,7 @@ def test_fused_rate_after_all_touches_is_not_below_a_single_touch_for_every_clas
     for o in range(3):
         for j in (1, 2, 3):
             img = rng.uniform(0, 1, (k, 16, 16))
-            img[:, 4 * o:4 * o + 4, 4:8] += 0.6                       # a weak signal among noise
+            img[:, 4 * o : 4 * o + 4, 4:8] += 0.6  # a weak signal among noise
             X.append(img / 1.6)
             y += [o] * k
             inst += [j] * k
@@ -154,10 +154,11 @@ def test_fused_rate_after_all_touches_is_not_below_a_single_touch_for_every_clas
     test = []
     for o in range(3):
         img = rng.uniform(0, 1, (k, 16, 16))
-        img[:, 4 * o:4 * o + 4, 4:8] += 0.6
+        img[:, 4 * o : 4 * o + 4, 4:8] += 0.6
         test.append((img / 1.6).astype(np.float32))
-    data = InstanceData(np.concatenate(X).astype(np.float32), np.array(y), np.array(inst), np.array(point),
-                        tuple(test), ("a", "b", "c"))
+    data = InstanceData(
+        np.concatenate(X).astype(np.float32), np.array(y), np.array(inst), np.array(point), tuple(test), ("a", "b", "c")
+    )
     for name in classify.NAMES:
         out = protocols.instance_job(InstanceJob(data, Recognizer(name, False, {}, 0.85), k, 20, 0, 0))
         assert out.rates[-1].mean() >= out.rates[0].mean(), name
@@ -178,5 +179,5 @@ def test_folds_grouped_by_point_keep_a_points_twins_out_of_its_test_fold():
         return protocols.paper_job(PaperJob(X, y, groups, tuple(splits), rec, 2)).rates.mean()
 
     grouped = rate(touches.point_groups(y, point))
-    assert 25.0 <= grouped <= 75.0                                   # chance: no twin ever trains
-    assert rate(np.arange(len(y))) > 90.0                            # imprints on their own: the twins leak
+    assert 25.0 <= grouped <= 75.0  # chance: no twin ever trains
+    assert rate(np.arange(len(y))) > 90.0  # imprints on their own: the twins leak

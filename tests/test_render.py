@@ -2,13 +2,13 @@
 
 import numpy as np
 import pytest
+from shapes import icosphere, plane
 
-from meshsal.mesh.embree import embree_scene
 from meshsal.mesh import Mesh
+from meshsal.mesh.embree import embree_scene
 from meshsal.views.cameras import Camera, project, view_rig
 from meshsal.views.render import render, render_views, surface_points
 from meshsal.views.tracer import tracer
-from shapes import icosphere, plane
 
 FRONT = Camera(direction=[0, 0, -1], up=[0, 1, 0])
 
@@ -24,8 +24,9 @@ def test_rig_is_18_sets_of_4_views_90_degrees_apart_on_a_great_circle():
     for cams in rig:
         D = np.array([c.direction for c in cams])
         np.testing.assert_allclose(np.linalg.norm(D, axis=1), 1.0, atol=1e-12)
-        np.testing.assert_allclose(D @ D.T, np.array([[1, 0, -1, 0], [0, 1, 0, -1],
-                                                      [-1, 0, 1, 0], [0, -1, 0, 1]]), atol=1e-12)
+        np.testing.assert_allclose(
+            D @ D.T, np.array([[1, 0, -1, 0], [0, 1, 0, -1], [-1, 0, 1, 0], [0, -1, 0, 1]]), atol=1e-12
+        )
         axis = cams[0].up
         assert all(np.allclose(c.up, axis) for c in cams)
         np.testing.assert_allclose(D @ axis, 0.0, atol=1e-12)
@@ -89,8 +90,11 @@ def test_headlight_shading_is_brightest_where_the_surface_faces_the_camera(spher
 
 
 def test_vertex_colors_are_interpolated():
-    plane = Mesh(vertices=[[-1, -1, 0], [1, -1, 0], [1, 1, 0], [-1, 1, 0]], faces=[[0, 1, 2], [0, 2, 3]],
-                 vertex_colors=[[1, 0, 0], [1, 0, 0], [0, 0, 1], [0, 0, 1]])
+    plane = Mesh(
+        vertices=[[-1, -1, 0], [1, -1, 0], [1, 1, 0], [-1, 1, 0]],
+        faces=[[0, 1, 2], [0, 2, 3]],
+        vertex_colors=[[1, 0, 0], [1, 0, 0], [0, 0, 1], [0, 0, 1]],
+    )
     view = render(plane, FRONT, size=64)
     red, blue = view.rgb[..., 0], view.rgb[..., 2]
     rows = np.arange(64)
@@ -108,8 +112,9 @@ def test_textured_cow_shows_its_texture(shared_mesh):
     face = view.face_id[rows, cols]
     uv = np.einsum("kc,kcd->kd", view.bary[rows, cols], cow.uv[face])
     H, W = cow.texture.shape[:2]
-    texel = cow.texture[np.clip(((1 - uv[:, 1]) * H).astype(int), 0, H - 1),
-                        np.clip((uv[:, 0] * W).astype(int), 0, W - 1)].mean(axis=1)
+    texel = cow.texture[
+        np.clip(((1 - uv[:, 1]) * H).astype(int), 0, H - 1), np.clip((uv[:, 0] * W).astype(int), 0, W - 1)
+    ].mean(axis=1)
     shown = view.rgb[rows, cols].mean(axis=1)
     flat = render(cow.replace(texture=None, uv=None), view_rig()[0][1], size=192).rgb[rows, cols].mean(axis=1)
     # The texture's dark patches and eyes appear where the texture puts them, not a flat colour.
@@ -131,16 +136,21 @@ def _every_pixel(mesh, view):
         directions = cam.direction + t * (X[..., None] * cam.right + Y[..., None] * cam.up)
         directions = directions / np.linalg.norm(directions, axis=-1, keepdims=True)
         origins = np.broadcast_to(view.eye, directions.shape)
-    hit = embree_scene(mesh).run(np.ascontiguousarray(origins.reshape(-1, 3), np.float32),
-                                 np.ascontiguousarray(directions.reshape(-1, 3), np.float32), output=1)
+    hit = embree_scene(mesh).run(
+        np.ascontiguousarray(origins.reshape(-1, 3), np.float32),
+        np.ascontiguousarray(directions.reshape(-1, 3), np.float32),
+        output=1,
+    )
     depth = np.where(hit["primID"] >= 0, hit["tfar"] * (directions.reshape(-1, 3) @ cam.direction), np.inf)
     return hit["primID"].reshape(size, size), depth.reshape(size, size)
 
 
 def _dumbbell():
     """Two spheres and the gap between them: a silhouette far from convex."""
-    a, b = icosphere(radius=1.0, subdivisions=3, center=(-2.0, 0, 0)), icosphere(radius=0.6, subdivisions=3,
-                                                                                 center=(2.0, 0.5, 0))
+    a, b = (
+        icosphere(radius=1.0, subdivisions=3, center=(-2.0, 0, 0)),
+        icosphere(radius=0.6, subdivisions=3, center=(2.0, 0.5, 0)),
+    )
     return Mesh(vertices=np.vstack([a.vertices, b.vertices]), faces=np.vstack([a.faces, b.faces + a.n_vertices]))
 
 
@@ -160,8 +170,11 @@ def test_culled_rays_never_lose_a_hit(projection):
 
 def test_flat_mesh_has_no_3d_hull_and_still_renders_from_every_side():
     flat = plane(size=2.0, n=4)
-    for camera in (FRONT, Camera(direction=[1.0, 0.0, -1e-3], up=[0, 1, 0]), Camera(direction=[0.6, 0.3, -0.7],
-                                                                                     up=[0, 1, 0])):
+    for camera in (
+        FRONT,
+        Camera(direction=[1.0, 0.0, -1e-3], up=[0, 1, 0]),
+        Camera(direction=[0.6, 0.3, -0.7], up=[0, 1, 0]),
+    ):
         view = render(flat, camera, size=40)
         face_id, _ = _every_pixel(flat, view)
         np.testing.assert_array_equal(view.mask, face_id >= 0)
@@ -184,7 +197,7 @@ def test_a_prebuilt_scene_renders_the_same_views(sphere):
         other = a.mask & (a.face_id != c.face_id)
         assert other.mean() < 0.01
         for fa, fc in zip(a.face_id[other], c.face_id[other]):
-            assert set(sphere.faces[fa].tolist()) & set(sphere.faces[fc].tolist())   # neighbours at the tie
+            assert set(sphere.faces[fa].tolist()) & set(sphere.faces[fc].tolist())  # neighbours at the tie
         same = a.mask & ~other
         np.testing.assert_allclose(a.bary[same], c.bary[same], atol=1e-4)
 

@@ -5,12 +5,12 @@ import re
 import warnings
 
 import igl
+import messy
 import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-import messy
 from meshsal.mesh import Mesh, MeshError, normal_defined, vertex_normals
 from meshsal.mesh.io import MeshRepairWarning, load_mesh
 from meshsal.mesh.repair import MeshReport, repair_arrays, repair_mesh
@@ -43,8 +43,9 @@ def components(F, n):
 
     e = Edges(F, n)
     pairs = e.pairs // 3
-    count, label = connected_components(coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])),
-                                                   shape=(len(F), len(F))), directed=False)
+    count, label = connected_components(
+        coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(len(F), len(F))), directed=False
+    )
     closed = np.ones(count, dtype=bool)
     closed[label[e.boundary() // 3]] = False
     return label, closed
@@ -62,7 +63,7 @@ def test_every_planted_defect_is_found_and_counted(corpus, name, fmt):
         assert len(messages) == 1 and messages[0].startswith(f"{path}: ")
         for phrase in report.repairs() + report.findings():
             assert phrase in messages[0]
-        for field in COUNTS[:COUNTS.index("outward_components") + 1]:
+        for field in COUNTS[: COUNTS.index("outward_components") + 1]:
             if getattr(report, field):
                 assert str(getattr(report, field)) in messages[0]
     else:
@@ -74,7 +75,7 @@ def test_the_repaired_mesh_is_manifold_consistent_and_outward(corpus, name, fmt)
     mesh, report, _ = load(corpus[name, fmt])
     F = mesh.faces.astype(np.int64)
     manifold = igl.is_edge_manifold(F)
-    assert (manifold[0] if isinstance(manifold, tuple) else manifold)
+    assert manifold[0] if isinstance(manifold, tuple) else manifold
     assert igl.is_vertex_manifold(F).all()
     assert Edges(F, mesh.n_vertices).consistent().all()
     label, closed = components(F, mesh.n_vertices)
@@ -135,8 +136,12 @@ def test_a_cap_splits_the_face_across_and_leaves_no_slit():
     fixed, report = repair_mesh(Mesh(vertices=Vc, faces=Fc))
     assert (report.sliver_faces, report.split_faces, report.boundary_edges) == (1, 1, 0)
     assert fixed.n_vertices == len(V) + 1 and fixed.n_faces == len(F) + 2
-    area = lambda m: 0.5 * np.linalg.norm(np.cross(m.vertices[m.faces[:, 1]] - m.vertices[m.faces[:, 0]],  # noqa: E731
-                                                   m.vertices[m.faces[:, 2]] - m.vertices[m.faces[:, 0]]), axis=1)
+
+    def area(m):
+        e1 = m.vertices[m.faces[:, 1]] - m.vertices[m.faces[:, 0]]
+        e2 = m.vertices[m.faces[:, 2]] - m.vertices[m.faces[:, 0]]
+        return 0.5 * np.linalg.norm(np.cross(e1, e2), axis=1)
+
     assert area(fixed).sum() == pytest.approx(6 * 32 * 32, rel=1e-12)
 
 
@@ -152,13 +157,13 @@ def test_split_keeps_the_vertex_order_and_agrees_with_libigl(corpus):
         case = CASES[name]
         V, F = case.vertices, case.faces
         if name == "double_sided_fin":
-            F = F[:-1]                                     # the fin without its twin
+            F = F[:-1]  # the fin without its twin
         ours = split_fans(V, F, None, Edges(F, len(V)))
-        np.testing.assert_array_equal(ours[0][: len(V)], V)   # copies come after the vertices
+        np.testing.assert_array_equal(ours[0][: len(V)], V)  # copies come after the vertices
         _, SF, _ = igl.split_nonmanifold(V, F)
         assert len(np.unique(SF)) == len(ours[0])
         if name == "nonmanifold_edges":
-            assert components(ours[1], len(ours[0]))[1].all()    # both boxes stay closed
+            assert components(ours[1], len(ours[0]))[1].all()  # both boxes stay closed
 
 
 def test_a_cavity_keeps_facing_into_its_hole():
@@ -192,11 +197,14 @@ def test_repair_mesh_reports_in_memory_and_names_the_mesh():
         report.faces = 0
 
 
-@pytest.mark.parametrize("faces, problem", [
-    ([[0, 1, 5]], "out of range"),
-    (np.zeros((0, 3), int), "no faces"),
-    ([[0, 1, 1]], "no non-degenerate face left"),
-])
+@pytest.mark.parametrize(
+    "faces, problem",
+    [
+        ([[0, 1, 5]], "out of range"),
+        (np.zeros((0, 3), int), "no faces"),
+        ([[0, 1, 1]], "no non-degenerate face left"),
+    ],
+)
 def test_in_memory_meshes_that_cannot_be_repaired_name_themselves(faces, problem):
     with pytest.raises(MeshError, match=rf"^blob: .*{problem}"):
         repair_arrays(np.eye(3), faces, source="blob")
@@ -213,7 +221,7 @@ def test_any_triangle_soup_becomes_manifold_and_consistent_or_a_mesh_error(seed,
         assert str(e).startswith("soup: ")
         return
     manifold = igl.is_edge_manifold(F2)
-    assert (manifold[0] if isinstance(manifold, tuple) else manifold)
+    assert manifold[0] if isinstance(manifold, tuple) else manifold
     assert igl.is_vertex_manifold(F2).all()
     assert Edges(F2, len(V2)).consistent().all()
     assert F2.min() == 0 and F2.max() == len(V2) - 1
@@ -223,11 +231,21 @@ def test_any_triangle_soup_becomes_manifold_and_consistent_or_a_mesh_error(seed,
 
 
 def test_the_report_message_is_one_line_in_a_fixed_order():
-    report = MeshReport(source="m.obj", merged_vertices=3, sliver_faces=2, collapsed_vertices=1, duplicate_faces=4,
-                        nonmanifold_vertices=2, nonmanifold_edges=1, added_vertices=2, normalless_vertices=5,
-                        notes=("texture image 't.png' is missing; loaded without texture",))
+    report = MeshReport(
+        source="m.obj",
+        merged_vertices=3,
+        sliver_faces=2,
+        collapsed_vertices=1,
+        duplicate_faces=4,
+        nonmanifold_vertices=2,
+        nonmanifold_edges=1,
+        added_vertices=2,
+        normalless_vertices=5,
+        notes=("texture image 't.png' is missing; loaded without texture",),
+    )
     assert report.message() == (
         "m.obj: texture image 't.png' is missing; loaded without texture; merged 3 duplicate vertices, dropped 2 "
         "sliver faces (1 vertices collapsed), dropped 4 duplicate faces, split 2 non-manifold vertices on 1 "
-        "non-manifold edges (2 vertices added); 5 vertices have no normal (their faces cancel)")
+        "non-manifold edges (2 vertices added); 5 vertices have no normal (their faces cancel)"
+    )
     assert "\n" not in report.message() and re.match(r"^m\.obj: ", str(report))

@@ -14,12 +14,25 @@ import pytest
 
 from classify.runtime.cluster import worker_env
 from meshsal.util import reproducible
-from meshsal.util.reproducible import (EMBREE_VARIABLE, KERNELS_VARIABLE, KernelPinWarning, cpu_flags,
-                                       kernel_environment, kernels, pin_kernels)
+from meshsal.util.reproducible import (
+    EMBREE_VARIABLE,
+    KERNELS_VARIABLE,
+    KernelPinWarning,
+    cpu_flags,
+    kernel_environment,
+    kernels,
+    pin_kernels,
+)
 
 TESTS = Path(__file__).resolve().parent
-PIN_VARIABLES = ("OPENBLAS_CORETYPE", "OPENCV_CPU_DISABLE", "OPENCV_IPP", "NPY_DISABLE_CPU_FEATURES", EMBREE_VARIABLE,
-                 KERNELS_VARIABLE)
+PIN_VARIABLES = (
+    "OPENBLAS_CORETYPE",
+    "OPENCV_CPU_DISABLE",
+    "OPENCV_IPP",
+    "NPY_DISABLE_CPU_FEATURES",
+    EMBREE_VARIABLE,
+    KERNELS_VARIABLE,
+)
 AVX2 = frozenset({"sse", "sse2", "pni", "ssse3", "sse4_1", "sse4_2", "popcnt", "avx", "f16c", "avx2", "fma"})
 SKYLAKE_X = AVX2 | {"avx512f", "avx512cd", "avx512bw", "avx512dq", "avx512vl"}
 X86_AVX2 = platform.machine().lower() in ("x86_64", "amd64") and "avx2" in (cpu_flags() or ())
@@ -27,8 +40,9 @@ needs_avx2 = pytest.mark.skipif(not X86_AVX2, reason="forces an x86-64 CPU with 
 
 
 def env(environ=None, flags=AVX2, machine="x86_64", numpy_version=(2, 4)):
-    return kernel_environment({} if environ is None else environ, flags=flags, machine=machine,
-                              numpy_version=numpy_version)
+    return kernel_environment(
+        {} if environ is None else environ, flags=flags, machine=machine, numpy_version=numpy_version
+    )
 
 
 def test_an_avx2_cpu_gets_haswell_blas_and_every_other_library_its_baseline():
@@ -45,7 +59,7 @@ def test_an_avx512_cpu_also_has_opencvs_avx512_group_turned_off_not_just_its_fla
     names = env(flags=SKYLAKE_X)["OPENCV_CPU_DISABLE"].split(",")
     # OpenCV dispatches on the group, which it derives before reading the variable.
     assert {"AVX512F", "AVX512VL", "AVX512-SKX"} <= set(names)
-    assert "AVX512-ICL" not in names and "AVX512-KNL" not in names      # groups this CPU does not have
+    assert "AVX512-ICL" not in names and "AVX512-KNL" not in names  # groups this CPU does not have
     assert len(names) == len(set(names))
 
 
@@ -59,7 +73,7 @@ def test_numpy_before_2_4_gets_its_feature_names_and_never_its_sse3_baseline():
 
 def test_a_cpu_without_avx2_keeps_its_own_blas_kernels_and_pins_the_rest():
     pinned = env(flags={"sse", "sse2", "ssse3", "sse4_1", "sse4_2", "popcnt", "avx"})
-    assert "OPENBLAS_CORETYPE" not in pinned                               # Haswell's kernels would not run
+    assert "OPENBLAS_CORETYPE" not in pinned  # Haswell's kernels would not run
     assert pinned["OPENCV_CPU_DISABLE"] == "SSSE3,SSE4.1,SSE4.2,POPCNT,AVX"
     assert pinned[EMBREE_VARIABLE] == "isa=sse2" and pinned["NPY_DISABLE_CPU_FEATURES"]
 
@@ -75,8 +89,13 @@ def test_without_cpu_flags_only_what_needs_none_is_pinned(monkeypatch):
 
 
 def test_user_values_win_and_user_lists_of_features_to_disable_are_only_extended():
-    user = {"OPENBLAS_CORETYPE": "Zen", "OPENCV_IPP": "disabled", EMBREE_VARIABLE: "max_isa=avx2",
-            "OPENCV_CPU_DISABLE": "AVX2;NEON", "NPY_DISABLE_CPU_FEATURES": "X86_V4 AVX512_SPR"}
+    user = {
+        "OPENBLAS_CORETYPE": "Zen",
+        "OPENCV_IPP": "disabled",
+        EMBREE_VARIABLE: "max_isa=avx2",
+        "OPENCV_CPU_DISABLE": "AVX2;NEON",
+        "NPY_DISABLE_CPU_FEATURES": "X86_V4 AVX512_SPR",
+    }
     pinned = env(user)
     assert pinned["OPENBLAS_CORETYPE"] == "Zen" and pinned["OPENCV_IPP"] == "disabled"
     assert pinned[EMBREE_VARIABLE] == "max_isa=avx2"
@@ -84,7 +103,7 @@ def test_user_values_win_and_user_lists_of_features_to_disable_are_only_extended
     assert pinned["NPY_DISABLE_CPU_FEATURES"] == "X86_V4,AVX512_SPR,X86_V3,AVX512_ICL"
     # NumPy refuses both of its variables at once: whoever chose what to enable keeps it.
     assert "NPY_DISABLE_CPU_FEATURES" not in env({"NPY_ENABLE_CPU_FEATURES": "X86_V3"})
-    assert env({EMBREE_VARIABLE: ""})[EMBREE_VARIABLE] == ""              # empty: Embree chooses
+    assert env({EMBREE_VARIABLE: ""})[EMBREE_VARIABLE] == ""  # empty: Embree chooses
 
 
 def test_native_turns_the_pin_off_and_any_other_mode_is_refused_by_name():
@@ -98,8 +117,12 @@ def test_native_turns_the_pin_off_and_any_other_mode_is_refused_by_name():
 def test_this_test_process_was_pinned_in_time():
     from threadpoolctl import threadpool_info
 
-    assert kernels() == {"openblas": "Haswell", "numpy": "baseline", "opencv": "baseline; IPP sse42",
-                         "embree": "isa=sse2"}
+    assert kernels() == {
+        "openblas": "Haswell",
+        "numpy": "baseline",
+        "opencv": "baseline; IPP sse42",
+        "embree": "isa=sse2",
+    }
     assert {i["architecture"] for i in threadpool_info() if i["internal_api"] == "openblas"} == {"Haswell"}
 
 
@@ -113,7 +136,7 @@ def test_pinning_after_numpy_is_loaded_is_too_late_and_says_so(monkeypatch):
     with pytest.warns(KernelPinWarning, match=late):
         now = pin_kernels()
     assert "OPENBLAS_CORETYPE" not in os.environ and "NPY_DISABLE_CPU_FEATURES" not in os.environ
-    assert now == {EMBREE_VARIABLE: "isa=sse2"}                            # read at each new device: never late
+    assert now == {EMBREE_VARIABLE: "isa=sse2"}  # read at each new device: never late
 
 
 def _clean_env(**changes):
@@ -123,24 +146,33 @@ def _clean_env(**changes):
 
 
 def _python(code, **changes):
-    return subprocess.run([sys.executable, "-W", "error", "-c", code], env=_clean_env(**changes),
-                          capture_output=True, text=True, timeout=120)
+    return subprocess.run(
+        [sys.executable, "-W", "error", "-c", code],
+        env=_clean_env(**changes),
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
 
 
 @needs_avx2
 def test_a_process_pinned_first_runs_every_library_at_its_pin_and_none_complains():
-    done = _python("from meshsal.util.reproducible import pin_kernels, kernels; pin_kernels()\n"
-                   "import json, numpy, scipy.linalg, cv2\nfrom threadpoolctl import threadpool_info\n"
-                   "print(json.dumps([kernels(), sorted({i['architecture'] for i in threadpool_info()})]))")
-    assert done.returncode == 0 and done.stderr == "", done.stderr     # no OpenCV notice, no NumPy warning
+    done = _python(
+        "from meshsal.util.reproducible import pin_kernels, kernels; pin_kernels()\n"
+        "import json, numpy, scipy.linalg, cv2\nfrom threadpoolctl import threadpool_info\n"
+        "print(json.dumps([kernels(), sorted({i['architecture'] for i in threadpool_info()})]))"
+    )
+    assert done.returncode == 0 and done.stderr == "", done.stderr  # no OpenCV notice, no NumPy warning
     found, blas = json.loads(done.stdout)
     assert found == kernels() and blas == ["Haswell"]
 
 
 @needs_avx2
 def test_the_visuotactile_command_pins_before_anything_loads_numpy():
-    done = _python("import json, sys\nfrom classify.cli import main\ntry:\n    main(['--help'])\nexcept SystemExit:\n"
-                   "    pass\nfrom meshsal.util.reproducible import kernels\nprint(json.dumps(kernels()), file=sys.stderr)")
+    done = _python(
+        "import json, sys\nfrom classify.cli import main\ntry:\n    main(['--help'])\nexcept SystemExit:\n"
+        "    pass\nfrom meshsal.util.reproducible import kernels\nprint(json.dumps(kernels()), file=sys.stderr)"
+    )
     assert json.loads(done.stderr.strip().splitlines()[-1]) == kernels()
 
 
@@ -153,8 +185,13 @@ def test_every_opencv_feature_name_the_pin_may_use_is_known_to_this_opencv():
 @needs_avx2
 def test_the_command_runs_a_program_pinned_and_without_one_prints_the_pin():
     module = [sys.executable, "-m", "meshsal.util.reproducible"]
-    ran = subprocess.run(module + [sys.executable, "-c", "import os; print(os.environ['OPENCV_CPU_DISABLE'])"],
-                         env=_clean_env(), capture_output=True, text=True, timeout=60)
+    ran = subprocess.run(
+        module + [sys.executable, "-c", "import os; print(os.environ['OPENCV_CPU_DISABLE'])"],
+        env=_clean_env(),
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
     assert ran.stdout.strip() == kernel_environment({})["OPENCV_CPU_DISABLE"]
     printed = subprocess.run(module, env=_clean_env(), capture_output=True, text=True, timeout=60).stdout
     assert dict(line.split("=", 1) for line in printed.split()) == kernel_environment({})
@@ -169,13 +206,21 @@ def test_local_cluster_workers_start_pinned_with_one_thread():
 def _lower_isa() -> dict:
     """The variables that make NumPy, OpenCV and glibc's libm take the code of a CPU without AVX2 or FMA."""
     numpy = "X86_V3" if tuple(int(x) for x in np.__version__.split(".")[:2]) >= (2, 4) else "AVX2,FMA3,AVX,F16C"
-    return {"OPENCV_CPU_DISABLE": "AVX2,FMA3,AVX,POPCNT", "NPY_DISABLE_CPU_FEATURES": numpy,
-            "GLIBC_TUNABLES": "glibc.cpu.hwcaps=-AVX2,-FMA,-AVX"}
+    return {
+        "OPENCV_CPU_DISABLE": "AVX2,FMA3,AVX,POPCNT",
+        "NPY_DISABLE_CPU_FEATURES": numpy,
+        "GLIBC_TUNABLES": "glibc.cpu.hwcaps=-AVX2,-FMA,-AVX",
+    }
 
 
 def _start(out_dir, *flags, **changes):
-    return subprocess.Popen([sys.executable, str(TESTS / "kernel_probe.py"), str(out_dir), *flags],
-                            env=_clean_env(**changes), stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    return subprocess.Popen(
+        [sys.executable, str(TESTS / "kernel_probe.py"), str(out_dir), *flags],
+        env=_clean_env(**changes),
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
 
 
 def _finish(process) -> dict:

@@ -68,7 +68,7 @@ def test_curvature_peaks_on_the_planted_bump(sphere, view):
     field, point = planted_field(sphere, view)
     got = curvature(view, field)
     peak = np.array(np.unravel_index(np.argmax(got), got.shape))
-    (row, col), = project(view, point[None])
+    ((row, col),) = project(view, point[None])
     assert np.hypot(peak[0] - row, peak[1] - col) <= 3.0
     assert got.max() > 0.95
 
@@ -200,7 +200,7 @@ def test_weights_selecting_one_channel_reproduce_it(sphere, view, result, name):
 def test_saliency_follows_the_planted_curvature(sphere, view):
     field, point = planted_field(sphere, view)
     m = saliency(view, sphere, weights={"curvature": 1.0}, vertex_saliency=field).map
-    (row, col), = project(view, point[None])
+    ((row, col),) = project(view, point[None])
     peak = np.unravel_index(np.argmax(m), m.shape)
     assert np.hypot(peak[0] - row, peak[1] - col) <= 3.0
 

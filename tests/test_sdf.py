@@ -6,8 +6,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from meshsal.objects import sdf
 from meshsal.mesh import face_areas
+from meshsal.objects import sdf
 
 
 def _signed_volume(V, F):
@@ -72,8 +72,9 @@ def test_known_distances():
 
 def test_round_cone_equal_radii_is_capsule():
     P = np.random.default_rng(2).uniform(-10, 10, (500, 3))
-    np.testing.assert_allclose(sdf.round_cone(P, [1, 0, 0], [2, 5, 3], 2.0, 2.0),
-                               sdf.capsule(P, [1, 0, 0], [2, 5, 3], 2.0), atol=1e-9)
+    np.testing.assert_allclose(
+        sdf.round_cone(P, [1, 0, 0], [2, 5, 3], 2.0, 2.0), sdf.capsule(P, [1, 0, 0], [2, 5, 3], 2.0), atol=1e-9
+    )
 
 
 def test_round_cone_side_is_the_tangent_line():

@@ -1,13 +1,11 @@
 """A missing ../shared skips a test on a laptop and fails it in CI."""
 
+import conftest
 import pytest
 from _pytest.outcomes import Failed, Skipped
 
-import conftest
 
-
-@pytest.mark.parametrize("value, fails", [("", False), ("0", False), ("false", False), ("true", True),
-                                           ("1", True)])
+@pytest.mark.parametrize("value, fails", [("", False), ("0", False), ("false", False), ("true", True), ("1", True)])
 def test_missing_shared_data_skips_or_fails_by_ci(monkeypatch, value, fails):
     monkeypatch.setenv("CI", value)
     with pytest.raises(Failed if fails else Skipped, match="nowhere"):

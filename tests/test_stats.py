@@ -13,7 +13,7 @@ def test_bootstrap_interval_covers_the_true_mean_about_95_percent_of_the_time():
     hits = 0
     trials = 200
     for t in range(trials):
-        R = 70.0 + 5.0 * rng.standard_normal((20, 1))               # replicates only: a plain mean
+        R = 70.0 + 5.0 * rng.standard_normal((20, 1))  # replicates only: a plain mean
         s = stats.summarize(R, seed=t)
         hits += s.ci_low <= 70.0 <= s.ci_high
     assert 0.88 <= hits / trials <= 0.99
@@ -28,7 +28,7 @@ def test_interval_widens_with_object_spread_and_is_a_point_when_nothing_varies()
 
 def test_paired_difference_finds_a_planted_gap_that_unpaired_noise_would_hide():
     rng = np.random.default_rng(1)
-    base = rng.uniform(40, 100, (20, 6))                             # replicate/object difficulty varies a lot
+    base = rng.uniform(40, 100, (20, 6))  # replicate/object difficulty varies a lot
     better = base + 3.0 + rng.normal(0, 1.0, base.shape)
     d = stats.paired_difference(better, base)
     assert 2.0 < d.ci_low < 3.0 < d.ci_high < 4.0 and d.p_value < 1e-3
@@ -50,16 +50,17 @@ def test_calibration_never_changes_a_single_decision_but_softens_certainty():
 def test_calibration_fitted_on_one_hot_wrong_answers_stops_a_single_zero_from_vetoing():
     y = np.repeat([0, 1], 20)
     P = np.eye(2)[y]
-    P[:4] = [0.0, 1.0]                                              # 4 of 20 "certain" answers are wrong
+    P[:4] = [0.0, 1.0]  # 4 of 20 "certain" answers are wrong
     cal = fusion.fit_calibration(P, y)
-    fused = fusion.fuse(fusion.calibrate([[1.0, 0.0], [1.0, 0.0], [0.0, 1.0]], cal), [[0, 1, 2]],
-                        np.random.default_rng(0))
-    assert fused.tolist() == [0]                                    # two firm votes beat one
+    fused = fusion.fuse(
+        fusion.calibrate([[1.0, 0.0], [1.0, 0.0], [0.0, 1.0]], cal), [[0, 1, 2]], np.random.default_rng(0)
+    )
+    assert fused.tolist() == [0]  # two firm votes beat one
 
 
 def test_touch_sets_are_distinct_exhaustive_when_few_and_seeded():
     rng = np.random.default_rng(0)
-    assert len(fusion.touch_sets(15, 14, 50, rng)) == 15            # C(15, 14) = 15 < 50: all of them
+    assert len(fusion.touch_sets(15, 14, 50, rng)) == 15  # C(15, 14) = 15 < 50: all of them
     a = fusion.touch_sets(15, 4, 50, np.random.default_rng(3))
     b = fusion.touch_sets(15, 4, 50, np.random.default_rng(3))
     assert np.array_equal(a, b) and len({tuple(r) for r in a.tolist()}) == 50
@@ -80,7 +81,7 @@ def test_knn_k_ties_are_drawn_with_the_seed_not_taken_by_order():
     X = np.r_[np.zeros((8, 2)), np.ones((8, 2))]
     y = np.repeat([0, 1], 8)
     chosen = {classify.make("knn", random_state=s).fit(X, y).k_ for s in range(12)}
-    assert len(chosen) > 1                                          # every k scores 100 %: the draw decides
+    assert len(chosen) > 1  # every k scores 100 %: the draw decides
 
 
 def test_knn_tuning_with_groups_does_not_reward_memorizing_a_point():
@@ -94,14 +95,14 @@ def test_knn_tuning_with_groups_does_not_reward_memorizing_a_point():
     groups = np.repeat(np.arange(40), 4)
     leaky = classify.make("knn", ks=(1, 9)).fit(X, y)
     grouped = classify.make("knn", ks=(1, 9)).fit(X, y, groups=groups)
-    assert leaky.cv_scores_[1] > 0.95                               # re-touches of the same point: memorized
-    assert grouped.cv_scores_[1] < 0.9                               # held-out points: no such luck
+    assert leaky.cv_scores_[1] > 0.95  # re-touches of the same point: memorized
+    assert grouped.cv_scores_[1] < 0.9  # held-out points: no such luck
 
 
 def test_knn_is_invariant_to_the_order_of_its_training_set():
     rng = np.random.default_rng(6)
-    X = np.round(rng.uniform(0, 1, (60, 16)) * 255) / 255            # ADC codes: exact distances
-    X[10] = X[40]                                                   # exact ties between classes
+    X = np.round(rng.uniform(0, 1, (60, 16)) * 255) / 255  # ADC codes: exact distances
+    X[10] = X[40]  # exact ties between classes
     y = np.repeat([0, 1, 2], 20)
     queries = np.r_[X[:5], X[40:41], rng.uniform(0, 1, (10, 16))]
     perm = rng.permutation(60)
@@ -117,8 +118,10 @@ def test_intervals_follow_the_objects_names_not_their_order():
     turn = [3, 0, 4, 1, 2]
     a, b = stats.summarize(R, 7, names), stats.summarize(R[:, turn], 7, [names[i] for i in turn])
     assert (a.ci_low, a.ci_high) == (b.ci_low, b.ci_high)
-    d, e = stats.paired_difference(R, B, 7, names), stats.paired_difference(R[:, turn], B[:, turn], 7,
-                                                                              [names[i] for i in turn])
+    d, e = (
+        stats.paired_difference(R, B, 7, names),
+        stats.paired_difference(R[:, turn], B[:, turn], 7, [names[i] for i in turn]),
+    )
     assert (d.ci_low, d.ci_high) == (e.ci_low, e.ci_high)
     # By position, the same resamples draw other objects: the interval moves.
     assert stats.summarize(R[:, turn], 7).ci_low != a.ci_low

@@ -72,11 +72,17 @@ def test_gain_spread_is_one_map_per_device():
 def test_one_session_stream_is_one_device_whatever_it_touches():
     plane = shapes.plane()
     sensor = Sensor(mode="pressure")
-    device = Perturbation(gain_spread=0.2, dead_fraction=0.1, uniform_rotation=True)   # rolls are drawn per touch
+    device = Perturbation(gain_spread=0.2, dead_fraction=0.1, uniform_rotation=True)  # rolls are drawn per touch
     up = np.array([[0.0, 1.0, 0.0]])
     one = acquire(plane, [[0.0, 0.0, 0.0]], up, sensor, device, rng=np.random.default_rng([5, 1]))
-    three = acquire(plane, [[20.0, 0.0, 0.0], [0.0, 0.0, 0.0], [-20.0, 0.0, 5.0]], np.repeat(up, 3, axis=0), sensor,
-                    device, rng=np.random.default_rng([5, 1]))
+    three = acquire(
+        plane,
+        [[20.0, 0.0, 0.0], [0.0, 0.0, 0.0], [-20.0, 0.0, 5.0]],
+        np.repeat(up, 3, axis=0),
+        sensor,
+        device,
+        rng=np.random.default_rng([5, 1]),
+    )
     # A flat plane looks the same under any roll: the same gain map and dead taxels read the same imprint.
     np.testing.assert_array_equal(one[0], three[1])
     other = acquire(plane, [[0.0, 0.0, 0.0]], up, sensor, device, rng=np.random.default_rng([5, 2]))
@@ -112,8 +118,18 @@ def test_jitter_and_tilt_move_the_imprint(surface):
         assert moved.max() > 0.5
 
 
-@pytest.mark.parametrize("bad", [dict(noise=-0.1), dict(dead_fraction=1.0), dict(adc_bits=40), dict(adc_bits=2.5),
-                                 dict(jitter_mm=float("inf")), dict(uniform_rotation="yes"), dict(blur_mm="x")])
+@pytest.mark.parametrize(
+    "bad",
+    [
+        dict(noise=-0.1),
+        dict(dead_fraction=1.0),
+        dict(adc_bits=40),
+        dict(adc_bits=2.5),
+        dict(jitter_mm=float("inf")),
+        dict(uniform_rotation="yes"),
+        dict(blur_mm="x"),
+    ],
+)
 def test_perturbation_rejects_bad_fields(bad):
     with pytest.raises(ValueError, match="Perturbation"):
         Perturbation(**bad)

@@ -13,9 +13,18 @@ from tactile import ImprintSet, Perturbation, Sensor
 def small_set(perturbation=None, seed=None) -> ImprintSet:
     rng = np.random.default_rng(0)
     sensor = Sensor(rows=8, cols=12, mode="pressure", pitch_mm=1.5)
-    return ImprintSet(imprints=rng.random((5, 8, 12)), labels=[0, 0, 1, 2, 2], object_names=("cup", "hand", "cow"),
-                      point_ids=[1, 2, 1, 1, 2], positions=rng.normal(size=(5, 3)), normals=rng.normal(size=(5, 3)),
-                      sensor=sensor, perturbation=perturbation, seed=seed, source="test")
+    return ImprintSet(
+        imprints=rng.random((5, 8, 12)),
+        labels=[0, 0, 1, 2, 2],
+        object_names=("cup", "hand", "cow"),
+        point_ids=[1, 2, 1, 1, 2],
+        positions=rng.normal(size=(5, 3)),
+        normals=rng.normal(size=(5, 3)),
+        sensor=sensor,
+        perturbation=perturbation,
+        seed=seed,
+        source="test",
+    )
 
 
 @pytest.mark.parametrize("perturbation,seed", [(None, None), (Perturbation.typical(), 42)])
@@ -75,14 +84,35 @@ def test_other_version_is_refused(tmp_path):
 def test_inconsistent_fields_are_refused():
     s = small_set()
     with pytest.raises(ValueError, match="labels"):
-        ImprintSet(imprints=s.imprints, labels=[0, 0, 1, 2, 3], object_names=s.object_names, point_ids=s.point_ids,
-                   positions=s.positions, normals=s.normals, sensor=s.sensor)
+        ImprintSet(
+            imprints=s.imprints,
+            labels=[0, 0, 1, 2, 3],
+            object_names=s.object_names,
+            point_ids=s.point_ids,
+            positions=s.positions,
+            normals=s.normals,
+            sensor=s.sensor,
+        )
     with pytest.raises(ValueError, match="sensor"):
-        ImprintSet(imprints=s.imprints, labels=s.labels, object_names=s.object_names, point_ids=s.point_ids,
-                   positions=s.positions, normals=s.normals, sensor=Sensor())
+        ImprintSet(
+            imprints=s.imprints,
+            labels=s.labels,
+            object_names=s.object_names,
+            point_ids=s.point_ids,
+            positions=s.positions,
+            normals=s.normals,
+            sensor=Sensor(),
+        )
     with pytest.raises(ValueError, match="positions"):
-        ImprintSet(imprints=s.imprints, labels=s.labels, object_names=s.object_names, point_ids=s.point_ids,
-                   positions=s.positions[:3], normals=s.normals, sensor=s.sensor)
+        ImprintSet(
+            imprints=s.imprints,
+            labels=s.labels,
+            object_names=s.object_names,
+            point_ids=s.point_ids,
+            positions=s.positions[:3],
+            normals=s.normals,
+            sensor=s.sensor,
+        )
 
 
 def test_subset_keeps_names_and_fields():
@@ -93,8 +123,10 @@ def test_subset_keeps_names_and_fields():
 
 
 def write_points(path, mesh_scale, positions, normals):
-    records = [{"id": i + 1, "position": (np.asarray(p) / mesh_scale).tolist(), "normal": list(n)}
-               for i, (p, n) in enumerate(zip(positions, normals))]
+    records = [
+        {"id": i + 1, "position": (np.asarray(p) / mesh_scale).tolist(), "normal": list(n)}
+        for i, (p, n) in enumerate(zip(positions, normals))
+    ]
     path.write_text(json.dumps({"mesh": "sphere.obj", "points": records}))
 
 
@@ -111,8 +143,21 @@ def test_imprints_command_writes_set_and_picture(tmp_path):
     top, side = [0.0, radius_mm, 0.0], [radius_mm, 0.0, 0.0]
     write_points(tmp_path / "points.json", scale, [top, side], [[0, 1, 0], [1, 0, 0]])
     out = tmp_path / "out" / "set.npz"
-    assert main(["imprints", str(tmp_path / "sphere.obj"), "--points", str(tmp_path / "points.json"),
-                 "--mode", "pressure", "--out", str(out)]) == 0
+    assert (
+        main(
+            [
+                "imprints",
+                str(tmp_path / "sphere.obj"),
+                "--points",
+                str(tmp_path / "points.json"),
+                "--mode",
+                "pressure",
+                "--out",
+                str(out),
+            ]
+        )
+        == 0
+    )
     s = ImprintSet.load(out)
     assert len(s) == 2 and s.sensor.mode == "pressure" and s.object_names == ("sphere",)
     np.testing.assert_allclose(s.positions, [top, side], atol=1e-6)
@@ -126,14 +171,17 @@ def test_imprints_command_writes_set_and_picture(tmp_path):
     assert picture is not None and picture.shape[0] > 16 * 8 and picture.shape[1] > 2 * 16 * 8
 
 
-@pytest.mark.parametrize("content,message", [
-    (None, "points.json: points file not found"),
-    ("{not json", "points.json: not a valid points file: malformed JSON at line 1"),
-    ('{"points": []}', "points.json: the 'points' list is empty"),
-    ('[1, 2]', "points.json: expected an object with a 'points' list"),
-    ('{"points": [{"position": [0, 1], "normal": [0, 1, 0]}]}', r"points.json: points\[0\]: 'position'"),
-    ('{"points": [{"position": [0, 1, 0], "normal": [0, 0, 0]}]}', r"points.json: points\[0\]: 'normal' is zero"),
-])
+@pytest.mark.parametrize(
+    "content,message",
+    [
+        (None, "points.json: points file not found"),
+        ("{not json", "points.json: not a valid points file: malformed JSON at line 1"),
+        ('{"points": []}', "points.json: the 'points' list is empty"),
+        ("[1, 2]", "points.json: expected an object with a 'points' list"),
+        ('{"points": [{"position": [0, 1], "normal": [0, 1, 0]}]}', r"points.json: points\[0\]: 'position'"),
+        ('{"points": [{"position": [0, 1, 0], "normal": [0, 0, 0]}]}', r"points.json: points\[0\]: 'normal' is zero"),
+    ],
+)
 def test_imprints_command_reports_bad_points_file(tmp_path, capsys, content, message):
     from classify.cli import main
 

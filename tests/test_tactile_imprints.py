@@ -40,7 +40,7 @@ def test_flat_plane_is_uniform_in_pressure_mode_and_blank_in_contour_mode():
 def test_sphere_pressed_gives_disk_of_known_radius(radius, depth):
     sensor = Sensor(mode="pressure", depth_mm=depth)
     img = tactile.imprint(shapes.sphere(radius), [0.0, radius, 0.0], [0.0, 1.0, 0.0], sensor)
-    r = np.sqrt(2 * radius * depth - depth ** 2)
+    r = np.sqrt(2 * radius * depth - depth**2)
     x, y = taxel_centres(sensor)
     dist = np.hypot(x, y)
     touched = img > 0
@@ -59,7 +59,7 @@ def test_cylinder_gives_band_along_its_axis():
     img = tactile.imprint(shapes.cylinder(radius), [0.0, radius, 0.0], [0.0, 1.0, 0.0], sensor)
     # Axis x is the image's right (up is -z at the +y pole): every column is the same.
     np.testing.assert_allclose(img, np.repeat(img[:, :1], sensor.cols, axis=1), atol=1e-5)
-    half_width = np.sqrt(2 * radius * depth - depth ** 2)
+    half_width = np.sqrt(2 * radius * depth - depth**2)
     _, y = taxel_centres(sensor)
     touched = img[:, 0] > 0
     assert np.abs(y[:, 0][touched]).max() <= half_width + sensor.pitch_mm
@@ -102,7 +102,7 @@ def test_contour_rings_on_sphere_are_nested_and_ordered_by_depth():
     x, y = taxel_centres(sensor)
     dist = np.hypot(x, y)
     levels = depth * np.arange(1, 5) / 4
-    rings = np.sqrt(2 * radius * levels - levels ** 2)  # 7.0, 9.9, 12.1, 14.0 mm
+    rings = np.sqrt(2 * radius * levels - levels**2)  # 7.0, 9.9, 12.1, 14.0 mm
     gray = [img[np.abs(dist - r) <= 0.5].mean() for r in rings]
     assert np.all(np.diff(gray) > 0), gray
     # Gray level ~ k/4 for plane k: the deepest ring is about four times the shallowest.
@@ -165,9 +165,19 @@ def test_sample_grid_is_symmetric():
     np.testing.assert_array_equal(ys, -xs)
 
 
-@pytest.mark.parametrize("bad", [dict(mode="tactile"), dict(plane="normal"), dict(rows=0), dict(cols=2.5),
-                                 dict(pitch_mm=-1.0), dict(depth_mm=float("nan")), dict(supersample=0),
-                                 dict(pitch_mm="wide")])
+@pytest.mark.parametrize(
+    "bad",
+    [
+        dict(mode="tactile"),
+        dict(plane="normal"),
+        dict(rows=0),
+        dict(cols=2.5),
+        dict(pitch_mm=-1.0),
+        dict(depth_mm=float("nan")),
+        dict(supersample=0),
+        dict(pitch_mm="wide"),
+    ],
+)
 def test_sensor_rejects_bad_fields(bad):
     with pytest.raises(ValueError, match="Sensor"):
         Sensor(**bad)
@@ -230,10 +240,12 @@ def test_prebuilt_scene_gives_the_same_imprints_and_a_foreign_scene_is_refused()
     N = np.tile([0.0, 1.0, 0.0], (2, 1))
     sensor = Sensor(mode="pressure")
     scene = embree_scene(surface)
-    np.testing.assert_array_equal(tactile.imprints(surface, P, N, sensor, scene=scene),
-                                  tactile.imprints(surface, P, N, sensor))
-    np.testing.assert_array_equal(tactile.imprint(surface, P[0], N[0], sensor, scene=scene),
-                                  tactile.imprint(surface, P[0], N[0], sensor))
+    np.testing.assert_array_equal(
+        tactile.imprints(surface, P, N, sensor, scene=scene), tactile.imprints(surface, P, N, sensor)
+    )
+    np.testing.assert_array_equal(
+        tactile.imprint(surface, P[0], N[0], sensor, scene=scene), tactile.imprint(surface, P[0], N[0], sensor)
+    )
     # The scene of the mesh before scaling, and of another mesh, are caught.
     scaled = surface.replace(vertices=surface.vertices * 1.5)
     with pytest.raises(ValueError, match="scene does not hold mesh"):
@@ -279,8 +291,9 @@ def test_pca_fit_of_a_few_points_equals_their_fit_in_a_large_batch():
     N = np.tile([0.0, 1.0, 0.0], (12, 1)) + rng.normal(scale=0.2, size=(12, 3))
     batch = sensor_poses(surface, P, N, Sensor()).normals
     for i in range(12):
-        np.testing.assert_allclose(sensor_poses(surface, P[i:i + 1], N[i:i + 1], Sensor()).normals[0], batch[i],
-                                   atol=1e-12)
+        np.testing.assert_allclose(
+            sensor_poses(surface, P[i : i + 1], N[i : i + 1], Sensor()).normals[0], batch[i], atol=1e-12
+        )
 
 
 def test_contour_lines_match_their_definition_plane_by_plane():
@@ -294,6 +307,6 @@ def test_contour_lines_match_their_definition_plane_by_plane():
     padded = np.pad(depth, ((0, 0), (1, 1), (1, 1)), mode="edge")
     for k, level in enumerate(plane_depths(sensor), start=1):
         inside = padded <= level
-        neighbours_inside = (inside[:, :-2, 1:-1] & inside[:, 2:, 1:-1] & inside[:, 1:-1, :-2] & inside[:, 1:-1, 2:])
+        neighbours_inside = inside[:, :-2, 1:-1] & inside[:, 2:, 1:-1] & inside[:, 1:-1, :-2] & inside[:, 1:-1, 2:]
         expected[inside[:, 1:-1, 1:-1] & ~neighbours_inside] = k / 4
     np.testing.assert_array_equal(contour_lines(depth, sensor), expected)

@@ -60,8 +60,14 @@ def test_blocks_give_the_same_answer(monkeypatch):
     np.testing.assert_array_equal(select_by_similarity(X, y), expected)
 
 
-@pytest.mark.parametrize("X,y,match", [(np.zeros((3, 4)), [0, 1], "labels"), (np.zeros(3), [0, 1, 2], "shape"),
-                                       (np.full((2, 4), np.nan), [0, 1], "finite")])
+@pytest.mark.parametrize(
+    "X,y,match",
+    [
+        (np.zeros((3, 4)), [0, 1], "labels"),
+        (np.zeros(3), [0, 1, 2], "shape"),
+        (np.full((2, 4), np.nan), [0, 1], "finite"),
+    ],
+)
 def test_bad_input(X, y, match):
     with pytest.raises(ValueError, match=match):
         select_by_similarity(X, y)

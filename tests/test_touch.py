@@ -2,21 +2,28 @@
 
 import numpy as np
 import pytest
+import shapes
+from models import one_feature_model
 
 from meshsal.mesh import Mesh
 from meshsal.points import METHODS, MODEL_METHODS, interest_points
 from meshsal.points.touch import contact_gap, default_pad_width, pad_rays, pad_touches, touchable
-
-import shapes
-from models import one_feature_model
 
 PAD = 32.0
 
 
 def step(height=10.0):
     """Two 100-unit-wide floors, the one at x > 0 ``height`` higher, joined by a wall at x = 0."""
-    V = [[-100, -100, 0], [0, -100, 0], [0, 100, 0], [-100, 100, 0],
-         [0, -100, height], [100, -100, height], [100, 100, height], [0, 100, height]]
+    V = [
+        [-100, -100, 0],
+        [0, -100, 0],
+        [0, 100, 0],
+        [-100, 100, 0],
+        [0, -100, height],
+        [100, -100, height],
+        [100, 100, height],
+        [0, 100, height],
+    ]
     F = [[0, 1, 2], [0, 2, 3], [4, 5, 6], [4, 6, 7], [1, 4, 7], [1, 7, 2]]
     return Mesh(vertices=np.array(V, float), faces=np.array(F))
 
@@ -29,19 +36,24 @@ def spiky_ball(spikes=12, height=18.0, seed=0):
     tips = rng.choice(len(V), spikes, replace=False)
     for t in tips:
         angle = np.arccos(np.clip(V @ V[t] / 2500.0, -1, 1))
-        V *= (1 + (height / 50.0) * np.exp(-angle**2 / (2 * 0.05**2)))[:, None]
+        V *= (1 + (height / 50.0) * np.exp(-(angle**2) / (2 * 0.05**2)))[:, None]
     return Mesh(vertices=V, faces=sphere.faces, name="spiky")
 
 
 def test_gap_beside_a_step_is_the_step_height():
     mesh = step(10.0)
-    reach = PAD / np.sqrt(2)              # the disc a rolled pad may sweep
+    reach = PAD / np.sqrt(2)  # the disc a rolled pad may sweep
     x = np.array([-5.0, -15.0, -reach + 1.0, -reach - 1.0, -60.0])
     positions = np.c_[x, np.zeros_like(x), np.zeros_like(x)]
     gaps = contact_gap(mesh, positions, np.tile([0, 0, 1.0], (x.size, 1)), PAD)
     np.testing.assert_allclose(gaps, [10, 10, 10, 0, 0], atol=1e-3)
     assert touchable(mesh, positions, np.tile([0, 0, 1.0], (x.size, 1)), PAD).tolist() == [
-        False, False, False, True, True]
+        False,
+        False,
+        False,
+        True,
+        True,
+    ]
 
 
 def test_every_point_of_a_sphere_is_touchable():
@@ -86,10 +98,28 @@ def pole(x, y, width=0.4, height=10.0):
     """A 200-unit floor at z = 0 with a thin square pole, ``width`` across and ``height`` high, at (x, y)."""
     floor_v = [[-100, -100, 0], [100, -100, 0], [100, 100, 0], [-100, 100, 0]]
     h = width / 2
-    box = [[x - h, y - h, 0], [x + h, y - h, 0], [x + h, y + h, 0], [x - h, y + h, 0],
-           [x - h, y - h, height], [x + h, y - h, height], [x + h, y + h, height], [x - h, y + h, height]]
-    box_f = [[4, 5, 6], [4, 6, 7], [0, 1, 5], [0, 5, 4], [1, 2, 6], [1, 6, 5], [2, 3, 7], [2, 7, 6],
-             [3, 0, 4], [3, 4, 7]]
+    box = [
+        [x - h, y - h, 0],
+        [x + h, y - h, 0],
+        [x + h, y + h, 0],
+        [x - h, y + h, 0],
+        [x - h, y - h, height],
+        [x + h, y - h, height],
+        [x + h, y + h, height],
+        [x - h, y + h, height],
+    ]
+    box_f = [
+        [4, 5, 6],
+        [4, 6, 7],
+        [0, 1, 5],
+        [0, 5, 4],
+        [1, 2, 6],
+        [1, 6, 5],
+        [2, 3, 7],
+        [2, 7, 6],
+        [3, 0, 4],
+        [3, 4, 7],
+    ]
     V = np.array(floor_v + box, float)
     F = np.array([[0, 1, 2], [0, 2, 3]] + [[a + 4, b + 4, c + 4] for a, b, c in box_f])
     return Mesh(vertices=V, faces=F)

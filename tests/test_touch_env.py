@@ -25,7 +25,7 @@ def _ball_and_domed():
     """Two objects that differ in one place only: a ball, and the same ball with a dome on it."""
     ball = shapes.sphere(radius=50.0, n=24).replace(name="ball")
     angle = np.arccos(np.clip(ball.vertices @ APEX / 50.0, -1.0, 1.0))
-    domed = Mesh(ball.vertices * (1.0 + 0.25 * np.exp(-(angle / 0.25) ** 2))[:, None], ball.faces, name="domed")
+    domed = Mesh(ball.vertices * (1.0 + 0.25 * np.exp(-((angle / 0.25) ** 2)))[:, None], ball.faces, name="domed")
     return ball, domed
 
 
@@ -42,8 +42,9 @@ def env(cache):
 def _sample(name, replicate, cache):
     """The test instance an episode touched, built apart from the env."""
     mesh = {m.name: m for m in _ball_and_domed()}[name]
-    return instance_samples(SampleTask(nominal_mesh(mesh, SETTINGS), name, (), SETTINGS, replicate, 0, places=True,
-                                       cache_dir=cache)).places
+    return instance_samples(
+        SampleTask(nominal_mesh(mesh, SETTINGS), name, (), SETTINGS, replicate, 0, places=True, cache_dir=cache)
+    ).places
 
 
 def _touch_first_available(env, observation):
@@ -55,12 +56,13 @@ def test_gymnasiums_checker_passes_without_a_warning(env):
         warnings.simplefilter("always")
         check_env(env, skip_render_check=True)
     assert not [str(w.message) for w in caught if "WARN" in str(w.message)]
-    assert env.max_places == 66 and env.action_space.n == 67 and env.max_touches == 3    # (20 + 2) * 3 places
+    assert env.max_places == 66 and env.action_space.n == 67 and env.max_touches == 3  # (20 + 2) * 3 places
 
 
 def test_the_env_made_by_id_is_the_env(env, cache):
-    made = gymnasium.make(ENV_ID, objects=list(_ball_and_domed()), settings=SETTINGS, test_replicates=range(3),
-                          cache_dir=cache)
+    made = gymnasium.make(
+        ENV_ID, objects=list(_ball_and_domed()), settings=SETTINGS, test_replicates=range(3), cache_dir=cache
+    )
     assert data_equivalence(made.reset(seed=5)[0], env.reset(seed=5)[0], exact=True)
 
 
@@ -69,20 +71,28 @@ def test_info_gain_through_the_env_touches_what_run_episode_touches(env, cache):
     assert set(run.objects) == {"ball", "domed"} and run.touches.tolist() == [3] * 6
     # The knowledge fitted apart, on instances 1 and 2 of replicate 0 as the sequential protocol fits it.
     nominal = {m.name: nominal_mesh(m, SETTINGS) for m in _ball_and_domed()}
-    training = {(name, j): instance_samples(SampleTask(mesh, name, (), SETTINGS, 0, j, places=True,
-                                                       cache_dir=cache)).places
-                for name, mesh in nominal.items() for j in (1, 2)}
+    training = {
+        (name, j): instance_samples(SampleTask(mesh, name, (), SETTINGS, 0, j, places=True, cache_dir=cache)).places
+        for name, mesh in nominal.items()
+        for j in (1, 2)
+    }
     knowledge = fit_knowledge(training, Recognizer("knn", features="polar"))
     for e, (name, replicate) in enumerate(zip(run.objects, run.replicates)):
-        episode = run_episode(InfoGainPolicy(), _sample(name, replicate, cache), knowledge, SETTINGS.n_points,
-                              0.5 * SETTINGS.sensor.width_mm, np.random.default_rng(0))
+        episode = run_episode(
+            InfoGainPolicy(),
+            _sample(name, replicate, cache),
+            knowledge,
+            SETTINGS.n_points,
+            0.5 * SETTINGS.sensor.width_mm,
+            np.random.default_rng(0),
+        )
         assert run.touched[e].tolist() == episode.touched.tolist(), (name, replicate)
         np.testing.assert_array_equal(run.beliefs[e], episode.beliefs[-1])
         assert run.correct[e] == (knowledge.names[int(np.argmax(episode.beliefs[-1]))] == name)
 
 
 def test_the_stopping_rule_and_random_run_through_the_env(env):
-    at_once = run_policy(env, "random", episodes=4, seed=0, stop=0.5)          # two objects: any belief reaches 0.5
+    at_once = run_policy(env, "random", episodes=4, seed=0, stop=0.5)  # two objects: any belief reaches 0.5
     assert at_once.touches.tolist() == [1] * 4
     assert np.allclose(at_once.rewards, at_once.correct - env.touch_cost)
     full = run_policy(env, "random", episodes=4, seed=0)
@@ -122,19 +132,19 @@ def test_the_observation_shows_only_what_was_touched_and_info_the_truth_only_at_
 
 def test_the_reward_an_unavailable_place_and_the_automatic_answer(env):
     observation, _ = env.reset(seed=2)
-    _, reward, over, _, info = env.step(env.max_places)                      # answer before any touch
+    _, reward, over, _, info = env.step(env.max_places)  # answer before any touch
     assert over and reward == float(info["correct"]) and info["touches"] == 0
     assert (info["answer"] == info["object"]) == info["correct"]
     with pytest.raises(RuntimeError, match="reset"):
         env.step(0)
     observation, _ = env.reset(seed=2)
     touched, _, _, _, _ = _touch_first_available(env, observation)
-    wasted = int(np.flatnonzero(touched["touched"])[0])                     # touching it again feels nothing
+    wasted = int(np.flatnonzero(touched["touched"])[0])  # touching it again feels nothing
     again, reward, over, _, info = env.step(wasted)
     assert reward == -env.touch_cost and not over and info["touches"] == again["touches"] == 2
     assert not again["imprints"][1].any() and np.array_equal(again["touched"], touched["touched"])
     assert np.array_equal(again["belief"], touched["belief"])
-    _, reward, over, _, info = _touch_first_available(env, again)           # the third and last touch answers
+    _, reward, over, _, info = _touch_first_available(env, again)  # the third and last touch answers
     assert over and info["touches"] == 3 and reward == pytest.approx(float(info["correct"]) - env.touch_cost)
     env.reset(seed=2)
     with pytest.raises(ValueError, match="action"):
@@ -147,7 +157,7 @@ def test_resets_are_seeded_and_draw_test_instances_training_never_saw(env, cache
     fresh = TouchEnv(list(_ball_and_domed()), SETTINGS, test_replicates=range(3), seed=7, cache_dir=cache)
     with pytest.raises(gymnasium.error.ResetNeeded):
         fresh.step(0)
-    assert data_equivalence(first, fresh.reset()[0], exact=True)                # an unseeded first reset: seed=7
+    assert data_equivalence(first, fresh.reset()[0], exact=True)  # an unseeded first reset: seed=7
     drawn = set()
     for seed in range(12):
         env.reset(seed=seed)

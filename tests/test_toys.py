@@ -7,9 +7,9 @@ import numpy as np
 import pytest
 
 from meshsal import load_mesh
-from meshsal.objects import toys
-from meshsal.mesh.io import MeshRepairWarning, save_ply
 from meshsal.mesh import face_areas
+from meshsal.mesh.io import MeshRepairWarning, save_ply
+from meshsal.objects import toys
 
 
 @pytest.fixture(scope="module")

@@ -13,11 +13,11 @@ so that no ray also meets a vertex on its way out.
 
 import numpy as np
 import pytest
-
-from meshsal.mesh.embree import embree_scene
-from meshsal.mesh import Mesh
-from meshsal.views.tracer import _LOCAL_RAYS, Tracer, tracer
 from shapes import icosphere
+
+from meshsal.mesh import Mesh
+from meshsal.mesh.embree import embree_scene
+from meshsal.views.tracer import _LOCAL_RAYS, Tracer, tracer
 
 CENTER = np.array([0.1, 0.2, 0.3])
 
@@ -69,8 +69,8 @@ class _Slipping:
 
     def run(self, origins, directions, dists=np.inf, output=1):
         hit = _run(self.robust, origins, directions)
-        far = _run(self.robust, origins + 400.0 * directions, -directions)     # from beyond: the exit face
-        chosen = self.slip[:len(origins)]
+        far = _run(self.robust, origins + 400.0 * directions, -directions)  # from beyond: the exit face
+        chosen = self.slip[: len(origins)]
         for key in hit:
             hit[key] = hit[key].copy()
             hit[key][chosen] = far[key][chosen]
@@ -110,7 +110,7 @@ def test_a_few_slipped_rays_are_traced_again_near_their_lines(inward):
     calls = np.flatnonzero(np.any(np.diff(directions, axis=0), axis=1)) + 1
     for o, d in zip(np.split(origins, calls), np.split(directions, calls)):
         slip = np.zeros(len(o), bool)
-        slip[::max(1, len(o) // 5)] = True                          # a few per call: small local scenes
+        slip[:: max(1, len(o) // 5)] = True  # a few per call: small local scenes
         assert 3 <= slip.sum() <= _LOCAL_RAYS
         trace = _slipping_tracer(mesh, slip)
         assert np.all(trace.fast.run(o, d[:1])["tfar"][slip] > _run(embree_scene(mesh), o, d)["tfar"][slip] + 0.5)
@@ -140,8 +140,7 @@ def test_rays_that_do_not_slip_are_answered_by_the_fast_scene_alone():
     directions /= np.linalg.norm(directions, axis=1, keepdims=True)
     origins = CENTER - 10.0 * directions + rng.uniform(-1.0, 1.0, size=(5000, 3))
     origins, directions = origins.astype(np.float32), directions.astype(np.float32)
-    trace = Tracer(mesh=mesh, fast=embree_scene(mesh, robust=False), facing=lambda: 1, robust=_refuse,
-                   reach=_refuse)
+    trace = Tracer(mesh=mesh, fast=embree_scene(mesh, robust=False), facing=lambda: 1, robust=_refuse, reach=_refuse)
     ours = trace.first_hits(origins, directions)
     robust = _run(embree_scene(mesh), origins, directions)
     assert 1000 < (robust["primID"] >= 0).sum() < 5000
@@ -168,8 +167,9 @@ def test_a_robust_scene_answers_every_ray_itself():
     trace = tracer(mesh, scene)
     assert trace.fast is None and trace.robust() is scene
     origins, directions = _rays_through_vertices(mesh)
-    np.testing.assert_array_equal(trace.first_hits(origins, directions)["primID"],
-                                  _run(scene, origins, directions)["primID"])
+    np.testing.assert_array_equal(
+        trace.first_hits(origins, directions)["primID"], _run(scene, origins, directions)["primID"]
+    )
 
 
 def test_misses_stay_misses():

@@ -3,8 +3,8 @@
 import numpy as np
 import pytest
 
-from meshsal.mesh.io import load_mesh, save_ply
 from meshsal.mesh import Mesh, MeshError, bounding_sphere
+from meshsal.mesh.io import load_mesh, save_ply
 from meshsal.mesh.transform import normalize, scale_to
 
 

@@ -72,8 +72,9 @@ class Settings:
         if int(self.n_points) != self.n_points or self.n_points < 1:
             raise ValueError(f"n_points must be a positive integer, got {self.n_points!r}")
         if self.train_instances < 2:
-            raise ValueError(f"train_instances must be at least 2 (calibration holds one out), "
-                             f"got {self.train_instances}")
+            raise ValueError(
+                f"train_instances must be at least 2 (calibration holds one out), got {self.train_instances}"
+            )
         if self.train_sessions < 1:
             raise ValueError(f"train_sessions must be at least 1, got {self.train_sessions}")
         if self.size_mm is not None and not self.size_mm > 0:
@@ -81,17 +82,37 @@ class Settings:
 
     def key(self) -> str:
         """A canonical text of every field, for cache keys."""
-        return repr([self.n_points, None if self.size_mm is None else float(self.size_mm), self.view_size, self.sensor, self.perturbation,
-                     self.train_instances, self.train_sessions, float(self.scale_spread), float(self.hue_deg),
-                     float(self.brightness_spread), int(self.seed)])
+        return repr(
+            [
+                self.n_points,
+                None if self.size_mm is None else float(self.size_mm),
+                self.view_size,
+                self.sensor,
+                self.perturbation,
+                self.train_instances,
+                self.train_sessions,
+                float(self.scale_spread),
+                float(self.hue_deg),
+                float(self.brightness_spread),
+                int(self.seed),
+            ]
+        )
 
     def to_json(self) -> dict:
         """The fields as ``results.json`` records them."""
-        return {"n_points": self.n_points, "size_mm": self.size_mm, "view_size": self.view_size,
-                "sensor": repr(self.sensor), "perturbation": repr(self.perturbation),
-                "train_instances": self.train_instances, "train_sessions": self.train_sessions,
-                "scale_spread": self.scale_spread, "hue_deg": self.hue_deg,
-                "brightness_spread": self.brightness_spread, "seed": self.seed}
+        return {
+            "n_points": self.n_points,
+            "size_mm": self.size_mm,
+            "view_size": self.view_size,
+            "sensor": repr(self.sensor),
+            "perturbation": repr(self.perturbation),
+            "train_instances": self.train_instances,
+            "train_sessions": self.train_sessions,
+            "scale_spread": self.scale_spread,
+            "hue_deg": self.hue_deg,
+            "brightness_spread": self.brightness_spread,
+            "seed": self.seed,
+        }
 
 
 def _all_protocols():
@@ -201,18 +222,36 @@ class ExperimentConfig:
         levels = tuple(float(p) for p in self.stop_levels)
         if any(not 0.0 < p <= 1.0 for p in levels):
             raise ValueError(f"stop levels must lie in (0, 1], got {list(levels)}")
-        return self.replace(methods=methods, protocols=protocols, classifiers=classifiers, baseline=baseline,
-                            params=dict(self.params), policies=policies, stop_levels=levels)
+        return self.replace(
+            methods=methods,
+            protocols=protocols,
+            classifiers=classifiers,
+            baseline=baseline,
+            params=dict(self.params),
+            policies=policies,
+            stop_levels=levels,
+        )
 
     def to_json(self) -> dict:
         """Every setting as ``results.json`` records it (with the classifiers' full parameters)."""
         from classify.recognizers.classifiers import make
 
-        return {"methods": list(self.methods), "protocols": list(self.protocols),
-                "classifiers": list(self.classifiers), "baseline": self.baseline if len(self.methods) > 1 else None,
-                "replicates": self.replicates, "folds": self.folds, "repeats": self.repeats,
-                "threshold": self.threshold, "touch_sets_per_object": self.touch_sets_per_object,
-                "features": self.features, "policies": list(self.policies), "stop_levels": list(self.stop_levels),
-                **self.settings.to_json(),
-                "classifier_params": {c: {k: repr(v) for k, v in make(c, **self.params.get(c, {})).get_params().items()}
-                                      for c in self.classifiers}}
+        return {
+            "methods": list(self.methods),
+            "protocols": list(self.protocols),
+            "classifiers": list(self.classifiers),
+            "baseline": self.baseline if len(self.methods) > 1 else None,
+            "replicates": self.replicates,
+            "folds": self.folds,
+            "repeats": self.repeats,
+            "threshold": self.threshold,
+            "touch_sets_per_object": self.touch_sets_per_object,
+            "features": self.features,
+            "policies": list(self.policies),
+            "stop_levels": list(self.stop_levels),
+            **self.settings.to_json(),
+            "classifier_params": {
+                c: {k: repr(v) for k, v in make(c, **self.params.get(c, {})).get_params().items()}
+                for c in self.classifiers
+            },
+        }

@@ -143,9 +143,16 @@ class TouchEnv(gymnasium.Env):
 
     metadata = {"render_modes": []}
 
-    def __init__(self, objects=("cow", "cup"), settings: Settings | None = None, classifier="knn",
-                 touch_cost: float = 0.01, test_replicates=range(FULL_REPLICATES), seed: int = 0,
-                 cache_dir="default"):
+    def __init__(
+        self,
+        objects=("cow", "cup"),
+        settings: Settings | None = None,
+        classifier="knn",
+        touch_cost: float = 0.01,
+        test_replicates=range(FULL_REPLICATES),
+        seed: int = 0,
+        cache_dir="default",
+    ):
         from classify.recognizers.classifiers import CLASSIFIERS
         from classify.runtime import cache as cache_mod
         from meshsal.points.learned import FEATURES
@@ -155,12 +162,19 @@ class TouchEnv(gymnasium.Env):
             raise ValueError(f"touch_cost must be finite and >= 0, got {touch_cost!r}")
         self.touch_cost = float(touch_cost)
         self.test_replicates = tuple(int(r) for r in test_replicates)
-        if not self.test_replicates or min(self.test_replicates) < 0 or \
-                len(set(self.test_replicates)) != len(self.test_replicates):
-            raise ValueError(f"test_replicates must be distinct replicates >= 0, at least one, "
-                             f"got {list(self.test_replicates)}")
-        recognizer = (classifier if isinstance(classifier, Recognizer)
-                      else Recognizer(CLASSIFIERS.check((classifier,))[0], features="polar"))
+        if (
+            not self.test_replicates
+            or min(self.test_replicates) < 0
+            or len(set(self.test_replicates)) != len(self.test_replicates)
+        ):
+            raise ValueError(
+                f"test_replicates must be distinct replicates >= 0, at least one, got {list(self.test_replicates)}"
+            )
+        recognizer = (
+            classifier
+            if isinstance(classifier, Recognizer)
+            else Recognizer(CLASSIFIERS.check((classifier,))[0], features="polar")
+        )
         self._first_seed = int(seed)
         self.cache_dir = cache_mod.default_dir() if cache_dir == "default" else cache_dir
         loaded = load_objects(objects, self.settings)
@@ -168,33 +182,41 @@ class TouchEnv(gymnasium.Env):
         self.names = tuple(loaded.names[i] for i in order)
         self._nominal = {loaded.names[i]: loaded.nominal[i] for i in order}
         n = self.settings.n_points
-        training = {(name, j): self._place_sample(name, 0, j)
-                    for name in self.names for j in range(1, self.settings.train_instances + 1)}
+        training = {
+            (name, j): self._place_sample(name, 0, j)
+            for name in self.names
+            for j in range(1, self.settings.train_instances + 1)
+        }
         self.knowledge = fit_knowledge(training, recognizer)
         self.max_places, self.max_touches = (POOL_FACTOR + PEAK_FACTOR) * n, n
         self.min_spacing = 0.5 * self.settings.sensor.width_mm
         shape = next(iter(training.values())).imprints.shape[2:]
         # An instance is its nominal mesh turned about the origin and resized by at most 1 + scale_spread.
-        reach = math.ceil(max(np.linalg.norm(m.vertices, axis=1).max() for m in self._nominal.values())
-                          * (1.0 + self.settings.scale_spread))
+        reach = math.ceil(
+            max(np.linalg.norm(m.vertices, axis=1).max() for m in self._nominal.values())
+            * (1.0 + self.settings.scale_spread)
+        )
         P, K, big = self.max_places, self.max_touches, np.finfo(np.float32).max
-        self.observation_space = spaces.Dict({
-            "features": spaces.Box(0.0, big, (P, len(FEATURES)), np.float32),
-            "positions": spaces.Box(-reach, reach, (P, 3), np.float32),
-            "normals": spaces.Box(-1.0, 1.0, (P, 3), np.float32),
-            "valid": spaces.MultiBinary(P),
-            "available": spaces.MultiBinary(P),
-            "touched": spaces.Box(0, K, (P,), np.int16),
-            "imprints": spaces.Box(0.0, 1.0, (K, *shape), np.float32),
-            "belief": spaces.Box(0.0, 1.0, (len(self.names),), np.float64),
-            "touches": spaces.Discrete(K + 1),
-        })
+        self.observation_space = spaces.Dict(
+            {
+                "features": spaces.Box(0.0, big, (P, len(FEATURES)), np.float32),
+                "positions": spaces.Box(-reach, reach, (P, 3), np.float32),
+                "normals": spaces.Box(-1.0, 1.0, (P, 3), np.float32),
+                "valid": spaces.MultiBinary(P),
+                "available": spaces.MultiBinary(P),
+                "touched": spaces.Box(0, K, (P,), np.int16),
+                "imprints": spaces.Box(0.0, 1.0, (K, *shape), np.float32),
+                "belief": spaces.Box(0.0, 1.0, (len(self.names),), np.float64),
+                "touches": spaces.Discrete(K + 1),
+            }
+        )
         self.action_space = spaces.Discrete(P + 1)
         self._episode = None
 
     def _place_sample(self, name: str, replicate: int, index: int):
-        task = SampleTask(self._nominal[name], name, (), self.settings, replicate, index, places=True,
-                          cache_dir=self.cache_dir)
+        task = SampleTask(
+            self._nominal[name], name, (), self.settings, replicate, index, places=True, cache_dir=self.cache_dir
+        )
         return instance_samples(task).places
 
     @property
@@ -224,11 +246,18 @@ class TouchEnv(gymnasium.Env):
         replicate = self.test_replicates[int(self.np_random.integers(len(self.test_replicates)))]
         sample = self._place_sample(self.names[truth], replicate, 0)
         if len(sample.places) > self.max_places:
-            raise ValueError(f"TouchEnv: {self.names[truth]!r} replicate {replicate} offers {len(sample.places)} "
-                             f"places, more than the {self.max_places} the observation holds")
-        self._episode = _Episode(sample, self.knowledge.forecast(sample.places),
-                                 self.knowledge.posterior(sample.imprints[0]), truth, replicate,
-                                 np.full(len(self.names), 1.0 / len(self.names)))
+            raise ValueError(
+                f"TouchEnv: {self.names[truth]!r} replicate {replicate} offers {len(sample.places)} "
+                f"places, more than the {self.max_places} the observation holds"
+            )
+        self._episode = _Episode(
+            sample,
+            self.knowledge.forecast(sample.places),
+            self.knowledge.posterior(sample.imprints[0]),
+            truth,
+            replicate,
+            np.full(len(self.names), 1.0 / len(self.names)),
+        )
         return self._observation(), {"touches": 0, "replicate": replicate}
 
     def step(self, action):
@@ -251,10 +280,9 @@ class TouchEnv(gymnasium.Env):
             felt = action < len(places) and bool(available_places(places, e.touched, self.min_spacing)[action])
             e.steps.append(action if felt else -1)
             if felt:
-                belief = e.belief * np.maximum(e.felt[action], 1e-300)     # as classify.policies.run_episode
+                belief = e.belief * np.maximum(e.felt[action], 1e-300)  # as classify.policies.run_episode
                 e.belief = belief / belief.sum()
-            e.over = (len(e.steps) == self.max_touches
-                      or not available_places(places, e.touched, self.min_spacing).any())
+            e.over = len(e.steps) == self.max_touches or not available_places(places, e.touched, self.min_spacing).any()
         else:
             e.over = True
         info = {"touches": len(e.steps)}
@@ -280,11 +308,17 @@ class TouchEnv(gymnasium.Env):
             if place >= 0:
                 touched[place] = i + 1
                 imprints[i] = e.sample.imprints[0, place]
-        return {"features": padded(places.features, np.float32), "positions": padded(places.positions, np.float32),
-                "normals": padded(places.normals, np.float32), "valid": padded(np.ones(p), np.int8),
-                "available": padded(available_places(places, e.touched, self.min_spacing), np.int8),
-                "touched": touched, "imprints": imprints, "belief": e.belief.copy(),
-                "touches": np.int64(len(e.steps))}
+        return {
+            "features": padded(places.features, np.float32),
+            "positions": padded(places.positions, np.float32),
+            "normals": padded(places.normals, np.float32),
+            "valid": padded(np.ones(p), np.int8),
+            "available": padded(available_places(places, e.touched, self.min_spacing), np.int8),
+            "touched": touched,
+            "imprints": imprints,
+            "belief": e.belief.copy(),
+            "touches": np.int64(len(e.steps)),
+        }
 
 
 @dataclass(eq=False)
@@ -315,9 +349,15 @@ def touch_state(env, observation: dict) -> TouchState:
     touched = np.asarray(observation["touched"][:p], np.int64)
     order = np.flatnonzero(touched)
     order = order[np.argsort(touched[order], kind="stable")]
-    return TouchState(places, tuple(int(i) for i in order), np.asarray(observation["imprints"])[touched[order] - 1],
-                      np.asarray(observation["belief"], np.float64), np.asarray(observation["available"][:p], bool),
-                      env.forecast, env.knowledge)
+    return TouchState(
+        places,
+        tuple(int(i) for i in order),
+        np.asarray(observation["imprints"])[touched[order] - 1],
+        np.asarray(observation["belief"], np.float64),
+        np.asarray(observation["available"][:p], bool),
+        env.forecast,
+        env.knowledge,
+    )
 
 
 @dataclass(frozen=True, eq=False)
@@ -371,8 +411,9 @@ def run_policy(env, policy, episodes: int, seed: int = 0, stop: float | None = N
         replicates.append(info["replicate"])
         total, over = 0.0, False
         while not over:
-            if (not observation["available"].any()
-                    or (stop is not None and observation["touches"] > 0 and observation["belief"].max() >= stop)):
+            if not observation["available"].any() or (
+                stop is not None and observation["touches"] > 0 and observation["belief"].max() >= stop
+            ):
                 action = answer
             else:
                 action = int(policy.choose(touch_state(env, observation), rng))
@@ -385,9 +426,15 @@ def run_policy(env, policy, episodes: int, seed: int = 0, stop: float | None = N
         objects.append(info["object"])
         beliefs.append(observation["belief"])
         touched.append(np.asarray(state.touched, np.int64))
-    return PolicyRun(np.asarray(rewards, np.float64), np.asarray(correct, bool), np.asarray(touches, np.int64),
-                     np.asarray(objects, str), np.asarray(replicates, np.int64),
-                     np.asarray(beliefs, np.float64).reshape(-1, len(env.unwrapped.names)), tuple(touched))
+    return PolicyRun(
+        np.asarray(rewards, np.float64),
+        np.asarray(correct, bool),
+        np.asarray(touches, np.int64),
+        np.asarray(objects, str),
+        np.asarray(replicates, np.int64),
+        np.asarray(beliefs, np.float64).reshape(-1, len(env.unwrapped.names)),
+        tuple(touched),
+    )
 
 
 gymnasium.register(ENV_ID, entry_point="classify.experiment.env:TouchEnv")

@@ -39,13 +39,25 @@ from threadpoolctl import threadpool_limits
 from classify.experiment.streams import Stream, recognition_rng
 from classify.policies.episodes import stopping_curve
 from classify.recognizers import touches
-from classify.recognizers.touches import Recognizer, point_groups
 from classify.recognizers.fusion import calibrate, fit_calibration, fuse, touch_sets
+from classify.recognizers.touches import Recognizer, point_groups
 from meshsal.util.registry import Registry
 from tactile.features import describe
 
-__all__ = ["PROTOCOLS", "PROTOCOL_REGISTRY", "Split", "paper_splits", "select_training", "PaperJob", "PaperOutcome", "paper_job", "InstanceData", "InstanceJob", "InstanceOutcome",
-           "instance_job"]
+__all__ = [
+    "PROTOCOLS",
+    "PROTOCOL_REGISTRY",
+    "Split",
+    "paper_splits",
+    "select_training",
+    "PaperJob",
+    "PaperOutcome",
+    "paper_job",
+    "InstanceData",
+    "InstanceJob",
+    "InstanceOutcome",
+    "instance_job",
+]
 
 #: The evaluation protocols (this module's docstring describes them).
 PROTOCOL_REGISTRY = Registry("protocol")
@@ -80,8 +92,10 @@ def paper_splits(labels, groups=None, folds=5, repeats=10, seed=0) -> list[Split
     groups = np.arange(len(labels)) if groups is None else np.asarray(groups)
     per_class = [len(np.unique(groups[labels == c])) for c in np.unique(labels)]
     if min(per_class) < folds:
-        raise ValueError(f"paper protocol: {folds}-fold cross-validation needs at least {folds} points per "
-                         f"object, the smallest object has {min(per_class)}")
+        raise ValueError(
+            f"paper protocol: {folds}-fold cross-validation needs at least {folds} points per "
+            f"object, the smallest object has {min(per_class)}"
+        )
     out = []
     for r in range(repeats):
         kfold = StratifiedGroupKFold(folds, shuffle=True, random_state=seed + r)
@@ -257,8 +271,12 @@ def instance_job(job: InstanceJob) -> InstanceOutcome:
         F = describe(data.train_X, rec.features)
         cal = _calibration(data, F, rec, n_classes)
         model, rows = _fit_selected(data, F, np.arange(len(data.train_y)), rec)
-        proba = [calibrate(touches.posteriors(model, describe(t, rec.features), n_classes), cal) if len(t)
-                 else np.zeros((0, n_classes)) for t in data.test]
+        proba = [
+            calibrate(touches.posteriors(model, describe(t, rec.features), n_classes), cal)
+            if len(t)
+            else np.zeros((0, n_classes))
+            for t in data.test
+        ]
     truth = np.concatenate([np.full(len(p), c) for c, p in enumerate(proba)]).astype(np.int64)
     guess = np.concatenate([np.argmax(p, axis=1) for p in proba]).astype(np.int64)
     confusion = _confusion(truth, guess, n_classes)
@@ -269,8 +287,12 @@ def instance_job(job: InstanceJob) -> InstanceOutcome:
             if len(p) == 0:
                 sets[k - 1] = 0
                 continue
-            chosen = touch_sets(len(p), min(k, len(p)), job.sets_per_k,
-                                recognition_rng(job.seed, job.replicate, k, data.names[c], Stream.TOUCH_SETS))
+            chosen = touch_sets(
+                len(p),
+                min(k, len(p)),
+                job.sets_per_k,
+                recognition_rng(job.seed, job.replicate, k, data.names[c], Stream.TOUCH_SETS),
+            )
             picks = fuse(p, chosen, recognition_rng(job.seed, job.replicate, k, data.names[c], Stream.TIES))
             rates[k - 1, c] = 100.0 * np.mean(picks == c)
             sets[k - 1] = min(sets[k - 1], len(chosen) if len(p) >= k else 0)
@@ -285,7 +307,7 @@ def _plan_stops(job: InstanceJob, proba: list) -> tuple[np.ndarray, np.ndarray]:
     for c, p in enumerate(proba):
         if len(p) == 0 or not job.stop_levels:
             continue
-        beliefs = np.cumprod(np.maximum(p[:job.n_touches], 1e-300), axis=0)
+        beliefs = np.cumprod(np.maximum(p[: job.n_touches], 1e-300), axis=0)
         beliefs /= beliefs.sum(axis=1, keepdims=True)
         rng = recognition_rng(job.seed, job.replicate, 0, job.data.names[c], Stream.EPISODE_TIES)
         right, touches_used = stopping_curve([beliefs], np.array([c]), job.stop_levels, [rng])

@@ -23,18 +23,48 @@ from threadpoolctl import threadpool_limits
 
 from classify.experiment.config import DEFAULT_REPLICATES, FULL_REPLICATES, ExperimentConfig, Settings
 from classify.experiment.protocols import PROTOCOLS
-from classify.experiment.stages import (InstanceStage, ObjectSet, Runtime, instance_recognition, instance_stage,
-                                        load_objects, paper_recognition, paper_stage, policy_recognition)
+from classify.experiment.stages import (
+    InstanceStage,
+    ObjectSet,
+    Runtime,
+    instance_recognition,
+    instance_stage,
+    load_objects,
+    paper_recognition,
+    paper_stage,
+    policy_recognition,
+)
 from classify.reporting import stats
-from classify.reporting.results import (Cell, CellKey, Comparison, ExperimentResult, StoppingCell, format_tables,
-                                       write_outputs)
+from classify.reporting.results import (
+    Cell,
+    CellKey,
+    Comparison,
+    ExperimentResult,
+    StoppingCell,
+    format_tables,
+    write_outputs,
+)
 from classify.runtime import cache as cache_mod
 from classify.runtime.cluster import Inline, worker_pool
 from meshsal.points import METHODS, MODEL_METHODS
 
-__all__ = ["PROTOCOLS", "METHODS", "DEFAULT_REPLICATES", "FULL_REPLICATES", "ExperimentConfig", "Settings",
-           "ObjectSet", "InstanceStage", "Runtime", "load_objects", "instance_stage", "run_experiment", "run_real",
-           "format_tables", "write_outputs"]
+__all__ = [
+    "PROTOCOLS",
+    "METHODS",
+    "DEFAULT_REPLICATES",
+    "FULL_REPLICATES",
+    "ExperimentConfig",
+    "Settings",
+    "ObjectSet",
+    "InstanceStage",
+    "Runtime",
+    "load_objects",
+    "instance_stage",
+    "run_experiment",
+    "run_real",
+    "format_tables",
+    "write_outputs",
+]
 
 
 def _object_sets(n_all: int) -> tuple:
@@ -75,30 +105,66 @@ def _summarize(measurements: list, config: ExperimentConfig, names) -> dict:
             correct, used = m.stopping
             stopping_rates[m.method, m.protocol, m.classifier, m.n_objects] = m.stopping
             for level_index, level in enumerate(config.stop_levels):
-                who = names[:m.n_objects]
+                who = names[: m.n_objects]
                 a = stats.summarize(correct[:, level_index], seed, who)
                 u = stats.summarize(used[:, level_index], seed, who)
-                stopping.append(StoppingCell(m.method, m.protocol, m.classifier, m.n_objects, level, a.mean,
-                                             a.ci_low, a.ci_high, u.mean, u.ci_low, u.ci_high, a.replicates))
-    cells = tuple(Cell(*key, **dataclasses.asdict(stats.summarize(R, seed, names[:key.n_objects])),
-                       touch_sets=sets[key]) for key, R in rates.items())
+                stopping.append(
+                    StoppingCell(
+                        m.method,
+                        m.protocol,
+                        m.classifier,
+                        m.n_objects,
+                        level,
+                        a.mean,
+                        a.ci_low,
+                        a.ci_high,
+                        u.mean,
+                        u.ci_low,
+                        u.ci_high,
+                        a.replicates,
+                    )
+                )
+    cells = tuple(
+        Cell(*key, **dataclasses.asdict(stats.summarize(R, seed, names[: key.n_objects])), touch_sets=sets[key])
+        for key, R in rates.items()
+    )
     comparisons = []
     if len(config.methods) > 1 or config.policies:
         for key, R in rates.items():
             # A model method as the baseline has no paper-protocol rates to compare with.
-            other = key._replace(method=config.baseline,
-                                 protocol="instance" if key.protocol == "sequential" else key.protocol)
+            other = key._replace(
+                method=config.baseline, protocol="instance" if key.protocol == "sequential" else key.protocol
+            )
             if key != other and other in rates:
-                d = stats.paired_difference(R, rates[other], seed, names[:key.n_objects])
-                comparisons.append(Comparison(key.method, config.baseline, *key[1:], d.mean, d.ci_low, d.ci_high,
-                                              d.p_value, d.replicates))
+                d = stats.paired_difference(R, rates[other], seed, names[: key.n_objects])
+                comparisons.append(
+                    Comparison(
+                        key.method, config.baseline, *key[1:], d.mean, d.ci_low, d.ci_high, d.p_value, d.replicates
+                    )
+                )
     confusions = tuple(m.confusion for m in measurements if m.confusion is not None)
-    return {"cells": cells, "comparisons": tuple(comparisons), "confusions": confusions, "selection_kept": kept,
-            "stopping": tuple(stopping), "rates": rates, "stopping_rates": stopping_rates}
+    return {
+        "cells": cells,
+        "comparisons": tuple(comparisons),
+        "confusions": confusions,
+        "selection_kept": kept,
+        "stopping": tuple(stopping),
+        "rates": rates,
+        "stopping_rates": stopping_rates,
+    }
 
 
-def run_experiment(objects=None, config: ExperimentConfig | None = None, *, executor=None, n_jobs: int = 2,
-                   cache_dir="default", out_dir=None, quiet: bool = False, **changes) -> ExperimentResult:
+def run_experiment(
+    objects=None,
+    config: ExperimentConfig | None = None,
+    *,
+    executor=None,
+    n_jobs: int = 2,
+    cache_dir="default",
+    out_dir=None,
+    quiet: bool = False,
+    **changes,
+) -> ExperimentResult:
     """Interest points -> imprints -> recognition, under the paper and instance protocols.
 
     Parameters
@@ -141,7 +207,7 @@ def run_experiment(objects=None, config: ExperimentConfig | None = None, *, exec
     paper_methods = [m for m in config.methods if m not in MODEL_METHODS]
     timings, measurements, stage = {}, [], InstanceStage({})
 
-    with threadpool_limits(1), (nullcontext(executor) if executor is not None else worker_pool(n_jobs)) as pool:
+    with threadpool_limits(1), nullcontext(executor) if executor is not None else worker_pool(n_jobs) as pool:
         # Workers render with one thread each; alone, the stage renders with every core.
         runtime = Runtime(pool, cache_dir, None if isinstance(pool, Inline) else 1, quiet)
         if "paper" in config.protocols and paper_methods:
@@ -150,8 +216,9 @@ def run_experiment(objects=None, config: ExperimentConfig | None = None, *, exec
             timings["paper"] = time.perf_counter() - t0
         if "instance" in config.protocols:
             t0 = time.perf_counter()
-            stage = instance_stage(objects, config.methods, settings, config.replicates, runtime,
-                                   places=bool(config.policies))
+            stage = instance_stage(
+                objects, config.methods, settings, config.replicates, runtime, places=bool(config.policies)
+            )
             timings["instance_points_and_imprints"] = time.perf_counter() - t0
             t0 = time.perf_counter()
             for m in config.methods:
@@ -166,11 +233,21 @@ def run_experiment(objects=None, config: ExperimentConfig | None = None, *, exec
 
     summary = _summarize(measurements, config, objects.names)
     timings["total"] = time.perf_counter() - started
-    run_settings = {"objects": list(objects.names), **config.to_json(), "libraries": cache_mod.library_versions(),
-                    "cache_dir": None if cache_dir is None else str(cache_dir),
-                    "learned_channel_weights": [m.channel_weights for m in stage.models]}
-    result = ExperimentResult(object_names=objects.names, object_sets=_object_sets(len(objects)),
-                              classifiers=config.classifiers, settings=run_settings, timings=timings, **summary)
+    run_settings = {
+        "objects": list(objects.names),
+        **config.to_json(),
+        "libraries": cache_mod.library_versions(),
+        "cache_dir": None if cache_dir is None else str(cache_dir),
+        "learned_channel_weights": [m.channel_weights for m in stage.models],
+    }
+    result = ExperimentResult(
+        object_names=objects.names,
+        object_sets=_object_sets(len(objects)),
+        classifiers=config.classifiers,
+        settings=run_settings,
+        timings=timings,
+        **summary,
+    )
     if out_dir is not None:
         write_outputs(result, out_dir)
         for r, model in enumerate(stage.models):
@@ -178,8 +255,15 @@ def run_experiment(objects=None, config: ExperimentConfig | None = None, *, exec
     return result
 
 
-def run_real(imprint_set, config: ExperimentConfig | None = None, *, out_dir=None, quiet: bool = False,
-             n_jobs: int = 2, **changes) -> ExperimentResult:
+def run_real(
+    imprint_set,
+    config: ExperimentConfig | None = None,
+    *,
+    out_dir=None,
+    quiet: bool = False,
+    n_jobs: int = 2,
+    **changes,
+) -> ExperimentResult:
     """Recognition on a measured ``tactile.ImprintSet``, in the paper's Table 2 layout.
 
     The paper protocol over the set's imprints, folds grouped by (object,
@@ -200,8 +284,10 @@ def run_real(imprint_set, config: ExperimentConfig | None = None, *, out_dir=Non
     points = np.asarray(imprint_set.point_ids, np.int64)
     names = tuple(imprint_set.object_names)
     if len(np.unique(y)) < 2:
-        raise ValueError(f"{imprint_set.source or 'imprint set'}: recognition needs imprints of at least "
-                         f"two objects, found {len(np.unique(y))}")
+        raise ValueError(
+            f"{imprint_set.source or 'imprint set'}: recognition needs imprints of at least "
+            f"two objects, found {len(np.unique(y))}"
+        )
     measurements = []
     with threadpool_limits(1), worker_pool(n_jobs) as pool:
         runtime = Runtime(pool, None, None, quiet)
@@ -209,12 +295,25 @@ def run_real(imprint_set, config: ExperimentConfig | None = None, *, out_dir=Non
             mask = y < n
             measurements += paper_recognition("real", X[mask], y[mask], points[mask], names[:n], config, runtime)
     summary = _summarize(measurements, config.replace(methods=("real",)), names)
-    settings = {"real": str(imprint_set.source), "n_imprints": int(len(y)), "folds": config.folds,
-                "repeats": config.repeats, "seed": config.settings.seed, "threshold": config.threshold,
-                "classifiers": list(config.classifiers), "features": config.features,
-                "sensor": repr(imprint_set.sensor)}
-    result = ExperimentResult(object_names=names, object_sets=_object_sets(len(names)), classifiers=config.classifiers,
-                              settings=settings, timings={"total": time.perf_counter() - started}, **summary)
+    settings = {
+        "real": str(imprint_set.source),
+        "n_imprints": int(len(y)),
+        "folds": config.folds,
+        "repeats": config.repeats,
+        "seed": config.settings.seed,
+        "threshold": config.threshold,
+        "classifiers": list(config.classifiers),
+        "features": config.features,
+        "sensor": repr(imprint_set.sensor),
+    }
+    result = ExperimentResult(
+        object_names=names,
+        object_sets=_object_sets(len(names)),
+        classifiers=config.classifiers,
+        settings=settings,
+        timings={"total": time.perf_counter() - started},
+        **summary,
+    )
     if out_dir is not None:
         write_outputs(result, out_dir)
     return result

@@ -34,9 +34,21 @@ from classify.experiment.survey import Survey, touch_survey
 from classify.policies.knowledge import Places, PlaceSample
 from classify.runtime import cache as cache_mod
 
-__all__ = ["Settings", "TouchSample", "PaperSampleTask", "SampleTask", "InstanceSamples", "nominal_mesh",
-           "mesh_hash", "instance_spec", "point_options", "method_points", "paper_sample", "place_sample",
-           "instance_samples"]
+__all__ = [
+    "Settings",
+    "TouchSample",
+    "PaperSampleTask",
+    "SampleTask",
+    "InstanceSamples",
+    "nominal_mesh",
+    "mesh_hash",
+    "instance_spec",
+    "point_options",
+    "method_points",
+    "paper_sample",
+    "place_sample",
+    "instance_samples",
+]
 
 
 @dataclass(frozen=True, eq=False)
@@ -136,8 +148,9 @@ def nominal_mesh(mesh, settings: Settings, units_mm: float | None = None):
     if settings.size_mm is not None:
         return scale_to_principal(mesh, settings.size_mm)
     if units_mm is None:
-        raise ValueError(f"{mesh.name or 'mesh'}: its units are not known, so it has no real size; give a size "
-                         f"(--size-mm) instead")
+        raise ValueError(
+            f"{mesh.name or 'mesh'}: its units are not known, so it has no real size; give a size (--size-mm) instead"
+        )
     return to_millimetres(mesh, units_mm)
 
 
@@ -150,8 +163,12 @@ def instance_spec(settings: Settings, name: str, replicate: int, index: int):
     """The pose, size and paint of instance ``index`` of replicate ``replicate`` of object ``name``."""
     from meshsal.objects.instances import draw_instance
 
-    return draw_instance(instance_rng(settings.seed, name, replicate, index, Stream.INSTANCE), settings.scale_spread,
-                         settings.hue_deg, settings.brightness_spread)
+    return draw_instance(
+        instance_rng(settings.seed, name, replicate, index, Stream.INSTANCE),
+        settings.scale_spread,
+        settings.hue_deg,
+        settings.brightness_spread,
+    )
 
 
 def point_options(settings: Settings, seed: int, threads: int | None):
@@ -159,16 +176,23 @@ def point_options(settings: Settings, seed: int, threads: int | None):
     from meshsal.points import PointOptions
 
     # The pad's real width: instances differ in size, the sensor does not.
-    return PointOptions(n=settings.n_points, seed=seed, pad_width=settings.sensor.width_mm,
-                        size=settings.view_size or PointOptions.size, threads=threads, quiet=True)
+    return PointOptions(
+        n=settings.n_points,
+        seed=seed,
+        pad_width=settings.sensor.width_mm,
+        size=settings.view_size or PointOptions.size,
+        threads=threads,
+        quiet=True,
+    )
 
 
 def _point_seed(settings: Settings, name: str, replicate: int, index: int) -> int:
     return int(instance_rng(settings.seed, name, replicate, index, Stream.POINTS).integers(2**31 - 1))
 
 
-def method_points(mesh, methods, options, *, model=None, surveyed: Survey | None = None, vertex_saliency=None,
-                  seen=None) -> dict:
+def method_points(
+    mesh, methods, options, *, model=None, surveyed: Survey | None = None, vertex_saliency=None, seen=None
+) -> dict:
     """Every method's points on one mesh, its rendering and mesh saliency computed once.
 
     The per-mesh stage that the experiment and the corpus batch
@@ -185,18 +209,26 @@ def method_points(mesh, methods, options, *, model=None, surveyed: Survey | None
 
     vertex_saliency = mesh_saliency(mesh) if vertex_saliency is None else vertex_saliency
     by_survey = surveyed is not None and "learned" in methods
-    picked = points_by_method(mesh, [m for m in methods if not (by_survey and m == "learned")], options,
-                              model=model, vertex_saliency=vertex_saliency, seen=seen)
+    picked = points_by_method(
+        mesh,
+        [m for m in methods if not (by_survey and m == "learned")],
+        options,
+        model=model,
+        vertex_saliency=vertex_saliency,
+        seen=seen,
+    )
     if by_survey:
-        picked["learned"] = learned_points(mesh, surveyed.pool, surveyed.features, model, vertex_saliency,
-                                           n=options.n, pad_width=options.pad_width)
+        picked["learned"] = learned_points(
+            mesh, surveyed.pool, surveyed.features, model, vertex_saliency, n=options.n, pad_width=options.pad_width
+        )
     return {m: picked[m] for m in methods}
 
 
 def _key(kind, nominal, name, method, settings, *parts):
     code = cache_mod.code_fingerprint("meshsal", "tactile") + cache_mod.file_fingerprint(__file__)
-    return cache_mod.cache_key(kind, mesh_hash(nominal), name, method, settings.key(), list(parts), code,
-                               cache_mod.library_versions())
+    return cache_mod.cache_key(
+        kind, mesh_hash(nominal), name, method, settings.key(), list(parts), code, cache_mod.library_versions()
+    )
 
 
 def paper_sample(task: PaperSampleTask) -> TouchSample:
@@ -208,14 +240,19 @@ def paper_sample(task: PaperSampleTask) -> TouchSample:
     def compute():
         from meshsal.points import interest_points
 
-        pts = interest_points(task.nominal, method=task.method,
-                              options=point_options(settings, _point_seed(settings, task.name, 0, 0), task.threads))
+        pts = interest_points(
+            task.nominal,
+            method=task.method,
+            options=point_options(settings, _point_seed(settings, task.name, 0, 0), task.threads),
+        )
         images = tactile.imprints(task.nominal, pts.positions, pts.normals, settings.sensor)
-        return TouchSample(np.asarray(pts.positions, np.float64), np.asarray(pts.normals, np.float64),
-                           np.asarray(images, np.float32)).to_arrays()
+        return TouchSample(
+            np.asarray(pts.positions, np.float64), np.asarray(pts.normals, np.float64), np.asarray(images, np.float32)
+        ).to_arrays()
 
-    return TouchSample.from_arrays(cache_mod.cached(task.cache_dir, _key("paper", task.nominal, task.name,
-                                                                         task.method, settings), compute))
+    return TouchSample.from_arrays(
+        cache_mod.cached(task.cache_dir, _key("paper", task.nominal, task.name, task.method, settings), compute)
+    )
 
 
 def _sessions(mesh, pts, task: SampleTask, scene) -> TouchSample:
@@ -224,12 +261,23 @@ def _sessions(mesh, pts, task: SampleTask, scene) -> TouchSample:
 
     settings = task.settings
     sessions = 1 if task.index == 0 else settings.train_sessions
-    stack = [tactile.acquire(mesh, pts.positions, pts.normals, settings.sensor, settings.perturbation,
-                             instance_rng(settings.seed, task.name, task.replicate, task.index, Stream.SESSION, s),
-                             scene=scene)
-             for s in range(sessions)]
-    return TouchSample(np.asarray(pts.positions, np.float64), np.asarray(pts.normals, np.float64),
-                       np.asarray(stack, np.float32).reshape(sessions, len(pts), *stack[0].shape[1:]))
+    stack = [
+        tactile.acquire(
+            mesh,
+            pts.positions,
+            pts.normals,
+            settings.sensor,
+            settings.perturbation,
+            instance_rng(settings.seed, task.name, task.replicate, task.index, Stream.SESSION, s),
+            scene=scene,
+        )
+        for s in range(sessions)
+    ]
+    return TouchSample(
+        np.asarray(pts.positions, np.float64),
+        np.asarray(pts.normals, np.float64),
+        np.asarray(stack, np.float32).reshape(sessions, len(pts), *stack[0].shape[1:]),
+    )
 
 
 def place_sample(mesh, seen, vertex_saliency, task: SampleTask, scene) -> PlaceSample:
@@ -252,18 +300,22 @@ def place_sample(mesh, seen, vertex_saliency, task: SampleTask, scene) -> PlaceS
     ids = candidate_places(mesh, vertex_saliency, settings.n_points)
     positions, normals = mesh.vertices[ids], vn[ids]
     pad = settings.sensor.width_mm
-    places = Places(ids, positions, normals,
-                    point_features(mesh, seen.views, seen.results, attention_maps(seen, "equal"), vertex_saliency, ids,
-                                   0.5 * pad),
-                    touchable(mesh, positions, normals, pad, scene=scene))
+    places = Places(
+        ids,
+        positions,
+        normals,
+        point_features(mesh, seen.views, seen.results, attention_maps(seen, "equal"), vertex_saliency, ids, 0.5 * pad),
+        touchable(mesh, positions, normals, pad, scene=scene),
+    )
     rng = instance_rng(settings.seed, task.name, task.replicate, task.index, Stream.SESSION, 0)
     imprints = tactile.acquire(mesh, positions, normals, settings.sensor, settings.perturbation, rng, scene=scene)
     return PlaceSample(places, np.asarray(imprints, np.float32)[None])
 
 
 def _model_hash(model) -> str:
-    return cache_mod.hash_arrays(model.mean, model.scale, model.coef, np.array([model.intercept]),
-                                 np.array(list(model.channel_weights.values())))
+    return cache_mod.hash_arrays(
+        model.mean, model.scale, model.coef, np.array([model.intercept]), np.array(list(model.channel_weights.values()))
+    )
 
 
 def instance_samples(task: SampleTask) -> InstanceSamples:
@@ -290,8 +342,19 @@ def instance_samples(task: SampleTask) -> InstanceSamples:
     settings = task.settings
     methods = list(dict.fromkeys(task.methods))
     model_part = [] if task.model is None else [_model_hash(task.model)]
-    keys = {m: _key("instance", task.nominal, task.name, m, settings, task.replicate, task.index,
-                    *(model_part if m in MODEL_METHODS else [])) for m in methods}
+    keys = {
+        m: _key(
+            "instance",
+            task.nominal,
+            task.name,
+            m,
+            settings,
+            task.replicate,
+            task.index,
+            *(model_part if m in MODEL_METHODS else []),
+        )
+        for m in methods
+    }
     survey_key = _key("survey", task.nominal, task.name, "", settings, task.replicate, task.index)
     places_key = _key("places", task.nominal, task.name, "", settings, task.replicate, task.index)
     found = {m: cache_mod.load(task.cache_dir, key) for m, key in keys.items()}
@@ -310,21 +373,29 @@ def instance_samples(task: SampleTask) -> InstanceSamples:
     mesh = make_instance(task.nominal, instance_spec(settings, task.name, task.replicate, task.index))
     vertex_saliency = mesh_saliency(mesh)
     seen = None
-    if (any(m in ATTENTION_METHODS for m in missing) or (task.survey and survey is None)
-            or (task.places and places is None)):
-        seen = view_channels(mesh, size=settings.view_size or 128, vertex_saliency=vertex_saliency,
-                             threads=task.threads)
+    if (
+        any(m in ATTENTION_METHODS for m in missing)
+        or (task.survey and survey is None)
+        or (task.places and places is None)
+    ):
+        seen = view_channels(
+            mesh, size=settings.view_size or 128, vertex_saliency=vertex_saliency, threads=task.threads
+        )
     scene = embree_scene(mesh)
     options = point_options(settings, _point_seed(settings, task.name, task.replicate, task.index), task.threads)
-    picked = method_points(mesh, missing, options, model=task.model, surveyed=task.surveyed,
-                           vertex_saliency=vertex_saliency, seen=seen)
+    picked = method_points(
+        mesh, missing, options, model=task.model, surveyed=task.surveyed, vertex_saliency=vertex_saliency, seen=seen
+    )
     for m in missing:
         by_method[m] = _sessions(mesh, picked[m], task, scene)
         cache_mod.store(task.cache_dir, keys[m], by_method[m].to_arrays())
     if task.survey and survey is None:
         # The test instance is never touched before the test.
-        rng = (instance_rng(settings.seed, task.name, task.replicate, task.index, Stream.SURVEY)
-               if task.index >= 1 else None)
+        rng = (
+            instance_rng(settings.seed, task.name, task.replicate, task.index, Stream.SURVEY)
+            if task.index >= 1
+            else None
+        )
         survey = touch_survey(mesh, seen, vertex_saliency, settings, scene, rng)
         cache_mod.store(task.cache_dir, survey_key, survey.to_arrays())
     if task.places and places is None:

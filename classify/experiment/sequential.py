@@ -98,7 +98,7 @@ def policy_job(job: PolicyJob) -> PolicyOutcome:
                 ties = recognition_rng(job.seed, job.replicate, 0, job.names[c], Stream.EPISODE_TIES)
                 right, used = stopping_curve([episode.beliefs], np.array([c]), job.stop_levels, [ties])
                 stop_correct[q, :, c], stop_touches[q, :, c] = 100.0 * right[:, 0], used[:, 0]
-                touched[q, c, :len(episode.vertex_ids)] = episode.vertex_ids
+                touched[q, c, : len(episode.vertex_ids)] = episode.vertex_ids
                 seconds.extend(episode.choice_s)
             choice_s[q] = float(np.median(seconds)) if seconds else 0.0
     return PolicyOutcome(rates, stop_correct, stop_touches, touched, choice_s)
@@ -111,12 +111,23 @@ def policy_jobs(stage, objects, n: int, config: ExperimentConfig) -> list:
     names = tuple(objects.names[i] for i in order)
     jobs = []
     for r in range(config.replicates):
-        training = {(objects.names[i], j): stage.places[r, i, j] for i in order
-                    for j in range(1, settings.train_instances + 1)}
+        training = {
+            (objects.names[i], j): stage.places[r, i, j] for i in order for j in range(1, settings.train_instances + 1)
+        }
         tests = tuple(stage.places[r, i, 0] for i in order)
         for c in config.classifiers:
-            jobs.append(PolicyJob(training, tests, names, Recognizer(c, False, config.params,
-                                                                               config.threshold, config.features),
-                                  config.policies, settings.n_points, 0.5 * settings.sensor.width_mm, settings.seed,
-                                  r, config.stop_levels))
+            jobs.append(
+                PolicyJob(
+                    training,
+                    tests,
+                    names,
+                    Recognizer(c, False, config.params, config.threshold, config.features),
+                    config.policies,
+                    settings.n_points,
+                    0.5 * settings.sensor.width_mm,
+                    settings.seed,
+                    r,
+                    config.stop_levels,
+                )
+            )
     return jobs

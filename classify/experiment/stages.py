@@ -19,10 +19,26 @@ import numpy as np
 from threadpoolctl import threadpool_limits
 
 from classify.experiment.config import ExperimentConfig, Settings
-from classify.experiment.protocols import (InstanceData, InstanceJob, InstanceOutcome, PaperJob, PaperOutcome,
-                                           Recognizer, instance_job, paper_job, paper_splits, point_groups)
-from classify.experiment.samples import (PaperSampleTask, SampleTask, TouchSample, instance_samples, nominal_mesh,
-                                         paper_sample)
+from classify.experiment.protocols import (
+    InstanceData,
+    InstanceJob,
+    InstanceOutcome,
+    PaperJob,
+    PaperOutcome,
+    Recognizer,
+    instance_job,
+    paper_job,
+    paper_splits,
+    point_groups,
+)
+from classify.experiment.samples import (
+    PaperSampleTask,
+    SampleTask,
+    TouchSample,
+    instance_samples,
+    nominal_mesh,
+    paper_sample,
+)
 from classify.experiment.survey import fit_replicate_model
 from classify.reporting.results import ConfusionMatrix
 from classify.runtime import cache as cache_mod
@@ -30,8 +46,18 @@ from meshsal.points import MODEL_METHODS
 from meshsal.util.errors import naming
 from meshsal.util.progress import progress
 
-__all__ = ["ObjectSet", "load_objects", "Runtime", "SampleKey", "InstanceStage", "paper_stage", "instance_stage",
-           "Measurement", "paper_recognition", "instance_recognition"]
+__all__ = [
+    "ObjectSet",
+    "load_objects",
+    "Runtime",
+    "SampleKey",
+    "InstanceStage",
+    "paper_stage",
+    "instance_stage",
+    "Measurement",
+    "paper_recognition",
+    "instance_recognition",
+]
 
 
 @dataclass(frozen=True, eq=False)
@@ -151,13 +177,16 @@ def _fit_model(surveys: dict):
 def paper_stage(objects: ObjectSet, methods, settings: Settings, runtime: Runtime) -> dict:
     """Each object's paper-protocol sample per method: ``{(method, object index): TouchSample}``."""
     pairs = [(m, i) for m in methods for i in range(len(objects))]
-    tasks = [PaperSampleTask(objects.nominal[i], objects.names[i], m, settings, runtime.cache_dir, runtime.threads)
-             for m, i in pairs]
+    tasks = [
+        PaperSampleTask(objects.nominal[i], objects.names[i], m, settings, runtime.cache_dir, runtime.threads)
+        for m, i in pairs
+    ]
     return dict(zip(pairs, runtime.map(_paper_sample, tasks, "paper: points+imprints")))
 
 
-def instance_stage(objects: ObjectSet, methods, settings: Settings, replicates: int, runtime: Runtime,
-                   places: bool = False) -> InstanceStage:
+def instance_stage(
+    objects: ObjectSet, methods, settings: Settings, replicates: int, runtime: Runtime, places: bool = False
+) -> InstanceStage:
     """Every instance's points and imprints for every method, and each replicate's touch model.
 
     One task per instance computes all methods that need no model, sharing
@@ -168,24 +197,43 @@ def instance_stage(objects: ObjectSet, methods, settings: Settings, replicates: 
     """
     plain = tuple(m for m in methods if m not in MODEL_METHODS)
     learned = tuple(m for m in methods if m in MODEL_METHODS)
-    where = [(r, i, j) for r in range(replicates) for i in range(len(objects))
-             for j in range(settings.train_instances + 1)]
+    where = [
+        (r, i, j) for r in range(replicates) for i in range(len(objects)) for j in range(settings.train_instances + 1)
+    ]
 
     def task(r, i, j, methods, **more):
-        return SampleTask(objects.nominal[i], objects.names[i], methods, settings, r, j, cache_dir=runtime.cache_dir,
-                          threads=runtime.threads, **more)
+        return SampleTask(
+            objects.nominal[i],
+            objects.names[i],
+            methods,
+            settings,
+            r,
+            j,
+            cache_dir=runtime.cache_dir,
+            threads=runtime.threads,
+            **more,
+        )
 
-    done = runtime.map(_instance_samples, [task(r, i, j, plain, survey=bool(learned), places=places)
-                                           for r, i, j in where], "instances: points+imprints")
+    done = runtime.map(
+        _instance_samples,
+        [task(r, i, j, plain, survey=bool(learned), places=places) for r, i, j in where],
+        "instances: points+imprints",
+    )
     samples = {SampleKey(r, m, i, j): out.by_method[m] for (r, i, j), out in zip(where, done) for m in plain}
     found = {(r, i, j): out.places for (r, i, j), out in zip(where, done)} if places else None
     if not learned:
         return InstanceStage(samples, (), found)
     surveys = {(r, i, j): out.survey for (r, i, j), out in zip(where, done)}
-    models = runtime.map(_fit_model, [{(objects.names[i], j): surveys[r, i, j] for q, i, j in where if q == r}
-                                      for r in range(replicates)], "instances: touch models")
-    done = runtime.map(_instance_samples, [task(r, i, j, learned, model=models[r], surveyed=surveys[r, i, j])
-                                           for r, i, j in where], "instances: learned points+imprints")
+    models = runtime.map(
+        _fit_model,
+        [{(objects.names[i], j): surveys[r, i, j] for q, i, j in where if q == r} for r in range(replicates)],
+        "instances: touch models",
+    )
+    done = runtime.map(
+        _instance_samples,
+        [task(r, i, j, learned, model=models[r], surveyed=surveys[r, i, j]) for r, i, j in where],
+        "instances: learned points+imprints",
+    )
     samples.update({SampleKey(r, m, i, j): out.by_method[m] for (r, i, j), out in zip(where, done) for m in learned})
     return InstanceStage(samples, tuple(models), found)
 
@@ -217,14 +265,17 @@ class Measurement:
 
 
 def _outcome_arrays(outcomes) -> dict:
-    return {f"{i}/{f.name}": np.asarray(getattr(o, f.name)) for i, o in enumerate(outcomes)
-            for f in dataclasses.fields(o)}
+    return {
+        f"{i}/{f.name}": np.asarray(getattr(o, f.name)) for i, o in enumerate(outcomes) for f in dataclasses.fields(o)
+    }
 
 
 def _outcomes_from(arrays, cls, count):
     names = [f.name for f in dataclasses.fields(cls)]
-    return [cls(**{n: (float(arrays[f"{i}/{n}"]) if n == "kept" else arrays[f"{i}/{n}"]) for n in names})
-            for i in range(count)]
+    return [
+        cls(**{n: (float(arrays[f"{i}/{n}"]) if n == "kept" else arrays[f"{i}/{n}"]) for n in names})
+        for i in range(count)
+    ]
 
 
 def _run_jobs(runtime: Runtime, key: str, cls, run, jobs: list, desc: str) -> list:
@@ -243,8 +294,9 @@ def _recognizers(config: ExperimentConfig):
     return [(c, s) for c in config.classifiers for s in (False, True)]
 
 
-def paper_recognition(method: str, X, y, points, names, config: ExperimentConfig, runtime: Runtime,
-                      order=None) -> list[Measurement]:
+def paper_recognition(
+    method: str, X, y, points, names, config: ExperimentConfig, runtime: Runtime, order=None
+) -> list[Measurement]:
     """The paper protocol on one pool of imprints: one :class:`Measurement` per classifier and selection.
 
     Label c of the pool is object ``order[c]`` of ``names`` (default: the
@@ -257,40 +309,72 @@ def paper_recognition(method: str, X, y, points, names, config: ExperimentConfig
     seed = config.settings.seed
     splits = paper_splits(y, groups, config.folds, config.repeats, seed)
     jobs = [(c, s, r) for c, s in _recognizers(config) for r in range(config.repeats)]
-    work = [PaperJob(X, y, groups, tuple(x for x in splits if x.repeat == r),
-                     Recognizer(c, s, config.params, config.threshold, config.features), n) for c, s, r in jobs]
-    key = _recognition_key("paper", (X, y, groups), [config.folds, config.repeats, seed, config.threshold,
-                                                     config.params, jobs, config.features])
+    work = [
+        PaperJob(
+            X,
+            y,
+            groups,
+            tuple(x for x in splits if x.repeat == r),
+            Recognizer(c, s, config.params, config.threshold, config.features),
+            n,
+        )
+        for c, s, r in jobs
+    ]
+    key = _recognition_key(
+        "paper",
+        (X, y, groups),
+        [config.folds, config.repeats, seed, config.threshold, config.params, jobs, config.features],
+    )
     outcomes = _run_jobs(runtime, key, PaperOutcome, paper_job, work, f"paper: {method}, {n} objects")
     out = []
     for c, s in _recognizers(config):
         mine = [o for (cj, sj, _), o in zip(jobs, outcomes) if (cj, sj) == (c, s)]
-        confusion = ConfusionMatrix(method, "paper", c, n, s, tuple(names),
-                                    sum(o.confusion for o in mine)[np.ix_(back, back)])
-        out.append(Measurement(method, "paper", c, n, s, {1: np.stack([o.rates for o in mine])[:, back]}, {1: 0},
-                               confusion, float(np.mean([o.kept for o in mine])) if s else None))
+        confusion = ConfusionMatrix(
+            method, "paper", c, n, s, tuple(names), sum(o.confusion for o in mine)[np.ix_(back, back)]
+        )
+        out.append(
+            Measurement(
+                method,
+                "paper",
+                c,
+                n,
+                s,
+                {1: np.stack([o.rates for o in mine])[:, back]},
+                {1: 0},
+                confusion,
+                float(np.mean([o.kept for o in mine])) if s else None,
+            )
+        )
     return out
 
 
-def instance_data(stage: InstanceStage, replicate: int, method: str, objects: ObjectSet, order,
-                  settings: Settings) -> InstanceData:
+def instance_data(
+    stage: InstanceStage, replicate: int, method: str, objects: ObjectSet, order, settings: Settings
+) -> InstanceData:
     """Replicate ``replicate``'s imprints of the objects ``order`` (label c is object ``order[c]``)."""
     X, y, inst, point = [], [], [], []
     for c, i in enumerate(order):
         for j in range(1, settings.train_instances + 1):
-            imprints = stage.samples[SampleKey(replicate, method, i, j)].imprints    # (sessions, k, rows, cols)
+            imprints = stage.samples[SampleKey(replicate, method, i, j)].imprints  # (sessions, k, rows, cols)
             sessions, k = imprints.shape[:2]
             X.append(imprints.reshape(-1, *imprints.shape[2:]))
             y.append(np.full(sessions * k, c))
             inst.append(np.full(sessions * k, j))
             point.append(np.tile(np.arange(k), sessions))
     test = tuple(stage.samples[SampleKey(replicate, method, i, 0)].imprints[0] for i in order)
-    return InstanceData(np.concatenate(X), np.concatenate(y).astype(np.int64), np.concatenate(inst).astype(np.int64),
-                        np.concatenate(point).astype(np.int64), test, tuple(objects.names[i] for i in order))
+    return InstanceData(
+        np.concatenate(X),
+        np.concatenate(y).astype(np.int64),
+        np.concatenate(inst).astype(np.int64),
+        np.concatenate(point).astype(np.int64),
+        test,
+        tuple(objects.names[i] for i in order),
+    )
 
 
-def instance_recognition(method: str, n: int, stage: InstanceStage, objects: ObjectSet, config: ExperimentConfig,
-                         runtime: Runtime) -> list[Measurement]:
+def instance_recognition(
+    method: str, n: int, stage: InstanceStage, objects: ObjectSet, config: ExperimentConfig, runtime: Runtime
+) -> list[Measurement]:
     """The instance protocol for one method on the first ``n`` objects: one :class:`Measurement` per
     classifier and selection."""
     settings = config.settings
@@ -299,50 +383,114 @@ def instance_recognition(method: str, n: int, stage: InstanceStage, objects: Obj
     back = np.argsort(order)
     data = [instance_data(stage, r, method, objects, order, settings) for r in range(config.replicates)]
     jobs = [(r, c, s) for r in range(config.replicates) for c, s in _recognizers(config)]
-    work = [InstanceJob(data[r], Recognizer(c, s, config.params, config.threshold, config.features),
-                        settings.n_points, config.touch_sets_per_object, settings.seed, r, config.stop_levels)
-            for r, c, s in jobs]
+    work = [
+        InstanceJob(
+            data[r],
+            Recognizer(c, s, config.params, config.threshold, config.features),
+            settings.n_points,
+            config.touch_sets_per_object,
+            settings.seed,
+            r,
+            config.stop_levels,
+        )
+        for r, c, s in jobs
+    ]
     arrays = [a for d in data for a in (d.train_X, d.train_y, d.train_instance, d.train_point, *d.test)]
-    key = _recognition_key("instance", arrays, [settings.key(), config.threshold, config.params, jobs,
-                                                config.touch_sets_per_object, sorted(names), config.features,
-                                                config.stop_levels])
+    key = _recognition_key(
+        "instance",
+        arrays,
+        [
+            settings.key(),
+            config.threshold,
+            config.params,
+            jobs,
+            config.touch_sets_per_object,
+            sorted(names),
+            config.features,
+            config.stop_levels,
+        ],
+    )
     outcomes = _run_jobs(runtime, key, InstanceOutcome, instance_job, work, f"instances: {method}, {n} objects")
     out = []
     for c, s in _recognizers(config):
         mine = [o for (_, cj, sj), o in zip(jobs, outcomes) if (cj, sj) == (c, s)]
-        stack = np.stack([o.rates for o in mine])[:, :, back]                  # (replicates, k, objects)
+        stack = np.stack([o.rates for o in mine])[:, :, back]  # (replicates, k, objects)
         rates = {k: stack[:, k - 1, :] for k in range(1, settings.n_points + 1)}
         sets = {k: int(min(o.sets[k - 1] for o in mine)) for k in range(1, settings.n_points + 1)}
-        confusion = ConfusionMatrix(method, "instance", c, n, s, names,
-                                    sum(o.confusion for o in mine)[np.ix_(back, back)])
-        stopping = (np.stack([o.stop_correct for o in mine])[:, :, back],
-                    np.stack([o.stop_touches for o in mine])[:, :, back])
-        out.append(Measurement(method, "instance", c, n, s, rates, sets, confusion,
-                               float(np.mean([o.kept for o in mine])) if s else None, stopping))
+        confusion = ConfusionMatrix(
+            method, "instance", c, n, s, names, sum(o.confusion for o in mine)[np.ix_(back, back)]
+        )
+        stopping = (
+            np.stack([o.stop_correct for o in mine])[:, :, back],
+            np.stack([o.stop_touches for o in mine])[:, :, back],
+        )
+        out.append(
+            Measurement(
+                method,
+                "instance",
+                c,
+                n,
+                s,
+                rates,
+                sets,
+                confusion,
+                float(np.mean([o.kept for o in mine])) if s else None,
+                stopping,
+            )
+        )
     return out
 
 
-def policy_recognition(n: int, stage: InstanceStage, objects: ObjectSet, config: ExperimentConfig,
-                       runtime: Runtime) -> list[Measurement]:
+def policy_recognition(
+    n: int, stage: InstanceStage, objects: ObjectSet, config: ExperimentConfig, runtime: Runtime
+) -> list[Measurement]:
     """The sequential protocol on the first ``n`` objects: one :class:`Measurement` per policy and classifier."""
     from classify.experiment.sequential import PolicyOutcome, policy_job, policy_jobs
 
     jobs = policy_jobs(stage, objects, n, config)
     back = np.argsort(objects.by_name(n))
-    arrays = [a for job in jobs[::len(config.classifiers)] for sample in (*job.training.values(), *job.tests)
-              for a in sample.to_arrays().values()]
-    key = _recognition_key("sequential", arrays, [config.settings.key(), config.params, config.features,
-                                                  list(config.policies), list(config.classifiers),
-                                                  config.stop_levels, config.replicates])
+    arrays = [
+        a
+        for job in jobs[:: len(config.classifiers)]
+        for sample in (*job.training.values(), *job.tests)
+        for a in sample.to_arrays().values()
+    ]
+    key = _recognition_key(
+        "sequential",
+        arrays,
+        [
+            config.settings.key(),
+            config.params,
+            config.features,
+            list(config.policies),
+            list(config.classifiers),
+            config.stop_levels,
+            config.replicates,
+        ],
+    )
     outcomes = _run_jobs(runtime, key, PolicyOutcome, policy_job, jobs, f"policies, {n} objects")
     out = []
     for q, policy in enumerate(config.policies):
         for c in config.classifiers:
             mine = [o for job, o in zip(jobs, outcomes) if job.recognizer.classifier == c]
-            stack = np.stack([o.rates[q] for o in mine])[:, :, back]                 # (replicates, k, objects)
+            stack = np.stack([o.rates[q] for o in mine])[:, :, back]  # (replicates, k, objects)
             K = stack.shape[1]
-            stopping = (np.stack([o.stop_correct[q] for o in mine])[:, :, back],
-                        np.stack([o.stop_touches[q] for o in mine])[:, :, back])
-            out.append(Measurement(policy, "sequential", c, n, False, {k: stack[:, k - 1, :] for k in range(1, K + 1)},
-                                   dict.fromkeys(range(1, K + 1), 1), None, None, stopping))
+            stopping = (
+                np.stack([o.stop_correct[q] for o in mine])[:, :, back],
+                np.stack([o.stop_touches[q] for o in mine])[:, :, back],
+            )
+            out.append(
+                Measurement(
+                    policy,
+                    "sequential",
+                    c,
+                    n,
+                    False,
+                    {k: stack[:, k - 1, :] for k in range(1, K + 1)},
+                    dict.fromkeys(range(1, K + 1), 1),
+                    None,
+                    None,
+                    stopping,
+                )
+            )
     return out

@@ -60,13 +60,16 @@ def instance_rng(seed: int, name: str, replicate: int, index: int, stream: Strea
     >>> a == instance_rng(0, "cow", 1, 2, Stream.SESSION, 0).random(), a == b
     (True, False)
     """
-    return np.random.default_rng([int(seed), name_seed(name), int(replicate), int(index), int(stream),
-                                  *(int(m) for m in more)])
+    return np.random.default_rng(
+        [int(seed), name_seed(name), int(replicate), int(index), int(stream), *(int(m) for m in more)]
+    )
 
 
-def recognition_rng(seed: int, replicate: int, touches: int, name: str, stream: Stream,
-                    *more: int) -> np.random.Generator:
+def recognition_rng(
+    seed: int, replicate: int, touches: int, name: str, stream: Stream, *more: int
+) -> np.random.Generator:
     """The generator of one ``stream`` of the recognition of object ``name``'s test instance after ``touches``
     (0 for a whole episode)."""
-    return np.random.default_rng([int(seed), int(replicate), int(touches), name_seed(name), int(stream),
-                                  *(int(m) for m in more)])
+    return np.random.default_rng(
+        [int(seed), int(replicate), int(touches), name_seed(name), int(stream), *(int(m) for m in more)]
+    )

@@ -68,18 +68,27 @@ def touch_survey(mesh, seen, vertex_saliency, settings, scene, rng: np.random.Ge
     from tactile.features import describe
 
     pool = candidate_pool(mesh, settings.n_points)
-    features = point_features(mesh, seen.views, seen.results, attention_maps(seen, "equal"), vertex_saliency, pool,
-                              0.5 * settings.sensor.width_mm)
+    features = point_features(
+        mesh,
+        seen.views,
+        seen.results,
+        attention_maps(seen, "equal"),
+        vertex_saliency,
+        pool,
+        0.5 * settings.sensor.width_mm,
+    )
     if rng is None:
         return Survey(pool.astype(np.int64), features)
     vn = vertex_normals(mesh.vertices, mesh.faces)
-    images = tactile.acquire(mesh, mesh.vertices[pool], vn[pool], settings.sensor, settings.perturbation, rng,
-                             scene=scene)
+    images = tactile.acquire(
+        mesh, mesh.vertices[pool], vn[pool], settings.sensor, settings.perturbation, rng, scene=scene
+    )
     return Survey(pool.astype(np.int64), features, describe(np.asarray(images, np.float32), "polar").astype(np.float32))
 
 
-def distinctiveness(descriptors: np.ndarray, labels: np.ndarray, instances: np.ndarray,
-                    chunk: int = 1024) -> np.ndarray:
+def distinctiveness(
+    descriptors: np.ndarray, labels: np.ndarray, instances: np.ndarray, chunk: int = 1024
+) -> np.ndarray:
     """Leave-the-instance-out nearest-neighbour margin of each touch.
 
     With ``d_same`` the distance to the nearest touch of the same object on
@@ -109,8 +118,9 @@ def distinctiveness(descriptors: np.ndarray, labels: np.ndarray, instances: np.n
     y = np.asarray(labels, dtype=np.int64)
     inst = np.asarray(instances, dtype=np.int64)
     if X.ndim != 2 or y.shape != (X.shape[0],) or inst.shape != y.shape:
-        raise ValueError(f"expected descriptors (m, d) with m labels and instances, got {X.shape}, {y.shape}, "
-                         f"{inst.shape}")
+        raise ValueError(
+            f"expected descriptors (m, d) with m labels and instances, got {X.shape}, {y.shape}, {inst.shape}"
+        )
     norms = np.einsum("ij,ij->i", X, X)
     out = np.zeros(len(y))
     for start in range(0, len(y), chunk):
@@ -154,5 +164,4 @@ def fit_replicate_model(surveys: dict, alpha: float = 1.0):
         labels.append(np.full(len(survey.features), names.index(name)))
         instances.append(np.full(len(survey.features), j))
     margin = distinctiveness(np.concatenate(descriptors), np.concatenate(labels), np.concatenate(instances))
-    return fit_touch_model(np.concatenate(features), margin, alpha,
-                           trained_on=tuple(f"{name}/{j}" for name, j in used))
+    return fit_touch_model(np.concatenate(features), margin, alpha, trained_on=tuple(f"{name}/{j}" for name, j in used))

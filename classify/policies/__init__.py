@@ -7,11 +7,45 @@ touching a test instance, and the stopping rule).
 """
 
 from classify.policies.episodes import Episode, available_places, decisions, run_episode, stopping_curve
-from classify.policies.knowledge import (LANDMARKS, Forecast, Places, PlaceSample, TouchKnowledge, fit_knowledge,
-                                        signatures)
-from classify.policies.policy import (POLICIES, InfoGainPolicy, LookaheadPolicy, PlanPolicy, RandomPolicy,
-                                      TouchPolicy, TouchState, expected_entropy)
+from classify.policies.knowledge import (
+    LANDMARKS,
+    Forecast,
+    Places,
+    PlaceSample,
+    TouchKnowledge,
+    fit_knowledge,
+    signatures,
+)
+from classify.policies.policy import (
+    POLICIES,
+    InfoGainPolicy,
+    LookaheadPolicy,
+    PlanPolicy,
+    RandomPolicy,
+    TouchPolicy,
+    TouchState,
+    expected_entropy,
+)
 
-__all__ = ["LANDMARKS", "signatures", "Places", "PlaceSample", "Forecast", "TouchKnowledge", "fit_knowledge", "TouchState", "TouchPolicy",
-           "RandomPolicy", "InfoGainPolicy", "LookaheadPolicy", "PlanPolicy", "POLICIES", "expected_entropy",
-           "Episode", "available_places", "run_episode", "decisions", "stopping_curve"]
+__all__ = [
+    "LANDMARKS",
+    "signatures",
+    "Places",
+    "PlaceSample",
+    "Forecast",
+    "TouchKnowledge",
+    "fit_knowledge",
+    "TouchState",
+    "TouchPolicy",
+    "RandomPolicy",
+    "InfoGainPolicy",
+    "LookaheadPolicy",
+    "PlanPolicy",
+    "POLICIES",
+    "expected_entropy",
+    "Episode",
+    "available_places",
+    "run_episode",
+    "decisions",
+    "stopping_curve",
+]

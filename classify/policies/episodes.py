@@ -59,8 +59,15 @@ def available_places(places: Places, touched, min_spacing: float) -> np.ndarray:
     return ok
 
 
-def run_episode(policy: TouchPolicy, sample: PlaceSample, knowledge: TouchKnowledge, touches: int,
-                min_spacing: float, rng: np.random.Generator, session: int = 0) -> Episode:
+def run_episode(
+    policy: TouchPolicy,
+    sample: PlaceSample,
+    knowledge: TouchKnowledge,
+    touches: int,
+    min_spacing: float,
+    rng: np.random.Generator,
+    session: int = 0,
+) -> Episode:
     """Let ``policy`` touch the test instance ``sample`` up to ``touches`` times.
 
     Parameters
@@ -87,15 +94,16 @@ def run_episode(policy: TouchPolicy, sample: PlaceSample, knowledge: TouchKnowle
 
     places = sample.places
     forecast = knowledge.forecast(places)
-    felt = knowledge.posterior(sample.imprints[session])           # what each place would feel; the policy never sees it
+    felt = knowledge.posterior(sample.imprints[session])  # what each place would feel; the policy never sees it
     belief = np.full(knowledge.n_classes, 1.0 / knowledge.n_classes)
     touched, beliefs, seconds = [], [], []
     for _ in range(touches):
         available = available_places(places, touched, min_spacing)
         if not available.any():
             break
-        state = TouchState(places, tuple(touched), sample.imprints[session, touched], belief, available, forecast,
-                           knowledge)
+        state = TouchState(
+            places, tuple(touched), sample.imprints[session, touched], belief, available, forecast, knowledge
+        )
         started = time.perf_counter()
         p = int(policy.choose(state, rng))
         seconds.append(time.perf_counter() - started)
@@ -106,8 +114,12 @@ def run_episode(policy: TouchPolicy, sample: PlaceSample, knowledge: TouchKnowle
         belief = belief / belief.sum()
         beliefs.append(belief)
     C = knowledge.n_classes
-    return Episode(np.asarray(touched, np.int64), places.vertex_ids[touched].astype(np.int64),
-                   np.asarray(beliefs, np.float64).reshape(-1, C), np.asarray(seconds))
+    return Episode(
+        np.asarray(touched, np.int64),
+        places.vertex_ids[touched].astype(np.int64),
+        np.asarray(beliefs, np.float64).reshape(-1, C),
+        np.asarray(seconds),
+    )
 
 
 def decisions(beliefs: np.ndarray, rng: np.random.Generator) -> np.ndarray:
@@ -144,7 +156,7 @@ def stopping_curve(beliefs: list, truth: np.ndarray, levels, rngs: list) -> tupl
     used = np.zeros((levels.size, len(beliefs)))
     for e, B in enumerate(beliefs):
         picks = decisions(B, rngs[e])
-        reached = B.max(axis=1)[None, :] >= levels[:, None]          # (L, k)
+        reached = B.max(axis=1)[None, :] >= levels[:, None]  # (L, k)
         stop = np.where(reached.any(axis=1), np.argmax(reached, axis=1), len(B) - 1)
         correct[:, e] = picks[stop] == truth[e]
         used[:, e] = stop + 1

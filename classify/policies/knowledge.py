@@ -78,13 +78,21 @@ class PlaceSample:
 
     def to_arrays(self) -> dict:
         p = self.places
-        return {"vertex_ids": p.vertex_ids, "positions": p.positions, "normals": p.normals, "features": p.features,
-                "touchable": p.touchable, "imprints": self.imprints}
+        return {
+            "vertex_ids": p.vertex_ids,
+            "positions": p.positions,
+            "normals": p.normals,
+            "features": p.features,
+            "touchable": p.touchable,
+            "imprints": self.imprints,
+        }
 
     @staticmethod
     def from_arrays(a: dict) -> PlaceSample:
-        return PlaceSample(Places(a["vertex_ids"], a["positions"], a["normals"], a["features"],
-                                  a["touchable"].astype(bool)), a["imprints"])
+        return PlaceSample(
+            Places(a["vertex_ids"], a["positions"], a["normals"], a["features"], a["touchable"].astype(bool)),
+            a["imprints"],
+        )
 
 
 def signatures(places: Places) -> np.ndarray:
@@ -215,8 +223,9 @@ def fit_knowledge(training: dict, recognizer) -> TouchKnowledge:
 
     names = tuple(sorted({name for name, _ in training}))
     if len(names) < 2 or any(j < 1 for _, j in training):
-        raise ValueError(f"touch knowledge needs training instances (index >= 1) of at least two objects, "
-                         f"got {sorted(training)}")
+        raise ValueError(
+            f"touch knowledge needs training instances (index >= 1) of at least two objects, got {sorted(training)}"
+        )
     keys = sorted(training, key=lambda k: (names.index(k[0]), k[1]))
     X, y, inst, vertex = [], [], [], []
     for name, j in keys:
@@ -258,5 +267,13 @@ def fit_knowledge(training: dict, recognizer) -> TouchKnowledge:
         located_places.append(located[mine][first])
         posteriors.append(post)
         weights.append(weight)
-    return TouchKnowledge(names, tuple(place_ids), tuple(located_places), tuple(posteriors), tuple(weights), model,
-                          calibration, recognizer.features)
+    return TouchKnowledge(
+        names,
+        tuple(place_ids),
+        tuple(located_places),
+        tuple(posteriors),
+        tuple(weights),
+        model,
+        calibration,
+        recognizer.features,
+    )

@@ -33,8 +33,16 @@ import numpy as np
 from classify.policies.knowledge import Forecast, Places, TouchKnowledge
 from meshsal.util.registry import Registry
 
-__all__ = ["TouchState", "TouchPolicy", "RandomPolicy", "InfoGainPolicy", "LookaheadPolicy", "PlanPolicy",
-           "POLICIES", "expected_entropy"]
+__all__ = [
+    "TouchState",
+    "TouchPolicy",
+    "RandomPolicy",
+    "InfoGainPolicy",
+    "LookaheadPolicy",
+    "PlanPolicy",
+    "POLICIES",
+    "expected_entropy",
+]
 
 
 @dataclass(frozen=True, eq=False)
@@ -141,16 +149,16 @@ def expected_entropy(belief: np.ndarray, forecast: Forecast, places: np.ndarray 
     >>> bool(h[0] < h[1]), round(float(h[1]), 4)           # place 0 tells the objects apart, place 1 does not
     (True, 0.6931)
     """
-    b = np.atleast_2d(np.asarray(belief, dtype=np.float64))                  # (B, C)
+    b = np.atleast_2d(np.asarray(belief, dtype=np.float64))  # (B, C)
     P, Q, W = forecast.posteriors, forecast.plogp, forecast.weights
     if places is not None:
         P, Q, W = P[:, places], Q[:, places], W[:, places]
     J, m, S, C = P.shape
     blogb = np.where(b > 0, b * np.log(np.where(b > 0, b, 1.0)), 0.0)
     P2, Q2 = P.reshape(-1, C), Q.reshape(-1, C)
-    Z = P2 @ b.T                                                             # (J m S, B)
+    Z = P2 @ b.T  # (J m S, B)
     h = np.log(Z) - (Q2 @ b.T + P2 @ blogb.T) / Z
-    h = (W.reshape(-1, 1) * h).reshape(J, m, S, -1).sum(axis=2)              # (J, m, B)
+    h = (W.reshape(-1, 1) * h).reshape(J, m, S, -1).sum(axis=2)  # (J, m, B)
     h += (1.0 - W.sum(axis=2))[:, :, None] * (-blogb.sum(axis=1))[None, None, :]
     out = np.einsum("bj,jmb->bm", b, h)
     return out[0] if np.ndim(belief) == 1 else out
@@ -187,7 +195,7 @@ class LookaheadPolicy(TouchPolicy):
         F, b = state.forecast, state.belief
         one = expected_entropy(b, F, candidates)
         order = candidates[np.lexsort((candidates, one))]
-        tries, seconds = order[:self.first], order[:self.second]
+        tries, seconds = order[: self.first], order[: self.second]
         best, best_value = int(order[0]), np.inf
         for p in tries:
             rest = seconds[seconds != p]
@@ -195,10 +203,14 @@ class LookaheadPolicy(TouchPolicy):
             outcomes = [(j, s) for j in np.flatnonzero(b > 1e-9) for s in np.flatnonzero(F.weights[j, p] > 0)]
             after = np.array([b * F.posteriors[j, p, s] for j, s in outcomes] + [b])
             after /= after.sum(axis=1, keepdims=True)
-            chance = np.array([b[j] * F.weights[j, p, s] for j, s in outcomes]
-                              + [float(b @ (1.0 - F.weights[:, p].sum(axis=1)))])
-            second = (expected_entropy(after, F, rest).min(axis=1) if rest.size
-                      else -np.sum(after * np.log(np.maximum(after, 1e-300)), axis=1))
+            chance = np.array(
+                [b[j] * F.weights[j, p, s] for j, s in outcomes] + [float(b @ (1.0 - F.weights[:, p].sum(axis=1)))]
+            )
+            second = (
+                expected_entropy(after, F, rest).min(axis=1)
+                if rest.size
+                else -np.sum(after * np.log(np.maximum(after, 1e-300)), axis=1)
+            )
             value = float(chance @ second)
             if value < best_value - 1e-12:
                 best, best_value = int(p), value

@@ -35,8 +35,17 @@ from sklearn.utils.validation import check_is_fitted
 from classify.recognizers.evolutionary_svm import EvolutionarySVM, as_matrix
 from meshsal.util.registry import Registry
 
-__all__ = ["CLASSIFIERS", "NAMES", "make", "as_matrix", "KNN", "NaiveBayes", "DecisionTree", "EvolutionarySVM",
-           "DeepNet"]
+__all__ = [
+    "CLASSIFIERS",
+    "NAMES",
+    "make",
+    "as_matrix",
+    "KNN",
+    "NaiveBayes",
+    "DecisionTree",
+    "EvolutionarySVM",
+    "DeepNet",
+]
 
 
 class _Flatten:
@@ -100,8 +109,9 @@ class DeepNet(_Flatten, MLPClassifier):
         splits = int(min(max(2, round(1.0 / self.validation_fraction)), len(np.unique(groups)), smallest))
         if splits < 2:
             return super().fit(X, y)
-        train, val = next(StratifiedGroupKFold(splits, shuffle=True, random_state=self.random_state)
-                          .split(X, y, groups))
+        train, val = next(
+            StratifiedGroupKFold(splits, shuffle=True, random_state=self.random_state).split(X, y, groups)
+        )
         classes = np.unique(y)
         self.set_params(early_stopping=False, batch_size=int(min(self.batch_size, len(train))))
         best, best_score, stale = None, -np.inf, 0
@@ -240,7 +250,7 @@ class KNN(ClassifierMixin, BaseEstimator):
         if X.shape[1] != self.n_features_in_:
             raise ValueError(f"KNN: X has {X.shape[1]} features, the model was fitted with {self.n_features_in_}")
         d2 = _sq_distances(X, self.X_)
-        order = _ranked(d2, self.tiebreak_)[:, :self.k_]
+        order = _ranked(d2, self.tiebreak_)[:, : self.k_]
         return _posterior(self.codes_[order], _class_distances(d2, self.codes_, len(self.classes_)), self.scale_)
 
     def predict(self, X):
@@ -281,9 +291,9 @@ def _sq_distances(A, B) -> np.ndarray:
     out = np.empty((len(A), len(B)))
     b2 = np.einsum("ij,ij->i", B, B)
     for start in range(0, len(A), _BLOCK):
-        a = A[start:start + _BLOCK]
+        a = A[start : start + _BLOCK]
         d2 = np.einsum("ij,ij->i", a, a)[:, None] + b2[None, :] - 2.0 * (a @ B.T)
-        out[start:start + _BLOCK] = np.maximum(d2, 0.0)
+        out[start : start + _BLOCK] = np.maximum(d2, 0.0)
     # Integer codes: every sum is an integer below 2**53, exact in any order.
     return out / _LEVELS**2 if exact else np.round(out, 9)
 
@@ -291,9 +301,16 @@ def _sq_distances(A, B) -> np.ndarray:
 def _row_keys(X, codes, seed) -> np.ndarray:
     """A seeded 64-bit hash of each row's bytes and label: a tie-break that ignores the rows' order."""
     salt = int(seed).to_bytes(8, "little", signed=True)
-    return np.array([int.from_bytes(hashlib.blake2b(row.tobytes() + int(c).to_bytes(8, "little"), digest_size=8,
-                                                    salt=salt).digest(), "little")
-                     for row, c in zip(np.ascontiguousarray(X, np.float64), codes)], dtype=np.uint64)
+    return np.array(
+        [
+            int.from_bytes(
+                hashlib.blake2b(row.tobytes() + int(c).to_bytes(8, "little"), digest_size=8, salt=salt).digest(),
+                "little",
+            )
+            for row, c in zip(np.ascontiguousarray(X, np.float64), codes)
+        ],
+        dtype=np.uint64,
+    )
 
 
 def _ranked(d2, tiebreak) -> np.ndarray:
@@ -313,9 +330,9 @@ def _distance_scale(X) -> float:
         return 1.0
     nearest = np.empty(len(X))
     for start in range(0, len(X), _BLOCK):
-        d2 = _sq_distances(X[start:start + _BLOCK], X)
+        d2 = _sq_distances(X[start : start + _BLOCK], X)
         d2[np.arange(len(d2)), np.arange(start, start + len(d2))] = np.inf
-        nearest[start:start + _BLOCK] = d2.min(axis=1)
+        nearest[start : start + _BLOCK] = d2.min(axis=1)
     scale = float(np.median(np.sqrt(nearest)))
     return scale if scale > 0 else 1.0
 
@@ -336,8 +353,14 @@ CLASSIFIERS.register("knn", (KNN, {}), "k-nearest neighbours, k tuned on grouped
 CLASSIFIERS.register("naive_bayes", (NaiveBayes, {}), "Gaussian naive Bayes")
 CLASSIFIERS.register("decision_tree", (DecisionTree, {"random_state": 0}), "CART")
 CLASSIFIERS.register("evolutionary_svm", (EvolutionarySVM, {}), "Mierswa's evolutionary SVM")
-CLASSIFIERS.register("deep", (DeepNet, {"hidden_layer_sizes": (128, 64), "early_stopping": True, "batch_size": 32,
-                                        "max_iter": 500, "random_state": 0}), "two-layer network")
+CLASSIFIERS.register(
+    "deep",
+    (
+        DeepNet,
+        {"hidden_layer_sizes": (128, 64), "early_stopping": True, "batch_size": 32, "max_iter": 500, "random_state": 0},
+    ),
+    "two-layer network",
+)
 NAMES = CLASSIFIERS.names()
 
 
@@ -364,6 +387,7 @@ def make(name: str, **params):
     valid = estimator.get_params()
     unknown = sorted(set(params) - set(valid))
     if unknown:
-        raise ValueError(f"classifier {name!r} has no parameter {', '.join(unknown)}; "
-                           f"valid: {', '.join(sorted(valid))}")
+        raise ValueError(
+            f"classifier {name!r} has no parameter {', '.join(unknown)}; valid: {', '.join(sorted(valid))}"
+        )
     return estimator.set_params(**params)

@@ -138,9 +138,9 @@ def solve_dual(K, Y, C=1.0, strategy: Strategy | None = None, **changes):
     tau = 1.0 / np.sqrt(2.0 * pairs)
     m = 2 * pairs
 
-    A = np.zeros((p, mu, n))             # parents' coefficients, all start at a = 0
-    G = np.ones((p, mu, n))              # gradient 1 - Q a (Q a = y * (K @ (a * y)))
-    F = np.zeros((p, mu))                # fitness W(a)
+    A = np.zeros((p, mu, n))  # parents' coefficients, all start at a = 0
+    G = np.ones((p, mu, n))  # gradient 1 - Q a (Q a = y * (K @ (a * y)))
+    F = np.zeros((p, mu))  # fitness W(a)
     S = np.full((p, mu), float(sigma0))  # self-adapted step sizes
     rows = np.arange(p)[:, None]
     stall = 0
@@ -149,9 +149,9 @@ def solve_dual(K, Y, C=1.0, strategy: Strategy | None = None, **changes):
         parent = rng.integers(0, mu, size=(p, lam))
         sigma = np.clip(S[rows, parent] * np.exp(tau * rng.standard_normal((p, lam))), 1e-6, 1.0)
         idx = rng.integers(0, n, size=(p, lam, m))
-        i, j = idx[..., 0::2], idx[..., 1::2]                      # (p, lam, pairs)
+        i, j = idx[..., 0::2], idx[..., 1::2]  # (p, lam, pairs)
         same = i == j
-        prob, par = rows[..., None], parent[..., None]           # broadcast to (p, lam, pairs)
+        prob, par = rows[..., None], parent[..., None]  # broadcast to (p, lam, pairs)
         yi, yj = Y[prob, i], Y[prob, j]
         ai, aj = A[prob, par, i], A[prob, par, j]
         step = sigma[..., None] * C * rng.standard_normal(i.shape)
@@ -168,12 +168,12 @@ def solve_dual(K, Y, C=1.0, strategy: Strategy | None = None, **changes):
             srt = np.sort(flat, axis=2)
             clash = (np.diff(srt, axis=2) == 0).any(axis=2)
             step[clash] = 0.0
-        delta = np.concatenate([step, s * step], axis=2)          # moves of coefficients (i..., j...)
+        delta = np.concatenate([step, s * step], axis=2)  # moves of coefficients (i..., j...)
         coords = np.concatenate([i, j], axis=2)
         yc = np.concatenate([yi, yj], axis=2)
         g = G[prob, par, coords]
         # W(a + d) - W(a) = g.d - 1/2 d^T Q d over the few touched coordinates.
-        Ksub = K[coords[..., :, None], coords[..., None, :]]       # (p, lam, m, m)
+        Ksub = K[coords[..., :, None], coords[..., None, :]]  # (p, lam, m, m)
         qd = yc * np.einsum("plab,plb->pla", Ksub, yc * delta)
         gain = (g * delta).sum(2) - 0.5 * (delta * qd).sum(2)
         cand_F = np.concatenate([F, F[rows, parent] + gain], axis=1)
@@ -188,13 +188,13 @@ def solve_dual(K, Y, C=1.0, strategy: Strategy | None = None, **changes):
         if from_child.any():
             pp, mm = np.nonzero(from_child)
             cc = child[pp, mm]
-            cidx = coords[pp, cc]                                  # (q, m)
+            cidx = coords[pp, cc]  # (q, m)
             cdel = delta[pp, cc]
             newA[pp[:, None], mm[:, None], cidx] += cdel
             np.clip(newA, 0.0, C, out=newA)
             # G -= Q[:, c] * d_c  with Q[:, c] = y * y_c * K[:, c]
-            yq = Y[pp]                                             # (q, n)
-            kcols = K[:, cidx].transpose(1, 0, 2)                  # (q, n, m)
+            yq = Y[pp]  # (q, n)
+            kcols = K[:, cidx].transpose(1, 0, 2)  # (q, n, m)
             newG[pp, mm] -= yq * np.einsum("qnm,qm->qn", kcols, yq[np.arange(len(pp))[:, None], cidx] * cdel)
         A, G, S = newA, newG, newS
         F = cand_F[rows, best]
@@ -249,8 +249,9 @@ class EvolutionarySVM(ClassifierMixin, BaseEstimator):
     1.0
     """
 
-    def __init__(self, C=1.0, gamma="scale", mu=4, lam=64, pairs=2, max_generations=600,
-                 patience=60, sigma0=0.5, random_state=0):
+    def __init__(
+        self, C=1.0, gamma="scale", mu=4, lam=64, pairs=2, max_generations=600, patience=60, sigma0=0.5, random_state=0
+    ):
         self.C = C
         self.gamma = gamma
         self.mu = mu
@@ -292,8 +293,13 @@ class EvolutionarySVM(ClassifierMixin, BaseEstimator):
         else:
             Y = np.where(codes[None, :] == np.arange(len(self.classes_))[:, None], 1.0, -1.0)
         alpha, self.fitness_, self.n_generations_ = solve_dual(
-            K, Y, float(self.C), Strategy(self.mu, self.lam, self.pairs, self.max_generations, self.patience,
-                                          self.sigma0, self.random_state))
+            K,
+            Y,
+            float(self.C),
+            Strategy(
+                self.mu, self.lam, self.pairs, self.max_generations, self.patience, self.sigma0, self.random_state
+            ),
+        )
         self.intercept_ = np.array([_bias(K, a, yy, float(self.C)) for a, yy in zip(alpha, Y)])
         used = (alpha > 0).any(axis=0)
         self.support_ = np.flatnonzero(used)
@@ -307,7 +313,9 @@ class EvolutionarySVM(ClassifierMixin, BaseEstimator):
         check_is_fitted(self, "dual_coef_")
         X = as_matrix(X)
         if X.shape[1] != self.n_features_in_:
-            raise ValueError(f"EvolutionarySVM: X has {X.shape[1]} features, the model was fitted with {self.n_features_in_}")
+            raise ValueError(
+                f"EvolutionarySVM: X has {X.shape[1]} features, the model was fitted with {self.n_features_in_}"
+            )
         if len(self.support_vectors_):
             f = rbf_kernel(X, self.support_vectors_, gamma=self._gamma) @ self.dual_coef_.T + self.intercept_
         else:
@@ -331,7 +339,7 @@ class EvolutionarySVM(ClassifierMixin, BaseEstimator):
 
 def _bias(K, alpha, y, C):
     """The SVM bias: mean over free support vectors, else the middle of the feasible range."""
-    grad = y - K @ (alpha * y)          # y_i - sum_j a_j y_j k_ij, equal to b at free SVs
+    grad = y - K @ (alpha * y)  # y_i - sum_j a_j y_j k_ij, equal to b at free SVs
     eps = 1e-8 * C
     free = (alpha > eps) & (alpha < C - eps)
     if free.any():

@@ -19,16 +19,54 @@ import numpy as np
 
 from meshsal.util.atomic import write_png, write_text
 
-__all__ = ["CSV_COLUMNS", "format_rate", "format_diff", "table_markdown", "touches_markdown", "comparison_markdown",
-           "stopping_markdown", "write_csv", "write_stopping_csv", "write_json", "confusion_image", "touches_image", "write_confusion_png", "write_touches_png"]
+__all__ = [
+    "CSV_COLUMNS",
+    "format_rate",
+    "format_diff",
+    "table_markdown",
+    "touches_markdown",
+    "comparison_markdown",
+    "stopping_markdown",
+    "write_csv",
+    "write_stopping_csv",
+    "write_json",
+    "confusion_image",
+    "touches_image",
+    "write_confusion_png",
+    "write_touches_png",
+]
 
-CSV_COLUMNS = ("method", "protocol", "classifier", "n_objects", "selection", "touches",
-               "mean", "std", "ci_low", "ci_high", "replicates", "touch_sets",
-               "baseline", "diff", "diff_ci_low", "diff_ci_high", "p_value")
+CSV_COLUMNS = (
+    "method",
+    "protocol",
+    "classifier",
+    "n_objects",
+    "selection",
+    "touches",
+    "mean",
+    "std",
+    "ci_low",
+    "ci_high",
+    "replicates",
+    "touch_sets",
+    "baseline",
+    "diff",
+    "diff_ci_low",
+    "diff_ci_high",
+    "p_value",
+)
 
 _FONT = cv2.FONT_HERSHEY_SIMPLEX
-_PALETTE = [(31, 119, 180), (255, 127, 14), (44, 160, 44), (214, 39, 40), (148, 103, 189),
-            (140, 86, 75), (227, 119, 194), (127, 127, 127)]
+_PALETTE = [
+    (31, 119, 180),
+    (255, 127, 14),
+    (44, 160, 44),
+    (214, 39, 40),
+    (148, 103, 189),
+    (140, 86, 75),
+    (227, 119, 194),
+    (127, 127, 127),
+]
 
 
 def format_rate(mean: float, low: float, high: float) -> str:
@@ -50,7 +88,11 @@ def format_diff(diff: float, low: float, high: float, p: float) -> str:
     >>> format_diff(-3.04, -6.0, -0.5, 0.0312)
     '-3.0 [-6.0, -0.5] p=0.031'
     """
-    return f"{diff:+.1f} [{low:.1f}, {high:.1f}] p={p:.3f}" if p >= 0.001 else f"{diff:+.1f} [{low:.1f}, {high:.1f}] p<0.001"
+    return (
+        f"{diff:+.1f} [{low:.1f}, {high:.1f}] p={p:.3f}"
+        if p >= 0.001
+        else f"{diff:+.1f} [{low:.1f}, {high:.1f}] p<0.001"
+    )
 
 
 def _index(cells):
@@ -85,13 +127,16 @@ def table_markdown(cells, method: str, protocol: str, classifiers, object_sets, 
     return "\n".join(lines)
 
 
-def touches_markdown(cells, method: str, protocol: str, classifiers, n_objects: int, selection: bool,
-                     touches=(1, 2, 3, 5, 10, 15)) -> str:
+def touches_markdown(
+    cells, method: str, protocol: str, classifiers, n_objects: int, selection: bool, touches=(1, 2, 3, 5, 10, 15)
+) -> str:
     """Recognition after k touches: rows classifiers, columns k (mean [95 % interval], percent)."""
     index = _index(cells)
     ks = [k for k in touches if any((method, protocol, c, n_objects, selection, k) in index for c in classifiers)]
-    lines = ["| classifier | " + " | ".join(f"{k} touch{'es' if k > 1 else ''}" for k in ks) + " |",
-             "|---|" + "|".join([":---:"] * len(ks)) + "|"]
+    lines = [
+        "| classifier | " + " | ".join(f"{k} touch{'es' if k > 1 else ''}" for k in ks) + " |",
+        "|---|" + "|".join([":---:"] * len(ks)) + "|",
+    ]
     for name in classifiers:
         row = [name]
         for k in ks:
@@ -101,8 +146,9 @@ def touches_markdown(cells, method: str, protocol: str, classifiers, n_objects: 
     return "\n".join(lines)
 
 
-def comparison_markdown(cells, comparisons, protocol: str, classifier: str, n_objects: int, selection: bool,
-                        touches=(1, 3, 5, 15)) -> str:
+def comparison_markdown(
+    cells, comparisons, protocol: str, classifier: str, n_objects: int, selection: bool, touches=(1, 3, 5, 15)
+) -> str:
     """Point methods side by side: rate and paired difference against the baseline at a few k.
 
     Rows are methods (the baseline first), then for the instance protocol the
@@ -112,9 +158,11 @@ def comparison_markdown(cells, comparisons, protocol: str, classifier: str, n_ob
     """
     index = _index(cells)
     protocols = (protocol, "sequential") if protocol == "instance" else (protocol,)
-    diffs = {(d.method, d.protocol, d.touches): d for d in comparisons
-             if d.protocol in protocols and (d.classifier, d.n_objects, d.selection) == (classifier, n_objects,
-                                                                                          selection)}
+    diffs = {
+        (d.method, d.protocol, d.touches): d
+        for d in comparisons
+        if d.protocol in protocols and (d.classifier, d.n_objects, d.selection) == (classifier, n_objects, selection)
+    }
     if not diffs:
         return ""
     baseline = next(iter(diffs.values())).baseline
@@ -131,10 +179,14 @@ def comparison_markdown(cells, comparisons, protocol: str, classifier: str, n_ob
             c = index.get((m, p, classifier, n_objects, selection, k))
             d = diffs.get((m, p, k))
             row.append(format_rate(c.mean, c.ci_low, c.ci_high) if c else "-")
-            row.append(format_diff(d.diff, d.ci_low, d.ci_high, d.p_value) if d else ("baseline" if m == baseline
-                                                                                      else "-"))
-        reached = sorted(c.touches for key, c in index.items()
-                         if key[:5] == (m, p, classifier, n_objects, selection) and c.mean >= 95.0)
+            row.append(
+                format_diff(d.diff, d.ci_low, d.ci_high, d.p_value) if d else ("baseline" if m == baseline else "-")
+            )
+        reached = sorted(
+            c.touches
+            for key, c in index.items()
+            if key[:5] == (m, p, classifier, n_objects, selection) and c.mean >= 95.0
+        )
         top = max((key[5] for key in index if key[:5] == (m, p, classifier, n_objects, selection)), default=0)
         row.append(str(reached[0]) if reached else f"not within {top}")
         lines.append("| " + " | ".join(row) + " |")
@@ -150,14 +202,18 @@ def stopping_markdown(stopping, classifier: str, n_objects: int) -> str:
     levels = sorted({s.level for s in mine})
     index = {(s.method, s.protocol, s.level): s for s in mine}
     rows = list(dict.fromkeys((s.method, s.protocol) for s in mine))
-    lines = ["| points or policy | " + " | ".join(f"p = {p:g}" for p in levels) + " | touches at 95 % |",
-             "|---|" + "|".join([":---:"] * (len(levels) + 1)) + "|"]
+    lines = [
+        "| points or policy | " + " | ".join(f"p = {p:g}" for p in levels) + " | touches at 95 % |",
+        "|---|" + "|".join([":---:"] * (len(levels) + 1)) + "|",
+    ]
     for m, p in rows:
         cells = [index[m, p, level] for level in levels]
         at = next((s for s in cells if s.accuracy >= 95.0), None)
-        lines.append(f"| {'policy ' + m if p == 'sequential' else m} | "
-                     + " | ".join(f"{s.accuracy:.1f} / {s.touches:.2f}" for s in cells)
-                     + f" | {f'{at.touches:.2f} [{at.touches_low:.2f}, {at.touches_high:.2f}]' if at else 'not reached'} |")
+        lines.append(
+            f"| {'policy ' + m if p == 'sequential' else m} | "
+            + " | ".join(f"{s.accuracy:.1f} / {s.touches:.2f}" for s in cells)
+            + f" | {f'{at.touches:.2f} [{at.touches_low:.2f}, {at.touches_high:.2f}]' if at else 'not reached'} |"
+        )
     return "\n".join(lines)
 
 
@@ -186,11 +242,28 @@ def write_csv(path, cells, comparisons=()) -> None:
     writer.writerow(CSV_COLUMNS)
     for c in cells:
         d = diffs.get((c.method, c.protocol, c.classifier, c.n_objects, c.selection, c.touches))
-        extra = ([d.baseline, f"{d.diff:.4f}", f"{d.ci_low:.4f}", f"{d.ci_high:.4f}", f"{d.p_value:.6f}"]
-                 if d else ["", "", "", "", ""])
-        writer.writerow([c.method, c.protocol, c.classifier, c.n_objects, "true" if c.selection else "false",
-                         c.touches, f"{c.mean:.4f}", f"{c.std:.4f}", f"{c.ci_low:.4f}", f"{c.ci_high:.4f}",
-                         c.replicates, c.touch_sets, *extra])
+        extra = (
+            [d.baseline, f"{d.diff:.4f}", f"{d.ci_low:.4f}", f"{d.ci_high:.4f}", f"{d.p_value:.6f}"]
+            if d
+            else ["", "", "", "", ""]
+        )
+        writer.writerow(
+            [
+                c.method,
+                c.protocol,
+                c.classifier,
+                c.n_objects,
+                "true" if c.selection else "false",
+                c.touches,
+                f"{c.mean:.4f}",
+                f"{c.std:.4f}",
+                f"{c.ci_low:.4f}",
+                f"{c.ci_high:.4f}",
+                c.replicates,
+                c.touch_sets,
+                *extra,
+            ]
+        )
     write_text(path, buffer.getvalue())
 
 
@@ -237,8 +310,14 @@ def _confusion_panel(matrix, names, title, cell=44):
             color = tuple(int(255 - f * (255 - c)) for c in (31, 119, 180))
             cv2.rectangle(img, (x0, y0), (x0 + cell - 1, y0 + cell - 1), color, -1)
             cv2.rectangle(img, (x0, y0), (x0 + cell - 1, y0 + cell - 1), (200, 200, 200), 1)
-            _put(img, f"{100 * f:.0f}", (x0 + cell // 2, y0 + cell // 2), 0.4,
-                 (255, 255, 255) if f > 0.5 else (0, 0, 0), anchor="center")
+            _put(
+                img,
+                f"{100 * f:.0f}",
+                (x0 + cell // 2, y0 + cell // 2),
+                0.4,
+                (255, 255, 255) if f > 0.5 else (0, 0, 0),
+                anchor="center",
+            )
     return img
 
 
@@ -301,8 +380,11 @@ def touches_image(curves, title: str, size=(760, 460)) -> np.ndarray:
     for n, (label, (ks, mean, low, high)) in enumerate(curves.items()):
         color = _PALETTE[n % len(_PALETTE)]
         pts = np.array([xy(k, r) for k, r in zip(ks, mean)], np.int32)
-        band = np.array([xy(k, min(100.0, h)) for k, h in zip(ks, high)]
-                        + [xy(k, max(y_min, lo)) for k, lo in zip(ks[::-1], low[::-1])], np.int32)
+        band = np.array(
+            [xy(k, min(100.0, h)) for k, h in zip(ks, high)]
+            + [xy(k, max(y_min, lo)) for k, lo in zip(ks[::-1], low[::-1])],
+            np.int32,
+        )
         overlay = img.copy()
         cv2.fillPoly(overlay, [band], color)
         img = cv2.addWeighted(overlay, 0.15, img, 0.85, 0)

@@ -22,8 +22,16 @@ import numpy as np
 
 from classify.reporting import report
 
-__all__ = ["CellKey", "Cell", "Comparison", "ConfusionMatrix", "StoppingCell", "ExperimentResult", "format_tables",
-           "write_outputs"]
+__all__ = [
+    "CellKey",
+    "Cell",
+    "Comparison",
+    "ConfusionMatrix",
+    "StoppingCell",
+    "ExperimentResult",
+    "format_tables",
+    "write_outputs",
+]
 
 
 class CellKey(NamedTuple):
@@ -164,16 +172,35 @@ class ExperimentResult:
             "classifiers": list(self.classifiers),
             "cells": [dataclasses.asdict(c) for c in self.cells],
             "comparisons": [dataclasses.asdict(c) for c in self.comparisons],
-            "confusions": [{**dataclasses.asdict(c), "object_names": list(c.object_names),
-                            "counts": c.counts.tolist()} for c in self.confusions],
-            "rates": [{"method": k[0], "protocol": k[1], "classifier": k[2], "n_objects": k[3],
-                       "selection": k[4], "touches": k[5], "replicate_by_object": np.asarray(v).tolist()}
-                      for k, v in self.rates.items()],
+            "confusions": [
+                {**dataclasses.asdict(c), "object_names": list(c.object_names), "counts": c.counts.tolist()}
+                for c in self.confusions
+            ],
+            "rates": [
+                {
+                    "method": k[0],
+                    "protocol": k[1],
+                    "classifier": k[2],
+                    "n_objects": k[3],
+                    "selection": k[4],
+                    "touches": k[5],
+                    "replicate_by_object": np.asarray(v).tolist(),
+                }
+                for k, v in self.rates.items()
+            ],
             "selection_kept": self.selection_kept,
             "stopping": [dataclasses.asdict(s) for s in self.stopping],
-            "stopping_by_object": [{"method": k[0], "protocol": k[1], "classifier": k[2], "n_objects": k[3],
-                                    "correct": np.asarray(c).tolist(), "touches": np.asarray(t).tolist()}
-                                   for k, (c, t) in self.stopping_rates.items()],
+            "stopping_by_object": [
+                {
+                    "method": k[0],
+                    "protocol": k[1],
+                    "classifier": k[2],
+                    "n_objects": k[3],
+                    "correct": np.asarray(c).tolist(),
+                    "touches": np.asarray(t).tolist(),
+                }
+                for k, (c, t) in self.stopping_rates.items()
+            ],
             "timings_s": self.timings,
         }
 
@@ -186,10 +213,11 @@ def _find(records, key):
 
 
 def _title(protocol):
-    return {"paper": "paper protocol (CV grouped by point)",
-            "instance": "instance protocol (train and test on distinct instances)",
-            "sequential": "sequential protocol (a touch policy on the instance protocol's instances)"}.get(protocol,
-                                                                                                       protocol)
+    return {
+        "paper": "paper protocol (CV grouped by point)",
+        "instance": "instance protocol (train and test on distinct instances)",
+        "sequential": "sequential protocol (a touch policy on the instance protocol's instances)",
+    }.get(protocol, protocol)
 
 
 def format_tables(result: ExperimentResult, title="Table 1 layout") -> str:
@@ -203,14 +231,17 @@ def format_tables(result: ExperimentResult, title="Table 1 layout") -> str:
             if not any(c.method == method and c.protocol == protocol for c in result.cells):
                 continue
             what = "policy" if protocol == "sequential" else "points"
-            blocks.append(f"### {title}: {method} {what}, {_title(protocol)}, recognition rate (%), single "
-                          f"touch, mean [95 % interval]\n\n" + result.table(method, protocol))
+            blocks.append(
+                f"### {title}: {method} {what}, {_title(protocol)}, recognition rate (%), single "
+                f"touch, mean [95 % interval]\n\n" + result.table(method, protocol)
+            )
             if protocol in ("instance", "sequential"):
                 for selection in (False, True) if protocol == "instance" else (False,):
-                    blocks.append(f"### {method} {what}, {protocol} protocol, {n} objects, "
-                                  f"{'with' if selection else 'no'} selection: recognition (%) after k touches\n\n"
-                                  + report.touches_markdown(result.cells, method, protocol, result.classifiers,
-                                                            n, selection))
+                    blocks.append(
+                        f"### {method} {what}, {protocol} protocol, {n} objects, "
+                        f"{'with' if selection else 'no'} selection: recognition (%) after k touches\n\n"
+                        + report.touches_markdown(result.cells, method, protocol, result.classifiers, n, selection)
+                    )
     clf = "knn" if "knn" in result.classifiers else result.classifiers[0]
     if result.comparisons:
         baseline = result.comparisons[0].baseline
@@ -218,20 +249,31 @@ def format_tables(result: ExperimentResult, title="Table 1 layout") -> str:
             table = report.comparison_markdown(result.cells, result.comparisons, protocol, clf, n, False)
             if table:
                 policies = " and touch policies" if protocol == "instance" and "sequential" in protocols else ""
-                blocks.append(f"### Point methods{policies} against {baseline}, {_title(protocol)}, {clf}, {n} "
-                              f"objects, no selection: rate (%) and paired difference (points) [95 % interval], "
-                              f"Wilcoxon p\n\n" + table)
+                blocks.append(
+                    f"### Point methods{policies} against {baseline}, {_title(protocol)}, {clf}, {n} "
+                    f"objects, no selection: rate (%) and paired difference (points) [95 % interval], "
+                    f"Wilcoxon p\n\n" + table
+                )
     if result.stopping:
-        blocks.append(f"### Stopping rule: stop when the top object's calibrated posterior reaches p; {clf}, {n} "
-                      f"objects, no selection: accuracy (%) / mean touches used [95 % intervals in "
-                      f"stopping.csv]\n\n" + report.stopping_markdown(result.stopping, clf, n))
-    notes = [c for c in result.cells if c.protocol == "instance" and c.touches > 1
-             and 0 < c.touch_sets < result.settings.get("touch_sets_per_object", 0)]
+        blocks.append(
+            f"### Stopping rule: stop when the top object's calibrated posterior reaches p; {clf}, {n} "
+            f"objects, no selection: accuracy (%) / mean touches used [95 % intervals in "
+            f"stopping.csv]\n\n" + report.stopping_markdown(result.stopping, clf, n)
+        )
+    notes = [
+        c
+        for c in result.cells
+        if c.protocol == "instance"
+        and c.touches > 1
+        and 0 < c.touch_sets < result.settings.get("touch_sets_per_object", 0)
+    ]
     if notes:
         ks = sorted({c.touches for c in notes})
-        blocks.append(f"Touch sets: at k = {', '.join(map(str, ks))} touches an object's test instance offers "
-                      f"fewer distinct sets than the {result.settings.get('touch_sets_per_object')} asked for; "
-                      f"all of them were used (the table's touch_sets column in results.csv says how many).")
+        blocks.append(
+            f"Touch sets: at k = {', '.join(map(str, ks))} touches an object's test instance offers "
+            f"fewer distinct sets than the {result.settings.get('touch_sets_per_object')} asked for; "
+            f"all of them were used (the table's touch_sets column in results.csv says how many)."
+        )
     return "\n\n".join(blocks) + "\n"
 
 
@@ -245,19 +287,36 @@ def write_outputs(result: ExperimentResult, out_dir) -> None:
         report.write_stopping_csv(out / "stopping.csv", result.stopping)
     n = result.object_sets[-1]
     for name in result.classifiers:
-        panels = [(f"{c.method} / {c.protocol} / {'sel' if c.selection else 'no sel'}", c.counts, c.object_names)
-                  for c in result.confusions if c.classifier == name and c.n_objects == n and not c.selection]
+        panels = [
+            (f"{c.method} / {c.protocol} / {'sel' if c.selection else 'no sel'}", c.counts, c.object_names)
+            for c in result.confusions
+            if c.classifier == name and c.n_objects == n and not c.selection
+        ]
         if panels:
             report.write_confusion_png(out / f"confusion_{name}.png", panels)
     clf = "knn" if "knn" in result.classifiers else result.classifiers[0]
     curves = {}
     for method, protocol in dict.fromkeys((c.method, c.protocol) for c in result.cells):
-        cells = sorted((c for c in result.cells if (c.method, c.protocol) == (method, protocol) and c.classifier == clf
-                        and c.n_objects == n and not c.selection and c.protocol in ("instance", "sequential")),
-                       key=lambda c: c.touches)
+        cells = sorted(
+            (
+                c
+                for c in result.cells
+                if (c.method, c.protocol) == (method, protocol)
+                and c.classifier == clf
+                and c.n_objects == n
+                and not c.selection
+                and c.protocol in ("instance", "sequential")
+            ),
+            key=lambda c: c.touches,
+        )
         if cells:
-            curves[f"policy {method}" if protocol == "sequential" else method] = (np.array([c.touches for c in cells]), np.array([c.mean for c in cells]),
-                              np.array([c.ci_low for c in cells]), np.array([c.ci_high for c in cells]))
+            curves[f"policy {method}" if protocol == "sequential" else method] = (
+                np.array([c.touches for c in cells]),
+                np.array([c.mean for c in cells]),
+                np.array([c.ci_low for c in cells]),
+                np.array([c.ci_high for c in cells]),
+            )
     if curves:
-        report.write_touches_png(out / "touches.png", curves,
-                                 f"instance protocol, {clf}, {n} objects, no selection: recognition vs touches")
+        report.write_touches_png(
+            out / "touches.png", curves, f"instance protocol, {clf}, {n} objects, no selection: recognition vs touches"
+        )

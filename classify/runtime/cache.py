@@ -30,8 +30,17 @@ import numpy as np
 from meshsal.util.atomic import atomic_path
 from meshsal.util.npzfile import NpzError, read_npz
 
-__all__ = ["default_dir", "hash_arrays", "code_fingerprint", "file_fingerprint", "library_versions", "cache_key",
-           "cached", "load", "store"]
+__all__ = [
+    "default_dir",
+    "hash_arrays",
+    "code_fingerprint",
+    "file_fingerprint",
+    "library_versions",
+    "cache_key",
+    "cached",
+    "load",
+    "store",
+]
 
 #: The distributions whose numbers reach a cached result.
 LIBRARIES = ("numpy", "scipy", "scikit-learn", "opencv-contrib-python-headless", "embreex", "libigl", "pymeshlab")

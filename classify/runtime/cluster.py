@@ -77,8 +77,9 @@ def worker_pool(n_jobs: int):
     if int(n_jobs) <= 1:
         yield Inline()
         return
-    with ProcessPoolExecutor(int(n_jobs), mp_context=multiprocessing.get_context("spawn"),
-                             initializer=_limit_threads) as pool:
+    with ProcessPoolExecutor(
+        int(n_jobs), mp_context=multiprocessing.get_context("spawn"), initializer=_limit_threads
+    ) as pool:
         yield pool
 
 
@@ -120,10 +121,15 @@ def tls_security(ca_file, cert, key=None):
     try:
         ssl.create_default_context().load_cert_chain(cert, key)
     except (ssl.SSLError, OSError) as exc:
-        raise ValueError(f"{cert}{' with ' + key if key else ''}: not a PEM certificate and its private key "
-                         f"({exc})") from None
-    roles = {f"tls_{role}_{part}": value for role in ("client", "scheduler", "worker")
-             for part, value in (("cert", cert), ("key", key)) if value is not None}
+        raise ValueError(
+            f"{cert}{' with ' + key if key else ''}: not a PEM certificate and its private key ({exc})"
+        ) from None
+    roles = {
+        f"tls_{role}_{part}": value
+        for role in ("client", "scheduler", "worker")
+        for part, value in (("cert", cert), ("key", key))
+        if value is not None
+    }
     return Security(require_encryption=True, tls_ca_file=ca, **roles)
 
 
@@ -135,19 +141,27 @@ def _client_security(scheduler: str, security):
     """The Security a client of ``scheduler`` uses; refuses a tls:// address without certificates."""
     from distributed import Security
 
-    security = Security() if security is None else security     # None: dask's distributed.comm.tls config
+    security = Security() if security is None else security  # None: dask's distributed.comm.tls config
     if scheduler.startswith("tls://") and not _has_client_certificate(security):
-        raise ValueError(f"{scheduler}: a tls:// scheduler needs a CA file and a client certificate "
-                         f"(--tls-ca-file, --tls-cert, --tls-key; security=tls_security(...) in Python)")
+        raise ValueError(
+            f"{scheduler}: a tls:// scheduler needs a CA file and a client certificate "
+            f"(--tls-ca-file, --tls-cert, --tls-key; security=tls_security(...) in Python)"
+        )
     if security.require_encryption and not scheduler.startswith("tls://"):
-        raise ValueError(f"{scheduler}: certificates were given but the address is not tls://; "
-                         f"write it as tls://host:port")
+        raise ValueError(
+            f"{scheduler}: certificates were given but the address is not tls://; write it as tls://host:port"
+        )
     return security
 
 
 @contextmanager
-def open_executor(workers: int | None = None, scheduler: str | None = None, n_jobs: int = 1, security=None,
-                  dashboard: str | None = None):
+def open_executor(
+    workers: int | None = None,
+    scheduler: str | None = None,
+    n_jobs: int = 1,
+    security=None,
+    dashboard: str | None = None,
+):
     """An executor on a Dask cluster (``scheduler``), a new LocalCluster (``workers``) or local processes.
 
     Parameters
@@ -179,8 +193,9 @@ def open_executor(workers: int | None = None, scheduler: str | None = None, n_jo
     if workers is not None and scheduler is not None:
         raise ValueError("give workers or a scheduler address, not both")
     if dashboard is not None and workers is None:
-        raise ValueError("a dashboard address is for a new LocalCluster (workers); an existing cluster's "
-                         "scheduler serves its own")
+        raise ValueError(
+            "a dashboard address is for a new LocalCluster (workers); an existing cluster's scheduler serves its own"
+        )
     if scheduler is None and workers is None:
         if security is not None:
             raise ValueError("certificates are for a Dask cluster: give workers or a scheduler address")
@@ -202,11 +217,24 @@ def open_executor(workers: int | None = None, scheduler: str | None = None, n_jo
         raise ValueError(f"workers must be at least 1, got {workers}")
     # The scheduler always serves health and metrics over HTTP: on a free loopback port, never 8787
     # (another cluster's), and with the dashboard only when asked.
-    http = {"dashboard_address": dashboard} if dashboard is not None else {
-        "dashboard_address": None, "scheduler_kwargs": {"dashboard_address": f"{LOOPBACK}:0"}}
-    with LocalCluster(n_workers=int(workers), threads_per_worker=1, processes=True, host=LOOPBACK,
-                      security=security, env=worker_env(), silence_logs=logging.ERROR, **http) as cluster, \
-            Client(cluster, security=security) as client:
+    http = (
+        {"dashboard_address": dashboard}
+        if dashboard is not None
+        else {"dashboard_address": None, "scheduler_kwargs": {"dashboard_address": f"{LOOPBACK}:0"}}
+    )
+    with (
+        LocalCluster(
+            n_workers=int(workers),
+            threads_per_worker=1,
+            processes=True,
+            host=LOOPBACK,
+            security=security,
+            env=worker_env(),
+            silence_logs=logging.ERROR,
+            **http,
+        ) as cluster,
+        Client(cluster, security=security) as client,
+    ):
         if dashboard is not None:
             print(f"dashboard: {client.dashboard_link}", file=sys.stderr)
         yield client.get_executor()

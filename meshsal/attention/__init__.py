@@ -20,24 +20,24 @@ once, ``attention_maps`` combines them as a method needs (``rig``).
 
 # Functions are bound after their modules, so ``attention.dkl`` and
 # ``attention.symmetry`` are the channel functions, not the submodules.
-from meshsal.attention.pyramid import center_surround_map, gaussian_pyramid, normalize_map
-from meshsal.attention.itti import color, intensity, orientation
-from meshsal.attention.dkl import dkl
-from meshsal.attention.symmetry import symmetry
-from meshsal.attention.local import contrast, entropy
 from meshsal.attention.combine import (
     CHANNELS,
     IMAGE_CHANNELS,
     SaliencyResult,
     combine_maps,
-    plateau_fraction,
     curvature,
     erode_mask,
     image_channels,
+    plateau_fraction,
     saliency,
     saliency_views,
 )
+from meshsal.attention.dkl import dkl
+from meshsal.attention.itti import color, intensity, orientation
+from meshsal.attention.local import contrast, entropy
+from meshsal.attention.pyramid import center_surround_map, gaussian_pyramid, normalize_map
 from meshsal.attention.rig import ViewChannels, attention_maps, saliency_maps, view_channels
+from meshsal.attention.symmetry import symmetry
 
 __all__ = [
     "CHANNELS",

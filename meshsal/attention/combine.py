@@ -10,13 +10,12 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from meshsal.util.registry import Registry
-
 from meshsal.attention.dkl import dkl
 from meshsal.attention.itti import color, intensity, orientation
 from meshsal.attention.local import contrast, entropy
 from meshsal.attention.pyramid import normalize_map, scale_to_max
 from meshsal.attention.symmetry import symmetry
+from meshsal.util.registry import Registry
 
 __all__ = [
     "CHANNELS",
@@ -322,8 +321,9 @@ def plateau_fraction(saliency_map: np.ndarray, mask: np.ndarray, erode: int | No
     return float(np.mean(values >= 0.5 * values.max()))
 
 
-def saliency(view, mesh, weights: Mapping[str, float] | None = None, vertex_saliency=None,
-             normalize: bool = True) -> SaliencyResult:
+def saliency(
+    view, mesh, weights: Mapping[str, float] | None = None, vertex_saliency=None, normalize: bool = True
+) -> SaliencyResult:
     """The eight-channel saliency map of one rendered view.
 
     Parameters

@@ -61,13 +61,15 @@ def local_entropy(gray: np.ndarray, size: int = 9, bins: int = 16) -> np.ndarray
         table = np.zeros(256, np.float32)
         table[1:] = np.arange(1, 256) * np.log2(np.arange(1, 256))
         for b in range(bins):
-            counts = cv2.boxFilter((q == b).view(np.uint8), cv2.CV_8U, (size, size),
-                                   normalize=False, borderType=cv2.BORDER_REFLECT)
+            counts = cv2.boxFilter(
+                (q == b).view(np.uint8), cv2.CV_8U, (size, size), normalize=False, borderType=cv2.BORDER_REFLECT
+            )
             clog += cv2.LUT(counts, table)
     else:
         for b in range(bins):
-            counts = cv2.boxFilter((q == b).astype(np.float32), cv2.CV_32F, (size, size),
-                                   normalize=False, borderType=cv2.BORDER_REFLECT)
+            counts = cv2.boxFilter(
+                (q == b).astype(np.float32), cv2.CV_32F, (size, size), normalize=False, borderType=cv2.BORDER_REFLECT
+            )
             counts = np.rint(counts)
             clog += counts * np.log2(np.maximum(counts, 1.0))
     return np.maximum(np.float32(np.log2(n)) - clog * np.float32(1.0 / n), 0.0)

@@ -125,7 +125,10 @@ def upsample(m: np.ndarray, factor: int, shape: tuple[int, int]) -> np.ndarray:
     inv = 1.0 / factor
     warp = np.array([[inv, 0.0, 0.0], [0.0, inv, 0.0]], np.float32)
     return cv2.warpAffine(
-        m, warp, (shape[1], shape[0]), flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP,
+        m,
+        warp,
+        (shape[1], shape[0]),
+        flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP,
         borderMode=cv2.BORDER_REPLICATE,
     )
 
@@ -337,9 +340,7 @@ def conspicuity_map(features: Sequence[np.ndarray], shape: tuple[int, int] | Non
     return conspicuity_from_pyramids([gaussian_pyramid(f) for f in features], shape or (h, w))
 
 
-def conspicuity_from_pyramids(
-    pyramids: Sequence[Sequence[np.ndarray]], shape: tuple[int, int]
-) -> np.ndarray:
+def conspicuity_from_pyramids(pyramids: Sequence[Sequence[np.ndarray]], shape: tuple[int, int]) -> np.ndarray:
     """:func:`conspicuity_map` on ready-made feature pyramids (e.g. Gabor pyramids).
 
     Parameters

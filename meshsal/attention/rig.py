@@ -37,12 +37,15 @@ def _rig_views(mesh: Mesh, size: int, threads: int | None) -> list:
     return render_views(mesh, [c for s in view_rig() for c in s], size=size, threads=threads)
 
 
-def view_channels(mesh: Mesh, size: int = 128, vertex_saliency=None, threads: int | None = None,
-                  quiet: bool = True) -> ViewChannels:
+def view_channels(
+    mesh: Mesh, size: int = 128, vertex_saliency=None, threads: int | None = None, quiet: bool = True
+) -> ViewChannels:
     """Render the rig's 72 views and compute each one's channels (arguments as in :func:`saliency_maps`)."""
     views = _rig_views(mesh, size, threads)
-    return ViewChannels(views, saliency_views(views, mesh, vertex_saliency=vertex_saliency, threads=threads,
-                                              quiet=quiet, normalize=False))
+    return ViewChannels(
+        views,
+        saliency_views(views, mesh, vertex_saliency=vertex_saliency, threads=threads, quiet=quiet, normalize=False),
+    )
 
 
 def attention_maps(seen: ViewChannels, combination: str = "equal", weights=None) -> np.ndarray:
@@ -51,12 +54,23 @@ def attention_maps(seen: ViewChannels, combination: str = "equal", weights=None)
     The same maps as :func:`saliency_maps` with that ``combination`` and
     ``weights`` ("learned" is a weighted sum with the given weights).
     """
-    return np.stack([combine_maps(r.channels, v.mask, weights, normalize=combination == "itti")
-                     for v, r in zip(seen.views, seen.results)]).astype(np.float32)
+    return np.stack(
+        [
+            combine_maps(r.channels, v.mask, weights, normalize=combination == "itti")
+            for v, r in zip(seen.views, seen.results)
+        ]
+    ).astype(np.float32)
 
 
-def saliency_maps(mesh: Mesh, size: int = 128, vertex_saliency=None, quiet: bool = True,
-                  weights=None, threads: int | None = None, combination: str = "equal"):
+def saliency_maps(
+    mesh: Mesh,
+    size: int = 128,
+    vertex_saliency=None,
+    quiet: bool = True,
+    weights=None,
+    threads: int | None = None,
+    combination: str = "equal",
+):
     """Render the 72 views of the rig and compute each one's saliency map.
 
     Parameters
@@ -81,6 +95,13 @@ def saliency_maps(mesh: Mesh, size: int = 128, vertex_saliency=None, quiet: bool
     maps : (72, size, size) float32 in [0, 1]
     """
     views = _rig_views(mesh, size, threads)
-    results = saliency_views(views, mesh, weights=weights, vertex_saliency=vertex_saliency, threads=threads,
-                             quiet=quiet, normalize=combination == "itti")
+    results = saliency_views(
+        views,
+        mesh,
+        weights=weights,
+        vertex_saliency=vertex_saliency,
+        threads=threads,
+        quiet=quiet,
+        normalize=combination == "itti",
+    )
     return views, np.stack([r.map for r in results]).astype(np.float32)

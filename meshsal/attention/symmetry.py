@@ -124,8 +124,7 @@ def _sum_in_numpy_order(terms) -> np.ndarray:
 def _columns(padded: np.ndarray, first: int, step: int, w: int) -> np.ndarray:
     """(r, h, w) view: plane j is ``padded[:, first + step * j : ... + w]`` (no copy)."""
     s0, s1 = padded.strides
-    return as_strided(padded[:, first:], shape=(_R, padded.shape[0], w), strides=(step * s1, s0, s1),
-                      writeable=False)
+    return as_strided(padded[:, first:], shape=(_R, padded.shape[0], w), strides=(step * s1, s0, s1), writeable=False)
 
 
 def _mirror_correlation(b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -154,14 +153,16 @@ def _mirror_correlation(b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     c = np.arange(w)
     present_on = _PRESENT_ON[np.clip(np.minimum(c, w - 1 - c), 0, r)]
     present_between = _PRESENT_BETWEEN[np.clip(np.minimum(c + 1, w - 1 - c), 0, r)]
-    present_along = cv2.sepFilter2D(np.ones((h, 1), np.float32), -1, _ONE, _ALONG_KERNEL,
-                                    borderType=cv2.BORDER_CONSTANT)
+    present_along = cv2.sepFilter2D(
+        np.ones((h, 1), np.float32), -1, _ONE, _ALONG_KERNEL, borderType=cv2.BORDER_CONSTANT
+    )
     out = []
     for num, den, present in ((num_on, den_on, present_on), (num_between, den_between, present_between)):
         # A ratio of window sums, not a mean of per-row ratios: rows with
         # little texture must not weigh as much as the rest.
-        num = cv2.sepFilter2D(np.ascontiguousarray(num, np.float32), -1, _ONE, _ALONG_KERNEL,
-                              borderType=cv2.BORDER_CONSTANT)
+        num = cv2.sepFilter2D(
+            np.ascontiguousarray(num, np.float32), -1, _ONE, _ALONG_KERNEL, borderType=cv2.BORDER_CONSTANT
+        )
         den = cv2.sepFilter2D(den, -1, _ONE, _ALONG_KERNEL, borderType=cv2.BORDER_CONSTANT)
         coverage = present.astype(np.float32)[None, :] * present_along
         out.append(num / (den + np.float32(_FLOOR)) * coverage * coverage)

@@ -3,9 +3,30 @@ scans them, ``io`` loads and writes them, ``texture`` reads their images), what 
 (``repair``), sizing (``transform``), curvature and mesh saliency (``curvature``) and the Embree scene
 that every ray caster shares (``embree``)."""
 
-from meshsal.mesh.geometry import (bounding_sphere, closed_orientation, face_areas, face_normals, half_edges,
-                                   normal_defined, ring_max, vertex_adjacency, vertex_normals)
+from meshsal.mesh.geometry import (
+    bounding_sphere,
+    closed_orientation,
+    face_areas,
+    face_normals,
+    half_edges,
+    normal_defined,
+    ring_max,
+    vertex_adjacency,
+    vertex_normals,
+)
 from meshsal.mesh.record import Mesh, MeshError, Similarity
 
-__all__ = ["Mesh", "MeshError", "Similarity", "face_normals", "face_areas", "vertex_normals", "normal_defined",
-           "bounding_sphere", "closed_orientation", "half_edges", "vertex_adjacency", "ring_max"]
+__all__ = [
+    "Mesh",
+    "MeshError",
+    "Similarity",
+    "face_normals",
+    "face_areas",
+    "vertex_normals",
+    "normal_defined",
+    "bounding_sphere",
+    "closed_orientation",
+    "half_edges",
+    "vertex_adjacency",
+    "ring_max",
+]

@@ -114,8 +114,9 @@ def default_max_cells(n_vertices: int) -> int:
     return int(np.clip(20 * n_vertices, 200_000, 1_000_000))
 
 
-def gaussian_average(vertices: np.ndarray, values: np.ndarray, weights: np.ndarray,
-                     sigma: float, max_cells: int | None = None) -> np.ndarray:
+def gaussian_average(
+    vertices: np.ndarray, values: np.ndarray, weights: np.ndarray, sigma: float, max_cells: int | None = None
+) -> np.ndarray:
     """Gaussian-weighted average of ``values`` around each vertex, truncated at 2 sigma.
 
     ``G(v) = sum_x w_x f_x exp(-|x - v|^2 / (2 sigma^2)) / sum_x w_x exp(...)``
@@ -170,14 +171,17 @@ def gaussian_average(vertices: np.ndarray, values: np.ndarray, weights: np.ndarr
         flat[k] = base + int(np.dot(o, stride))
         cw[k] = axis_w[o[0], :, 0] * axis_w[o[1], :, 1] * axis_w[o[2], :, 2]
     size = int(np.prod(dims))
-    grid = np.stack([
-        np.bincount(flat.ravel(), weights=(cw * (w * f)).ravel(), minlength=size),
-        np.bincount(flat.ravel(), weights=(cw * w).ravel(), minlength=size),
-    ]).reshape(2, *dims)
+    grid = np.stack(
+        [
+            np.bincount(flat.ravel(), weights=(cw * (w * f)).ravel(), minlength=size),
+            np.bincount(flat.ravel(), weights=(cw * w).ravel(), minlength=size),
+        ]
+    ).reshape(2, *dims)
     s = sigma / h
     s_blur = np.sqrt(max(s * s - 1.0 / 3.0, 0.25 * s * s))
-    ndimage.gaussian_filter(grid, sigma=(0.0, s_blur, s_blur, s_blur), truncate=2.0 * s / s_blur,
-                            mode="constant", output=grid)
+    ndimage.gaussian_filter(
+        grid, sigma=(0.0, s_blur, s_blur, s_blur), truncate=2.0 * s / s_blur, mode="constant", output=grid
+    )
     grid = grid.reshape(2, -1)
     num = np.einsum("kn,kn->n", cw, grid[0][flat])
     den = np.einsum("kn,kn->n", cw, grid[1][flat])

@@ -62,8 +62,10 @@ def _library():
         "rtcGetDeviceError": (ctypes.c_int, [handle]),
         "rtcGetDeviceLastErrorMessage": (ctypes.c_char_p, [handle]),
         "rtcNewGeometry": (handle, [handle, ctypes.c_int]),
-        "rtcSetNewGeometryBuffer": (handle, [handle, ctypes.c_int, ctypes.c_uint, ctypes.c_int, ctypes.c_size_t,
-                                             ctypes.c_size_t]),
+        "rtcSetNewGeometryBuffer": (
+            handle,
+            [handle, ctypes.c_int, ctypes.c_uint, ctypes.c_int, ctypes.c_size_t, ctypes.c_size_t],
+        ),
         "rtcCommitGeometry": (None, [handle]),
         "rtcAttachGeometry": (ctypes.c_uint, [handle, handle]),
         "rtcReleaseGeometry": (None, [handle]),
@@ -120,8 +122,10 @@ def _attach_directly(scene, mesh: Mesh) -> bool:
         vertices = np.zeros((mesh.n_vertices, 4), np.float32)
         vertices[:, :3] = mesh.vertices
         faces = np.ascontiguousarray(mesh.faces, dtype=np.uint32)
-        for kind, fmt, array in ((_BUFFER_TYPE_VERTEX, _FORMAT_FLOAT3, vertices),
-                                 (_BUFFER_TYPE_INDEX, _FORMAT_UINT3, faces)):
+        for kind, fmt, array in (
+            (_BUFFER_TYPE_VERTEX, _FORMAT_FLOAT3, vertices),
+            (_BUFFER_TYPE_INDEX, _FORMAT_UINT3, faces),
+        ):
             target = lib.rtcSetNewGeometryBuffer(geometry, kind, 0, fmt, array.strides[0], len(array))
             if not target:
                 lib.rtcReleaseGeometry(geometry)
@@ -171,8 +175,12 @@ def _configured_device(config: str):
     device = rtc.EmbreeDevice()
     slot = _device_slot(device)
     if slot is None:
-        warnings.warn(f"${EMBREE_VARIABLE}={config!r} is not applied: this embreex's device is not the one "
-                      f"meshsal.mesh.embree knows, so Embree picks its kernels by CPU", RuntimeWarning, stacklevel=3)
+        warnings.warn(
+            f"${EMBREE_VARIABLE}={config!r} is not applied: this embreex's device is not the one "
+            f"meshsal.mesh.embree knows, so Embree picks its kernels by CPU",
+            RuntimeWarning,
+            stacklevel=3,
+        )
         return None
     lib = _library()
     made = lib.rtcNewDevice(config.encode())
@@ -242,8 +250,11 @@ def embree_scene(mesh: Mesh, robust: bool = True):
     scene = rtcs.EmbreeScene(device=device, robust=robust)
     if mesh.n_faces == 0 or not _attach_directly(scene, mesh):
         scene = rtcs.EmbreeScene(device=device, robust=robust)
-        TriangleMesh(scene, np.ascontiguousarray(mesh.vertices, dtype=np.float32),
-                     np.ascontiguousarray(mesh.faces, dtype=np.int32))
+        TriangleMesh(
+            scene,
+            np.ascontiguousarray(mesh.vertices, dtype=np.float32),
+            np.ascontiguousarray(mesh.faces, dtype=np.int32),
+        )
     # The first query commits (builds) the scene: do it before threads share it.
     scene.run(np.zeros((1, 3), np.float32), np.ones((1, 3), np.float32), output=0)
     return scene

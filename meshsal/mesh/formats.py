@@ -193,8 +193,10 @@ def _obj_textures(path: Path, libraries, materials_used, declared: Declared):
             declared.notes.append(f"material library {name!r} cannot be read ({e.strerror or e})")
             continue
         if text is None:
-            declared.notes.append(f"material library {name!r} has {size} bytes, over the cap of "
-                                  f"{MAX_MATERIAL_BYTES}; loaded without its textures")
+            declared.notes.append(
+                f"material library {name!r} has {size} bytes, over the cap of "
+                f"{MAX_MATERIAL_BYTES}; loaded without its textures"
+            )
             continue
         current = None
         for line in text.splitlines():
@@ -438,7 +440,10 @@ def _scan_off(path: Path, data: bytes) -> Declared:
     except (IndexError, ValueError):
         fail(path, "unparseable content: OFF header has no 'vertices faces edges' counts")
     if nv < 0 or nf < 0 or len(body) < nv + nf:
-        fail(path, f"unparseable content: OFF file declares {nv} vertices and {nf} faces but has only {len(body)} data lines")
+        fail(
+            path,
+            f"unparseable content: OFF file declares {nv} vertices and {nf} faces but has only {len(body)} data lines",
+        )
     # Coordinates, then normals (N), texture coordinates (ST), maybe a color.
     width = 3 + 3 * bool(header.group(3)) + 2 * bool(header.group(1))
     widths = {len(ln) for ln in body[:nv]}

@@ -7,9 +7,21 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["face_normals", "face_areas", "area_vectors", "vertex_normals", "normal_defined", "NORMAL_TOLERANCE",
-           "bounding_sphere", "closed_orientation", "half_edges", "vertex_adjacency", "edge_graph", "ring_max",
-           "tangent_frames"]
+__all__ = [
+    "face_normals",
+    "face_areas",
+    "area_vectors",
+    "vertex_normals",
+    "normal_defined",
+    "NORMAL_TOLERANCE",
+    "bounding_sphere",
+    "closed_orientation",
+    "half_edges",
+    "vertex_adjacency",
+    "edge_graph",
+    "ring_max",
+    "tangent_frames",
+]
 
 #: A vertex has a normal when the area vectors of its faces sum to more than this fraction of their
 #: total length: far above rounding (1e-16), so a face and its flipped twin, whose vectors cancel up
@@ -132,8 +144,12 @@ def closed_orientation(vertices: np.ndarray, faces: np.ndarray) -> int:
     n = int(F.max()) + 1
     key = np.sort((np.minimum(start, end) * n + np.maximum(start, end)) * 2 + (start < end))
     forward, backward = key[0::2], key[1::2]
-    if not (np.array_equal(forward >> 1, backward >> 1) and np.all(forward & 1 == 0) and np.all(backward & 1 == 1)
-            and np.all((forward[1:] >> 1) > (backward[:-1] >> 1))):
+    if not (
+        np.array_equal(forward >> 1, backward >> 1)
+        and np.all(forward & 1 == 0)
+        and np.all(backward & 1 == 1)
+        and np.all((forward[1:] >> 1) > (backward[:-1] >> 1))
+    ):
         return 0
     # Six times the enclosed volume: the sum of det(a, b, c) over the faces.
     (xa, xb, xc), (ya, yb, yc), (za, zb, zc) = (np.take(V[:, d], F.T) for d in range(3))
@@ -203,8 +219,9 @@ def edge_graph(vertices: np.ndarray, faces: np.ndarray):
     length = np.linalg.norm(V[E[:, 0]] - V[E[:, 1]], axis=1)
     length = np.maximum(length, 1e-12 * max(float(length.max(initial=0.0)), 1e-300))
     n = len(V)
-    return sparse.coo_matrix((np.r_[length, length], (np.r_[E[:, 0], E[:, 1]], np.r_[E[:, 1], E[:, 0]])),
-                             shape=(n, n)).tocsr()
+    return sparse.coo_matrix(
+        (np.r_[length, length], (np.r_[E[:, 0], E[:, 1]], np.r_[E[:, 1], E[:, 0]])), shape=(n, n)
+    ).tocsr()
 
 
 def ring_max(adjacency, values: np.ndarray) -> np.ndarray:

@@ -21,14 +21,22 @@ from pathlib import Path
 
 import numpy as np
 
-from meshsal.util.atomic import atomic_path
 from meshsal.mesh import Mesh
 from meshsal.mesh.formats import SUPPORTED_EXTENSIONS, Declared, fail, read_ply, scan
 from meshsal.mesh.repair import MeshRepairWarning, MeshReport, repair_arrays
 from meshsal.mesh.texture import MAX_TEXTURE_PIXELS, read_texture
+from meshsal.util.atomic import atomic_path
 
-__all__ = ["MeshRepairWarning", "MeshReport", "load_mesh", "save_ply", "load_vertex_quality", "MAX_MESH_BYTES",
-           "MAX_TEXTURE_PIXELS", "SUPPORTED_EXTENSIONS"]
+__all__ = [
+    "MeshRepairWarning",
+    "MeshReport",
+    "load_mesh",
+    "save_ply",
+    "load_vertex_quality",
+    "MAX_MESH_BYTES",
+    "MAX_TEXTURE_PIXELS",
+    "SUPPORTED_EXTENSIONS",
+]
 
 #: Largest mesh file read, in bytes (256 MiB).  Scanning an OBJ takes about 30 times its size in
 #: memory (nefertiti: 3.7 MB of OBJ, 100 MB), so this admits a 7-million-face OBJ in about 7 GB.
@@ -45,8 +53,11 @@ def _read_checked(path: Path, max_bytes: int | None) -> bytes:
     try:
         size = path.stat().st_size
         if max_bytes is not None and size > max_bytes:
-            fail(path, f"{size:,} bytes, over the cap of {max_bytes:,} bytes for a mesh file "
-                       "(load_mesh's max_bytes raises it)")
+            fail(
+                path,
+                f"{size:,} bytes, over the cap of {max_bytes:,} bytes for a mesh file "
+                "(load_mesh's max_bytes raises it)",
+            )
         data = path.read_bytes()
     except OSError as e:
         fail(path, f"cannot be read ({e.strerror or e})")
@@ -71,7 +82,9 @@ def _load_texture(declared: Declared, notes: list, max_pixels: int | None):
     """The (H,W,3) uint8 RGB texture the OBJ's faces use, or None (with a note why)."""
     if len(declared.textures) > 1:
         names = ", ".join(t.name for t in declared.textures)
-        notes.append(f"faces use {len(declared.textures)} texture images ({names}); only one is supported, texture dropped")
+        notes.append(
+            f"faces use {len(declared.textures)} texture images ({names}); only one is supported, texture dropped"
+        )
         return None
     image, note = read_texture(declared.textures[0], max_pixels)
     if note:
@@ -79,8 +92,13 @@ def _load_texture(declared: Declared, notes: list, max_pixels: int | None):
     return image
 
 
-def load_mesh(path, *, report: bool = False, max_bytes: int | None = MAX_MESH_BYTES,
-              max_texture_pixels: int | None = MAX_TEXTURE_PIXELS):
+def load_mesh(
+    path,
+    *,
+    report: bool = False,
+    max_bytes: int | None = MAX_MESH_BYTES,
+    max_texture_pixels: int | None = MAX_TEXTURE_PIXELS,
+):
     """Load a triangle mesh from an OBJ, PLY, OFF or STL file, repaired.
 
     Polygons are triangulated.  OBJ files bring their MTL texture image
@@ -166,8 +184,12 @@ def load_mesh(path, *, report: bool = False, max_bytes: int | None = MAX_MESH_BY
             texture = None
     del ms, pm
     V, F, C, UV, found = repair_arrays(V, F, C, UV, source=str(path))
-    found = dataclasses.replace(found, faces=found.faces + declared.n_repeated,
-                                zero_area_faces=found.zero_area_faces + declared.n_repeated, notes=tuple(notes))
+    found = dataclasses.replace(
+        found,
+        faces=found.faces + declared.n_repeated,
+        zero_area_faces=found.zero_area_faces + declared.n_repeated,
+        notes=tuple(notes),
+    )
     if found.repaired or found.findings():
         warnings.warn(found.message(), MeshRepairWarning, stacklevel=2)
     mesh = Mesh(vertices=V, faces=F, vertex_colors=C, uv=UV, texture=texture, name=path.stem)

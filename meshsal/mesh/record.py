@@ -56,8 +56,11 @@ class Similarity:
 
     def then(self, other: Similarity) -> Similarity:
         """The transform that applies ``self`` first, then ``other``."""
-        return Similarity(other.scale * self.scale, other.scale * (other.rotation @ self.offset) + other.offset,
-                          other.rotation @ self.rotation)
+        return Similarity(
+            other.scale * self.scale,
+            other.scale * (other.rotation @ self.offset) + other.offset,
+            other.rotation @ self.rotation,
+        )
 
     def inverse(self) -> Similarity:
         """The transform back: ``inverse().apply(apply(p)) == p``."""

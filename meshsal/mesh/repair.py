@@ -148,14 +148,24 @@ class MeshReport:
 
     def repairs(self) -> list[str]:
         """What was done, one phrase per kind of repair, in the order they ran."""
-        done = [f"{verb} {count} {noun}" for verb, count, noun in (
-            ("merged", self.merged_vertices, "duplicate vertices"),
-            ("removed", self.unreferenced_vertices, "unreferenced vertices"),
-            ("dropped", self.zero_area_faces, "zero-area faces"))
-            if count]
+        done = [
+            f"{verb} {count} {noun}"
+            for verb, count, noun in (
+                ("merged", self.merged_vertices, "duplicate vertices"),
+                ("removed", self.unreferenced_vertices, "unreferenced vertices"),
+                ("dropped", self.zero_area_faces, "zero-area faces"),
+            )
+            if count
+        ]
         if self.sliver_faces:
-            how = [f"{k} {what}" for k, what in ((self.collapsed_vertices, "vertices collapsed"),
-                                                 (self.split_faces, "faces split at a cap's vertex")) if k]
+            how = [
+                f"{k} {what}"
+                for k, what in (
+                    (self.collapsed_vertices, "vertices collapsed"),
+                    (self.split_faces, "faces split at a cap's vertex"),
+                )
+                if k
+            ]
             done.append(f"dropped {self.sliver_faces} sliver faces" + (f" ({', '.join(how)})" if how else ""))
         if self.duplicate_faces:
             done.append(f"dropped {self.duplicate_faces} duplicate faces")
@@ -165,8 +175,9 @@ class MeshReport:
             done.append(f"flipped {self.flipped_faces} faces to orient their components consistently")
         if self.nonmanifold_vertices:
             edges = f" on {self.nonmanifold_edges} non-manifold edges" if self.nonmanifold_edges else ""
-            done.append(f"split {self.nonmanifold_vertices} non-manifold vertices{edges} "
-                        f"({self.added_vertices} vertices added)")
+            done.append(
+                f"split {self.nonmanifold_vertices} non-manifold vertices{edges} ({self.added_vertices} vertices added)"
+            )
         if self.outward_components:
             done.append(f"turned {self.outward_components} closed components outward")
         return done
@@ -183,8 +194,10 @@ class MeshReport:
         return f"{self.source}: " + "; ".join(parts)
 
     def __str__(self) -> str:
-        kept = (f"{self.components} components ({self.closed_components} closed), {self.boundary_edges} boundary "
-                f"edges in {self.boundary_loops} loops")
+        kept = (
+            f"{self.components} components ({self.closed_components} closed), {self.boundary_edges} boundary "
+            f"edges in {self.boundary_loops} loops"
+        )
         return self.message() + ("; " if self.repaired or self.findings() else "") + kept
 
 
@@ -355,8 +368,11 @@ def _drop_degenerate(V, F, UV):
     area = 0.5 * np.sqrt(nx * nx + ny * ny + nz * nz)
     zero = ~(area > ZERO_AREA * diagonal**2)
     # Squared length of edge k, the one opposite corner k.
-    squared = ((xc - xb) ** 2 + (yc - yb) ** 2 + (zc - zb) ** 2, vx * vx + vy * vy + vz * vz,
-               ux * ux + uy * uy + uz * uz)
+    squared = (
+        (xc - xb) ** 2 + (yc - yb) ** 2 + (zc - zb) ** 2,
+        vx * vx + vy * vy + vz * vz,
+        ux * ux + uy * uy + uz * uz,
+    )
     longest = np.maximum(np.maximum(squared[0], squared[1]), squared[2])
     sliver = ~zero & ((2.0 * area) ** 2 < (SLIVER * diagonal) ** 2 * longest)
     bad = zero | sliver

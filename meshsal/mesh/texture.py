@@ -110,5 +110,7 @@ def read_texture(path, max_pixels: int | None = MAX_TEXTURE_PIXELS) -> tuple[np.
 
 
 def _too_large(path: Path, width: int, height: int, max_pixels: int) -> str:
-    return (f"texture image {path.name!r} has {width} x {height} = {width * height:,} pixels, over the cap of "
-            f"{max_pixels:,}; loaded without texture")
+    return (
+        f"texture image {path.name!r} has {width} x {height} = {width * height:,} pixels, over the cap of "
+        f"{max_pixels:,}; loaded without texture"
+    )

@@ -406,9 +406,13 @@ def orient_outward(V: np.ndarray, F: np.ndarray, UV, edges: Edges):
             inward[k] = not _inside_another(V, F, component, closed, k)
     if inward.any():
         F, UV = _flip(F, UV, inward[component])
-    stats = {"outward_components": int(np.count_nonzero(inward)), "components": int(n_components),
-             "closed_components": int(np.count_nonzero(closed)), "boundary_edges": int(boundary.size),
-             "boundary_loops": _loops(F, boundary, len(V))}
+    stats = {
+        "outward_components": int(np.count_nonzero(inward)),
+        "components": int(n_components),
+        "closed_components": int(np.count_nonzero(closed)),
+        "boundary_edges": int(boundary.size),
+        "boundary_loops": _loops(F, boundary, len(V)),
+    }
     return F, UV, stats
 
 

@@ -54,8 +54,13 @@ class InstanceSpec:
 
     def key(self) -> list:
         """A JSON-ready description, for cache keys and reports."""
-        return [np.round(self.rotation, 12).tolist(), round(self.scale, 12), self.paint_seed,
-                round(self.hue_deg, 9), round(self.brightness, 12)]
+        return [
+            np.round(self.rotation, 12).tolist(),
+            round(self.scale, 12),
+            self.paint_seed,
+            round(self.hue_deg, 9),
+            round(self.brightness, 12),
+        ]
 
 
 def random_rotation(rng: np.random.Generator) -> np.ndarray:
@@ -74,8 +79,13 @@ def random_rotation(rng: np.random.Generator) -> np.ndarray:
     return Rotation.from_quat([x, y, z, w]).as_matrix()
 
 
-def draw_instance(rng: np.random.Generator, scale_spread: float = 0.05, hue_deg: float = 30.0,
-                  brightness_spread: float = 0.15, rotate: bool = True) -> InstanceSpec:
+def draw_instance(
+    rng: np.random.Generator,
+    scale_spread: float = 0.05,
+    hue_deg: float = 30.0,
+    brightness_spread: float = 0.15,
+    rotate: bool = True,
+) -> InstanceSpec:
     """Draw one instance's pose, size and paint.
 
     Parameters
@@ -97,8 +107,10 @@ def draw_instance(rng: np.random.Generator, scale_spread: float = 0.05, hue_deg:
     (True, True)
     """
     if not 0 <= scale_spread < 1 or not 0 <= brightness_spread < 1 or hue_deg < 0:
-        raise ValueError(f"spreads must be in [0, 1) and hue_deg >= 0, got scale_spread={scale_spread}, "
-                         f"brightness_spread={brightness_spread}, hue_deg={hue_deg}")
+        raise ValueError(
+            f"spreads must be in [0, 1) and hue_deg >= 0, got scale_spread={scale_spread}, "
+            f"brightness_spread={brightness_spread}, hue_deg={hue_deg}"
+        )
     rotation = random_rotation(rng) if rotate else np.eye(3)
     scale = float(rng.uniform(1 - scale_spread, 1 + scale_spread))
     paint_seed = int(rng.integers(2**31 - 1))

@@ -12,8 +12,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 from pathlib import Path
 
-from meshsal.objects import toys, ycb
 from meshsal.mesh import Mesh
+from meshsal.objects import toys, ycb
 
 __all__ = ["OBJECT_SETS", "ObjectRef", "resolve_objects", "load_ref", "load_object"]
 
@@ -51,8 +51,10 @@ def _ref(item: str) -> ObjectRef:
         return ObjectRef(item, "toy", units_mm=1.0)
     if item in ycb.NAMES:
         return ObjectRef(item, "ycb", str(ycb.path(item)), units_mm=1000.0)
-    raise ValueError(f"object {item!r} is neither a set ({', '.join(OBJECT_SETS)}), a known object "
-                     f"({', '.join(toys.NAMES + ycb.NAMES)}) nor an existing mesh file")
+    raise ValueError(
+        f"object {item!r} is neither a set ({', '.join(OBJECT_SETS)}), a known object "
+        f"({', '.join(toys.NAMES + ycb.NAMES)}) nor an existing mesh file"
+    )
 
 
 def resolve_objects(specs) -> tuple[ObjectRef, ...]:

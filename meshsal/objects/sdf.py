@@ -145,8 +145,7 @@ def round_cone(P, a, b, ra: float, rb: float) -> np.ndarray:
     beyond_b = np.sign(z) * a2 * z2 > k
     before_a = np.sign(y) * a2 * y2 < k
     side = (np.sqrt(x2 * a2 / l2) + y * rr) / l2 - ra
-    return np.where(beyond_b, np.sqrt(x2 + z2) / l2 - rb,
-                    np.where(before_a, np.sqrt(x2 + y2) / l2 - ra, side))
+    return np.where(beyond_b, np.sqrt(x2 + z2) / l2 - rb, np.where(before_a, np.sqrt(x2 + y2) / l2 - ra, side))
 
 
 def cylinder(P, a, b, radius: float, rounding: float = 0.0) -> np.ndarray:
@@ -241,8 +240,9 @@ def _rounded_rect2(x, y, half_size, corner: float) -> np.ndarray:
     return _box2(np.abs(x) - hx + corner, np.abs(y) - hy + corner) - corner
 
 
-def rounded_plate(P, center, half_size, corner: float, half_thickness: float,
-                  rounding: float = 0.0, rot=None) -> np.ndarray:
+def rounded_plate(
+    P, center, half_size, corner: float, half_thickness: float, rounding: float = 0.0, rot=None
+) -> np.ndarray:
     """Exact distance to a plate: a rounded rectangle in local x-y, thick along local z.
 
     ``half_size`` (2,) are the outline's half extents, ``corner`` its corner

@@ -33,8 +33,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from meshsal.objects import sdf
 from meshsal.mesh import Mesh, face_areas
+from meshsal.objects import sdf
 
 __all__ = ["NAMES", "make", "repaint"]
 
@@ -207,7 +207,8 @@ def _mesh(design: _Design):
     ms = pymeshlab.MeshSet()
     ms.add_mesh(pymeshlab.Mesh(V, F.astype(np.int32)))
     ms.meshing_decimation_quadric_edge_collapse(
-        targetfacenum=min(MAX_FACES, int(0.8 * len(F))), preservetopology=True, preservenormal=True)
+        targetfacenum=min(MAX_FACES, int(0.8 * len(F))), preservetopology=True, preservenormal=True
+    )
     ms.meshing_remove_unreferenced_vertices()
     V = np.ascontiguousarray(ms.current_mesh().vertex_matrix(), dtype=np.float64)
     F = np.ascontiguousarray(ms.current_mesh().face_matrix(), dtype=np.int64)
@@ -267,23 +268,60 @@ def _cow() -> _Design:
         _Part("eye", _mirror_x(lambda P: S.sphere(P, [13, 94, 90], 4.6)), 1),
         _Part("ear", _mirror_x(lambda P: S.ellipsoid(P, [20, 101, 72], [9, 3, 5.5], S.rotation([0, 0, 1], 20))), 3),
         _Part("horn", _mirror_x(lambda P: S.round_cone(P, [8, 104, 80], [19, 114, 78], 3.8, 2.2)), 2),
-        _Part("leg", _mirror_x(_union(lambda P: S.round_cone(P, [18, 62, 40], [18, 9, 41], 11, 7.5),
-                                      lambda P: S.round_cone(P, [18, 62, -40], [18, 9, -41], 12, 7.5))), 6),
-        _Part("hoof", _mirror_x(_union(lambda P: S.cylinder(P, [18, 0, 41], [18, 11, 41], 8.2, 2.0),
-                                       lambda P: S.cylinder(P, [18, 0, -41], [18, 11, -41], 8.2, 2.0))), 2),
+        _Part(
+            "leg",
+            _mirror_x(
+                _union(
+                    lambda P: S.round_cone(P, [18, 62, 40], [18, 9, 41], 11, 7.5),
+                    lambda P: S.round_cone(P, [18, 62, -40], [18, 9, -41], 12, 7.5),
+                )
+            ),
+            6,
+        ),
+        _Part(
+            "hoof",
+            _mirror_x(
+                _union(
+                    lambda P: S.cylinder(P, [18, 0, 41], [18, 11, 41], 8.2, 2.0),
+                    lambda P: S.cylinder(P, [18, 0, -41], [18, 11, -41], 8.2, 2.0),
+                )
+            ),
+            2,
+        ),
         _Part("udder", lambda P: S.sphere(P, [0, 46, -26], 13), 6),
-        _Part("udder", _mirror_x(_union(lambda P: S.capsule(P, [5, 38, -21], [5.5, 30, -21], 2.8),
-                                        lambda P: S.capsule(P, [5, 38, -31], [5.5, 30, -31], 2.8))), 2),
+        _Part(
+            "udder",
+            _mirror_x(
+                _union(
+                    lambda P: S.capsule(P, [5, 38, -21], [5.5, 30, -21], 2.8),
+                    lambda P: S.capsule(P, [5, 38, -31], [5.5, 30, -31], 2.8),
+                )
+            ),
+            2,
+        ),
         _Part("tail", lambda P: S.capsule(P, [0, 90, -57], [0, 42, -66], 3.0), 3),
         _Part("tuft", lambda P: S.ellipsoid(P, [0, 38, -66], [5, 9, 5]), 2),
     )
 
     def paint(V, labels, rng):
         white, dark = _rgb(0.96, 0.95, 0.92), _rgb(0.12, 0.10, 0.09)
-        colors = _base_colors(labels, {
-            "body": white, "neck": white, "head": white, "ear": white, "leg": white, "tail": white,
-            "muzzle": _rgb(0.93, 0.66, 0.68), "udder": _rgb(0.93, 0.66, 0.68), "eye": _rgb(0.04, 0.04, 0.04),
-            "horn": _rgb(0.90, 0.85, 0.70), "hoof": _rgb(0.22, 0.20, 0.18), "tuft": dark})
+        colors = _base_colors(
+            labels,
+            {
+                "body": white,
+                "neck": white,
+                "head": white,
+                "ear": white,
+                "leg": white,
+                "tail": white,
+                "muzzle": _rgb(0.93, 0.66, 0.68),
+                "udder": _rgb(0.93, 0.66, 0.68),
+                "eye": _rgb(0.04, 0.04, 0.04),
+                "horn": _rgb(0.90, 0.85, 0.70),
+                "hoof": _rgb(0.22, 0.20, 0.18),
+                "tuft": dark,
+            },
+        )
         # Patches: random blobs over the coat, their edges wobbled by a few mm.
         n = 9
         centers = np.column_stack([rng.uniform(-35, 35, n), rng.uniform(45, 100, n), rng.uniform(-60, 90, n)])
@@ -317,9 +355,16 @@ def _glasses() -> _Design:
     def paint(V, labels, rng):
         frames = [_rgb(0.75, 0.12, 0.10), _rgb(0.12, 0.30, 0.75), _rgb(0.45, 0.25, 0.10), _rgb(0.10, 0.55, 0.30)]
         frame = _jitter(rng, frames[rng.integers(len(frames))], 0.03)
-        return _base_colors(labels, {
-            "lens": _rgb(0.07, 0.09, 0.12), "frame": frame, "temple": frame,
-            "pad": _rgb(0.80, 0.80, 0.78), "hinge": _rgb(0.62, 0.62, 0.64)})
+        return _base_colors(
+            labels,
+            {
+                "lens": _rgb(0.07, 0.09, 0.12),
+                "frame": frame,
+                "temple": frame,
+                "pad": _rgb(0.80, 0.80, 0.78),
+                "hinge": _rgb(0.62, 0.62, 0.64),
+            },
+        )
 
     return _Design(parts, spacing=0.9, paint=paint)
 
@@ -346,8 +391,9 @@ def _cup() -> _Design:
     def paint(V, labels, rng):
         bodies = [_rgb(0.15, 0.35, 0.70), _rgb(0.85, 0.30, 0.15), _rgb(0.20, 0.55, 0.35), _rgb(0.90, 0.75, 0.20)]
         body = _jitter(rng, bodies[rng.integers(len(bodies))], 0.03)
-        colors = _base_colors(labels, {"body": body, "handle": body, "rim": _rgb(0.97, 0.97, 0.95),
-                                       "inside": 0.55 + 0.45 * body})
+        colors = _base_colors(
+            labels, {"body": body, "handle": body, "rim": _rgb(0.97, 0.97, 0.95), "inside": 0.55 + 0.45 * body}
+        )
         colors[(V[:, 1] > height - 6.0) & (labels != "inside")] = _rgb(0.97, 0.97, 0.95)
         return colors
 
@@ -357,8 +403,12 @@ def _cup() -> _Design:
 # The hand --------------------------------------------------------------------------------------
 
 # Finger base x, length, base and tip radius, spread (degrees about z, + towards the pinky side).
-_FINGERS = ((-26.0, 70.0, 9.5, 7.5, 8.0), (-8.5, 79.0, 10.0, 8.0, 2.0),
-            (8.5, 74.0, 9.5, 7.5, -3.0), (25.0, 58.0, 8.5, 6.5, -10.0))
+_FINGERS = (
+    (-26.0, 70.0, 9.5, 7.5, 8.0),
+    (-8.5, 79.0, 10.0, 8.0, 2.0),
+    (8.5, 74.0, 9.5, 7.5, -3.0),
+    (25.0, 58.0, 8.5, 6.5, -10.0),
+)
 
 
 def _chain(start, direction, lengths, curl_deg, curl_axis) -> list[np.ndarray]:
@@ -373,9 +423,14 @@ def _chain(start, direction, lengths, curl_deg, curl_axis) -> list[np.ndarray]:
 
 def _digit(joints, radii, blend: float) -> list[_Part]:
     """Tapered segments between consecutive joints; the first blends into the palm."""
-    return [_Part("skin", lambda P, a=joints[k], b=joints[k + 1], ra=radii[k], rb=radii[k + 1]:
-                  sdf.round_cone(P, a, b, ra, rb), blend if k == 0 else 1.0)
-            for k in range(len(joints) - 1)]
+    return [
+        _Part(
+            "skin",
+            lambda P, a=joints[k], b=joints[k + 1], ra=radii[k], rb=radii[k + 1]: sdf.round_cone(P, a, b, ra, rb),
+            blend if k == 0 else 1.0,
+        )
+        for k in range(len(joints) - 1)
+    ]
 
 
 def _hand() -> _Design:
@@ -437,8 +492,17 @@ def _plane() -> _Design:
         liveries = [_rgb(0.10, 0.30, 0.75), _rgb(0.80, 0.12, 0.12), _rgb(0.10, 0.55, 0.45), _rgb(0.95, 0.55, 0.10)]
         livery = _jitter(rng, liveries[rng.integers(len(liveries))], 0.03)
         white, window = _rgb(0.96, 0.96, 0.97), _rgb(0.10, 0.14, 0.25)
-        colors = _base_colors(labels, {"fuselage": white, "wing": livery, "tail": livery, "fin": livery,
-                                       "pylon": _rgb(0.7, 0.7, 0.72), "engine": _rgb(0.62, 0.63, 0.66)})
+        colors = _base_colors(
+            labels,
+            {
+                "fuselage": white,
+                "wing": livery,
+                "tail": livery,
+                "fin": livery,
+                "pylon": _rgb(0.7, 0.7, 0.72),
+                "engine": _rgb(0.62, 0.63, 0.66),
+            },
+        )
         x, y, z = V.T
         body = labels == "fuselage"
         cabin = body & (np.abs(x) > 6) & (y > 1.5) & (y < 6.5) & (z > -70) & (z < 50) & (np.mod(z, 8.0) < 4.5)
@@ -459,9 +523,11 @@ def _dromedary() -> _Design:
     head_rot = S.rotation([1, 0, 0], 12)
     legs = []
     for z in (38.0, -36.0):
-        legs += [lambda P, z=z: S.round_cone(P, [14, 98, z], [14, 56, z + 1], 11, 6.5),
-                 lambda P, z=z: S.round_cone(P, [14, 56, z + 1], [14, 8, z], 6.5, 5),
-                 lambda P, z=z: S.sphere(P, [14, 56, z + 1], 7.2)]
+        legs += [
+            lambda P, z=z: S.round_cone(P, [14, 98, z], [14, 56, z + 1], 11, 6.5),
+            lambda P, z=z: S.round_cone(P, [14, 56, z + 1], [14, 8, z], 6.5, 5),
+            lambda P, z=z: S.sphere(P, [14, 56, z + 1], 7.2),
+        ]
     parts = (
         _Part("coat", lambda P: S.ellipsoid(P, [0, 105, 0], [26, 27, 52])),
         _Part("hump", lambda P: S.ellipsoid(P, [0, 127, -3], [20, 26, 30]), 12),
@@ -472,20 +538,36 @@ def _dromedary() -> _Design:
         _Part("eye", _mirror_x(lambda P: S.sphere(P, [8.6, 152, 100], 2.8)), 1),
         _Part("ear", _mirror_x(lambda P: S.ellipsoid(P, [6.5, 158, 93], [2.5, 5, 3])), 1.5),
         _Part("coat", _mirror_x(_union(*legs)), 6),
-        _Part("foot", _mirror_x(_union(lambda P: S.ellipsoid(P, [14, 4.5, 40], [8, 4.5, 10]),
-                                       lambda P: S.ellipsoid(P, [14, 4.5, -34], [8, 4.5, 10]))), 3),
+        _Part(
+            "foot",
+            _mirror_x(
+                _union(
+                    lambda P: S.ellipsoid(P, [14, 4.5, 40], [8, 4.5, 10]),
+                    lambda P: S.ellipsoid(P, [14, 4.5, -34], [8, 4.5, 10]),
+                )
+            ),
+            3,
+        ),
         _Part("coat", lambda P: S.capsule(P, [0, 112, -50], [0, 76, -58], 2.6), 3),
         _Part("tuft", lambda P: S.ellipsoid(P, [0, 73, -58], [4, 7, 4]), 2),
     )
 
     def paint(V, labels, rng):
         sand = _jitter(rng, _rgb(0.84, 0.68, 0.44), 0.03)
-        return _base_colors(labels, {"coat": sand, "hump": 0.78 * sand, "muzzle": 0.85 * sand,
-                                     "eye": _rgb(0.05, 0.04, 0.03), "ear": 0.8 * sand,
-                                     "foot": 0.55 * sand, "tuft": 0.45 * sand})
+        return _base_colors(
+            labels,
+            {
+                "coat": sand,
+                "hump": 0.78 * sand,
+                "muzzle": 0.85 * sand,
+                "eye": _rgb(0.05, 0.04, 0.03),
+                "ear": 0.8 * sand,
+                "foot": 0.55 * sand,
+                "tuft": 0.45 * sand,
+            },
+        )
 
     return _Design(parts, spacing=1.3, paint=paint)
 
 
-_DESIGNS = {"cow": _cow, "glasses": _glasses, "cup": _cup, "hand": _hand, "plane": _plane,
-            "dromedary": _dromedary}
+_DESIGNS = {"cow": _cow, "glasses": _glasses, "cup": _cup, "hand": _hand, "plane": _plane, "dromedary": _dromedary}

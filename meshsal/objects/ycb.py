@@ -19,8 +19,18 @@ __all__ = ["NAMES", "path", "load"]
 
 _DIR = Path(__file__).resolve().parent / "data" / "ycb"
 
-NAMES = ("banana", "cracker_box", "foam_brick", "gelatin_box", "master_chef_can", "mustard_bottle",
-         "potted_meat_can", "power_drill", "scissors", "tomato_soup_can")
+NAMES = (
+    "banana",
+    "cracker_box",
+    "foam_brick",
+    "gelatin_box",
+    "master_chef_can",
+    "mustard_bottle",
+    "potted_meat_can",
+    "power_drill",
+    "scissors",
+    "tomato_soup_can",
+)
 
 
 def path(name: str) -> Path:

@@ -12,13 +12,41 @@ selection they share: spacing, the touch check, the fill (``select``, on
 from meshsal.attention.rig import ViewChannels, attention_maps, saliency_maps, view_channels
 from meshsal.points.attend import attention_points, best_view_set, map_peaks
 from meshsal.points.learned import learned_points
-from meshsal.points.methods import (ATTENTION_METHODS, METHODS, MODEL_METHODS, POINT_METHODS, PointMethod,
-                                    attention_combination, interest_points, points_by_method)
+from meshsal.points.methods import (
+    ATTENTION_METHODS,
+    METHODS,
+    MODEL_METHODS,
+    POINT_METHODS,
+    PointMethod,
+    attention_combination,
+    interest_points,
+    points_by_method,
+)
 from meshsal.points.record import InterestPoints
 from meshsal.points.rules import COMBINATIONS, PointOptions, Rules, default_min_spacing
 from meshsal.views.paper_projection import project_pixel_paper
 
-__all__ = ["METHODS", "POINT_METHODS", "PointMethod", "PointOptions", "Rules", "InterestPoints", "interest_points",
-           "default_min_spacing", "saliency_maps", "best_view_set", "map_peaks", "attention_points",
-           "project_pixel_paper", "COMBINATIONS", "ATTENTION_METHODS", "MODEL_METHODS", "attention_combination",
-           "ViewChannels", "view_channels", "attention_maps", "learned_points", "points_by_method"]
+__all__ = [
+    "METHODS",
+    "POINT_METHODS",
+    "PointMethod",
+    "PointOptions",
+    "Rules",
+    "InterestPoints",
+    "interest_points",
+    "default_min_spacing",
+    "saliency_maps",
+    "best_view_set",
+    "map_peaks",
+    "attention_points",
+    "project_pixel_paper",
+    "COMBINATIONS",
+    "ATTENTION_METHODS",
+    "MODEL_METHODS",
+    "attention_combination",
+    "ViewChannels",
+    "view_channels",
+    "attention_maps",
+    "learned_points",
+    "points_by_method",
+]

@@ -30,8 +30,7 @@ from meshsal.points.record import InterestPoints
 from meshsal.points.rules import PointOptions, Rules
 from meshsal.points.select import TouchFilter, saliency_fill, select, surface_candidates
 
-__all__ = ["best_view_set", "map_peaks", "salient_vertices", "view_votes", "attention_points",
-           "check_field"]
+__all__ = ["best_view_set", "map_peaks", "salient_vertices", "view_votes", "attention_points", "check_field"]
 
 
 def check_field(mesh: Mesh, vertex_saliency) -> np.ndarray:
@@ -131,7 +130,7 @@ def view_votes(graph, salient, vertex_ids: np.ndarray, radius: float, chunk: int
 
     found = []
     for start in range(0, vertex_ids.size, chunk):
-        ids = vertex_ids[start:start + chunk]
+        ids = vertex_ids[start : start + chunk]
         near = np.isfinite(dijkstra(graph, indices=ids, limit=radius))
         hits = (salient @ sparse.csr_matrix(near.T.astype(np.float32))).toarray() > 0
         found.extend(tuple(np.flatnonzero(hits[:, j]).tolist()) for j in range(ids.size))
@@ -149,8 +148,16 @@ def _best_set_values(mesh: Mesh, views, maps, set_views) -> np.ndarray:
     return best
 
 
-def attention_points(mesh: Mesh, views, maps: np.ndarray, vertex_saliency: np.ndarray, rules: Rules | None = None,
-                     combination: str = "equal", method: str = "attention", **changes) -> InterestPoints:
+def attention_points(
+    mesh: Mesh,
+    views,
+    maps: np.ndarray,
+    vertex_saliency: np.ndarray,
+    rules: Rules | None = None,
+    combination: str = "equal",
+    method: str = "attention",
+    **changes,
+) -> InterestPoints:
     """Steps 2-5 of the pipeline on views and saliency maps already computed.
 
     Parameters
@@ -197,10 +204,25 @@ def attention_points(mesh: Mesh, views, maps: np.ndarray, vertex_saliency: np.nd
     peaks = found.take(np.lexsort((np.arange(len(found)), -scores, -votes)))
     seen = _best_set_values(mesh, views, maps, set_views)
     checker = TouchFilter(mesh, rules) if rules.touch else None
-    chosen, lost = select(peaks, saliency_fill(mesh, vn, vertex_saliency, lambda i: seen[i]), rules, checker,
-                          normal_defined(mesh.vertices, mesh.faces))
+    chosen, lost = select(
+        peaks,
+        saliency_fill(mesh, vn, vertex_saliency, lambda i: seen[i]),
+        rules,
+        checker,
+        normal_defined(mesh.vertices, mesh.faces),
+    )
     votes, voters = view_votes(graph, salient, chosen.vertex_ids, spacing)
-    return InterestPoints(vertex_ids=chosen.vertex_ids, positions=chosen.positions, normals=chosen.normals,
-                          scores=chosen.scores, votes=votes, vertex_saliency=vertex_saliency, views=voters,
-                          method=method, best_set=best, min_spacing=spacing, combination=combination,
-                          untouchable=lost)
+    return InterestPoints(
+        vertex_ids=chosen.vertex_ids,
+        positions=chosen.positions,
+        normals=chosen.normals,
+        scores=chosen.scores,
+        votes=votes,
+        vertex_saliency=vertex_saliency,
+        views=voters,
+        method=method,
+        best_set=best,
+        min_spacing=spacing,
+        combination=combination,
+        untouchable=lost,
+    )

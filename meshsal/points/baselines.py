@@ -20,8 +20,7 @@ from meshsal.mesh.curvature import mean_curvature
 from meshsal.points.sampling import farthest_points, field_peaks, random_surface_points
 from meshsal.points.select import surface_candidates, vertex_candidates
 
-__all__ = ["RANDOM_POOL", "random_candidates", "uniform_candidates", "mesh_saliency_candidates",
-           "curvature_candidates"]
+__all__ = ["RANDOM_POOL", "random_candidates", "uniform_candidates", "mesh_saliency_candidates", "curvature_candidates"]
 
 #: Candidates drawn per requested point by the random baseline (dart throwing).
 RANDOM_POOL = 64

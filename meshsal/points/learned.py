@@ -33,13 +33,20 @@ from meshsal.mesh import Mesh, vertex_normals
 from meshsal.mesh.curvature import mean_curvature
 from meshsal.mesh.geometry import edge_graph
 from meshsal.points.attend import check_field, salient_vertices, view_votes
+from meshsal.points.places import POOL_FACTOR, candidate_pool
 from meshsal.points.record import InterestPoints
 from meshsal.points.rules import PointOptions, Rules
-from meshsal.points.places import POOL_FACTOR, candidate_pool
 from meshsal.points.select import choose_without_views, vertex_candidates
 
-__all__ = ["FEATURES", "POOL_FACTOR", "candidate_pool", "point_features", "TouchModel", "fit_touch_model",
-           "learned_points"]
+__all__ = [
+    "FEATURES",
+    "POOL_FACTOR",
+    "candidate_pool",
+    "point_features",
+    "TouchModel",
+    "fit_touch_model",
+    "learned_points",
+]
 
 #: The per-point visual features, in column order.
 FEATURES = tuple(f"{c}_mean" for c in CHANNELS) + ("views", "votes", "mesh_saliency", "curvature")
@@ -60,13 +67,22 @@ def _channel_means(mesh: Mesh, views, results) -> tuple[np.ndarray, np.ndarray]:
         pixels += counts
         seen += counts > 0
         for c, name in enumerate(CHANNELS):
-            sums[c] += np.bincount(corners, weights=np.repeat(result.channels[name][hit].astype(np.float64), 3),
-                                   minlength=n)
+            sums[c] += np.bincount(
+                corners, weights=np.repeat(result.channels[name][hit].astype(np.float64), 3), minlength=n
+            )
     return sums / np.maximum(pixels, 1.0), seen
 
 
-def point_features(mesh: Mesh, views, results, maps: np.ndarray, vertex_saliency: np.ndarray,
-                   vertex_ids: np.ndarray, spacing: float, threshold: float = 0.5) -> np.ndarray:
+def point_features(
+    mesh: Mesh,
+    views,
+    results,
+    maps: np.ndarray,
+    vertex_saliency: np.ndarray,
+    vertex_ids: np.ndarray,
+    spacing: float,
+    threshold: float = 0.5,
+) -> np.ndarray:
     """The ``FEATURES`` of some vertices, from the 72 views and their channels.
 
     Parameters
@@ -89,11 +105,17 @@ def point_features(mesh: Mesh, views, results, maps: np.ndarray, vertex_saliency
     """
     ids = np.asarray(vertex_ids, dtype=np.int64)
     means, seen = _channel_means(mesh, views, results)
-    votes, _ = view_votes(edge_graph(mesh.vertices, mesh.faces), salient_vertices(mesh, views, maps, threshold), ids,
-                          spacing)
+    votes, _ = view_votes(
+        edge_graph(mesh.vertices, mesh.faces), salient_vertices(mesh, views, maps, threshold), ids, spacing
+    )
     curvature = np.abs(mean_curvature(mesh.vertices, mesh.faces))[ids]
-    columns = [means[:, ids].T, seen[ids, None], votes[:, None].astype(np.float64),
-               np.asarray(vertex_saliency, np.float64)[ids, None], curvature[:, None]]
+    columns = [
+        means[:, ids].T,
+        seen[ids, None],
+        votes[:, None].astype(np.float64),
+        np.asarray(vertex_saliency, np.float64)[ids, None],
+        curvature[:, None],
+    ]
     return np.concatenate(columns, axis=1)
 
 
@@ -147,14 +169,21 @@ class TouchModel:
 
         from meshsal.util.atomic import write_text
 
-        document = {"format": MODEL_FORMAT, "version": MODEL_VERSION, "features": list(FEATURES),
-                    "mean": self.mean.tolist(), "scale": self.scale.tolist(), "coef": self.coef.tolist(),
-                    "intercept": self.intercept, "channel_weights": self.channel_weights,
-                    "trained_on": list(self.trained_on)}
+        document = {
+            "format": MODEL_FORMAT,
+            "version": MODEL_VERSION,
+            "features": list(FEATURES),
+            "mean": self.mean.tolist(),
+            "scale": self.scale.tolist(),
+            "coef": self.coef.tolist(),
+            "intercept": self.intercept,
+            "channel_weights": self.channel_weights,
+            "trained_on": list(self.trained_on),
+        }
         write_text(path, json.dumps(document, indent=1) + "\n")
 
     @staticmethod
-    def load(path) -> "TouchModel":
+    def load(path) -> TouchModel:
         """Read a model written by :meth:`save`; a clear error names the file and what is wrong."""
         from meshsal.util.jsonfile import read_json
 
@@ -162,23 +191,29 @@ class TouchModel:
         if not isinstance(document, dict) or document.get("format") != MODEL_FORMAT:
             raise ValueError(f"{path}: not a touch model file (format {MODEL_FORMAT!r} expected)")
         if document.get("version") != MODEL_VERSION or document.get("features") != list(FEATURES):
-            raise ValueError(f"{path}: a touch model of version {document.get('version')!r} with features "
-                             f"{document.get('features')}; this reads version {MODEL_VERSION} with {list(FEATURES)}")
+            raise ValueError(
+                f"{path}: a touch model of version {document.get('version')!r} with features "
+                f"{document.get('features')}; this reads version {MODEL_VERSION} with {list(FEATURES)}"
+            )
         try:
             arrays = [np.asarray(document[k], dtype=np.float64) for k in ("mean", "scale", "coef")]
             weights = {str(k): float(v) for k, v in document["channel_weights"].items()}
             intercept = float(document["intercept"])
         except (KeyError, TypeError, ValueError, AttributeError) as error:
             raise ValueError(f"{path}: incomplete or malformed touch model ({error})") from None
-        if any(a.shape != (len(FEATURES),) or not np.isfinite(a).all() for a in arrays) or \
-                not (arrays[1] > 0).all() or sorted(weights) != sorted(CHANNELS):
-            raise ValueError(f"{path}: malformed touch model (mean, scale, coef must be {len(FEATURES)} finite "
-                             f"numbers, scale positive; channel_weights one per channel)")
+        if (
+            any(a.shape != (len(FEATURES),) or not np.isfinite(a).all() for a in arrays)
+            or not (arrays[1] > 0).all()
+            or sorted(weights) != sorted(CHANNELS)
+        ):
+            raise ValueError(
+                f"{path}: malformed touch model (mean, scale, coef must be {len(FEATURES)} finite "
+                f"numbers, scale positive; channel_weights one per channel)"
+            )
         return TouchModel(*arrays, intercept, weights, tuple(str(t) for t in document.get("trained_on", ())))
 
 
-def fit_touch_model(features: np.ndarray, target: np.ndarray, alpha: float = 1.0,
-                    trained_on: tuple = ()) -> TouchModel:
+def fit_touch_model(features: np.ndarray, target: np.ndarray, alpha: float = 1.0, trained_on: tuple = ()) -> TouchModel:
     """Ridge regression of ``target`` on standardized ``features``; NNLS channel weights.
 
     Parameters
@@ -221,15 +256,28 @@ def fit_touch_model(features: np.ndarray, target: np.ndarray, alpha: float = 1.0
     scaler = StandardScaler().fit(X)
     ridge = Ridge(alpha=alpha * len(y)).fit(scaler.transform(X), y)
     # The combination sums channels scaled to [0, 1]: their raw values, centred, with non-negative weights.
-    C = X[:, :len(CHANNELS)] - X[:, :len(CHANNELS)].mean(axis=0)
+    C = X[:, : len(CHANNELS)] - X[:, : len(CHANNELS)].mean(axis=0)
     w, _ = nnls(C, y - y.mean())
     w = np.ones(len(CHANNELS)) if not w.sum() > 0 else w * len(CHANNELS) / w.sum()
-    return TouchModel(scaler.mean_, scaler.scale_, ridge.coef_, float(ridge.intercept_),
-                      dict(zip(CHANNELS, w.tolist())), tuple(trained_on))
+    return TouchModel(
+        scaler.mean_,
+        scaler.scale_,
+        ridge.coef_,
+        float(ridge.intercept_),
+        dict(zip(CHANNELS, w.tolist())),
+        tuple(trained_on),
+    )
 
 
-def learned_points(mesh: Mesh, pool: np.ndarray, features: np.ndarray, model: TouchModel,
-                   vertex_saliency: np.ndarray, rules: Rules | None = None, **changes) -> InterestPoints:
+def learned_points(
+    mesh: Mesh,
+    pool: np.ndarray,
+    features: np.ndarray,
+    model: TouchModel,
+    vertex_saliency: np.ndarray,
+    rules: Rules | None = None,
+    **changes,
+) -> InterestPoints:
     """The "learned" method on a candidate pool whose features are known.
 
     Candidates are ranked by ``model.predict(features)`` (ties by pool

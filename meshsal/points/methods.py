@@ -27,8 +27,17 @@ from meshsal.points.rules import PointOptions, Rules
 from meshsal.points.select import choose_without_views
 from meshsal.util.registry import Registry
 
-__all__ = ["PointMethod", "MeshContext", "POINT_METHODS", "METHODS", "ATTENTION_METHODS", "MODEL_METHODS",
-           "attention_combination", "points_by_method", "interest_points"]
+__all__ = [
+    "PointMethod",
+    "MeshContext",
+    "POINT_METHODS",
+    "METHODS",
+    "ATTENTION_METHODS",
+    "MODEL_METHODS",
+    "attention_combination",
+    "points_by_method",
+    "interest_points",
+]
 
 #: The attention methods and the combination each uses ("attention" takes the one asked for).
 ATTENTION_METHODS = {"attention": "equal", "attention_itti": "itti", "attention_learned": "learned"}
@@ -91,52 +100,89 @@ def _attention_maps_of(name, options, model):
 
 def _attention(name, ctx: MeshContext) -> InterestPoints:
     mode, weights = _attention_maps_of(name, ctx.options, ctx.model)
-    return attention_points(ctx.mesh, ctx.seen.views, ctx.maps_of(mode, weights), ctx.vertex_saliency, ctx.rules,
-                            combination=mode, method=name)
+    return attention_points(
+        ctx.mesh,
+        ctx.seen.views,
+        ctx.maps_of(mode, weights),
+        ctx.vertex_saliency,
+        ctx.rules,
+        combination=mode,
+        method=name,
+    )
 
 
 def _learned(name, ctx: MeshContext) -> InterestPoints:
     pool = candidate_pool(ctx.mesh, ctx.rules.n)
-    features = point_features(ctx.mesh, ctx.seen.views, ctx.seen.results, ctx.maps_of("equal"), ctx.vertex_saliency,
-                              pool, ctx.rules.min_spacing, ctx.rules.threshold)
+    features = point_features(
+        ctx.mesh,
+        ctx.seen.views,
+        ctx.seen.results,
+        ctx.maps_of("equal"),
+        ctx.vertex_saliency,
+        pool,
+        ctx.rules.min_spacing,
+        ctx.rules.threshold,
+    )
     return learned_points(ctx.mesh, pool, features, ctx.model, ctx.vertex_saliency, ctx.rules)
 
 
 def _baseline(candidates):
     def choose(name, ctx: MeshContext) -> InterestPoints:
-        first, field = candidates(ctx.mesh, ctx.vertex_normals, ctx.rules.n, np.random.default_rng(ctx.options.seed),
-                                  ctx.vertex_saliency)
-        return choose_without_views(ctx.mesh, ctx.vertex_normals, ctx.vertex_saliency, first, lambda i: field[i],
-                                    ctx.rules, name)
+        first, field = candidates(
+            ctx.mesh, ctx.vertex_normals, ctx.rules.n, np.random.default_rng(ctx.options.seed), ctx.vertex_saliency
+        )
+        return choose_without_views(
+            ctx.mesh, ctx.vertex_normals, ctx.vertex_saliency, first, lambda i: field[i], ctx.rules, name
+        )
 
     return choose
 
 
 #: The interest-point methods, each a :class:`PointMethod`.
 POINT_METHODS = Registry("interest-point method")
-POINT_METHODS.register("attention", PointMethod(_attention, _attention_maps_of),
-                       "the paper's visual attention (equal channel weights)")
-POINT_METHODS.register("attention_itti", PointMethod(_attention, _attention_maps_of),
-                       "the paper's visual attention, each channel weighted by Itti's N(.)")
-POINT_METHODS.register("attention_learned", PointMethod(_attention, _attention_maps_of, needs_model=True),
-                       "the paper's visual attention, channel weights learned from touches")
-POINT_METHODS.register("learned", PointMethod(_learned, lambda name, options, model: ("equal", None),
-                                              needs_model=True),
-                       "points by touch distinctiveness predicted from vision (meshsal.points.learned)")
-POINT_METHODS.register("random", PointMethod(_baseline(baselines.random_candidates)),
-                       "area-weighted random surface points")
+POINT_METHODS.register(
+    "attention", PointMethod(_attention, _attention_maps_of), "the paper's visual attention (equal channel weights)"
+)
+POINT_METHODS.register(
+    "attention_itti",
+    PointMethod(_attention, _attention_maps_of),
+    "the paper's visual attention, each channel weighted by Itti's N(.)",
+)
+POINT_METHODS.register(
+    "attention_learned",
+    PointMethod(_attention, _attention_maps_of, needs_model=True),
+    "the paper's visual attention, channel weights learned from touches",
+)
+POINT_METHODS.register(
+    "learned",
+    PointMethod(_learned, lambda name, options, model: ("equal", None), needs_model=True),
+    "points by touch distinctiveness predicted from vision (meshsal.points.learned)",
+)
+POINT_METHODS.register(
+    "random", PointMethod(_baseline(baselines.random_candidates)), "area-weighted random surface points"
+)
 POINT_METHODS.register("uniform", PointMethod(_baseline(baselines.uniform_candidates)), "farthest-point sampling")
-POINT_METHODS.register("mesh_saliency", PointMethod(_baseline(baselines.mesh_saliency_candidates)),
-                       "peaks of Lee et al.'s mesh saliency")
-POINT_METHODS.register("curvature", PointMethod(_baseline(baselines.curvature_candidates)),
-                       "peaks of absolute mean curvature")
+POINT_METHODS.register(
+    "mesh_saliency", PointMethod(_baseline(baselines.mesh_saliency_candidates)), "peaks of Lee et al.'s mesh saliency"
+)
+POINT_METHODS.register(
+    "curvature", PointMethod(_baseline(baselines.curvature_candidates)), "peaks of absolute mean curvature"
+)
 METHODS = POINT_METHODS.names()
 #: Methods that need a fitted ``meshsal.points.learned.TouchModel`` (``model=``).
 MODEL_METHODS = tuple(e.name for e in POINT_METHODS if e.value.needs_model)
 
 
-def points_by_method(mesh: Mesh, methods, options: PointOptions | None = None, *, model=None, vertex_saliency=None,
-                     seen: ViewChannels | None = None, **changes) -> dict:
+def points_by_method(
+    mesh: Mesh,
+    methods,
+    options: PointOptions | None = None,
+    *,
+    model=None,
+    vertex_saliency=None,
+    seen: ViewChannels | None = None,
+    **changes,
+) -> dict:
     """:func:`interest_points` of several methods on one mesh, rendering and computing channels once.
 
     Parameters
@@ -168,22 +214,36 @@ def points_by_method(mesh: Mesh, methods, options: PointOptions | None = None, *
         if method.needs_model and model is None:
             raise ValueError(f"method {m!r} needs a fitted touch model (model=, a meshsal.points.learned.TouchModel)")
         if m == "attention" and options.combination == "learned" and options.weights is None:
-            raise ValueError("combination 'learned' needs channel weights (weights=, e.g. a TouchModel's "
-                             "channel_weights)")
+            raise ValueError(
+                "combination 'learned' needs channel weights (weights=, e.g. a TouchModel's channel_weights)"
+            )
     vertex_saliency = check_field(mesh, mesh_saliency(mesh) if vertex_saliency is None else vertex_saliency)
-    wanted = {_maps_key(*method.combination(m, options, model)): method.combination(m, options, model)
-              for m, method in chosen.items() if method.combination is not None}
+    wanted = {
+        _maps_key(*method.combination(m, options, model)): method.combination(m, options, model)
+        for m, method in chosen.items()
+        if method.combination is not None
+    }
     if seen is None and wanted:
-        seen = view_channels(mesh, size=options.size, vertex_saliency=vertex_saliency, threads=options.threads,
-                             quiet=options.quiet)
+        seen = view_channels(
+            mesh, size=options.size, vertex_saliency=vertex_saliency, threads=options.threads, quiet=options.quiet
+        )
     maps = {key: attention_maps(seen, mode, weights) for key, (mode, weights) in wanted.items()}
-    ctx = MeshContext(mesh, vertex_normals(mesh.vertices, mesh.faces), vertex_saliency, rules, options, model, seen,
-                      maps)
+    ctx = MeshContext(
+        mesh, vertex_normals(mesh.vertices, mesh.faces), vertex_saliency, rules, options, model, seen, maps
+    )
     return {m: method.choose(m, ctx) for m, method in chosen.items()}
 
 
-def interest_points(mesh: Mesh, n: int | None = None, method: str = "attention", options: PointOptions | None = None,
-                    *, model=None, vertex_saliency=None, **changes) -> InterestPoints:
+def interest_points(
+    mesh: Mesh,
+    n: int | None = None,
+    method: str = "attention",
+    options: PointOptions | None = None,
+    *,
+    model=None,
+    vertex_saliency=None,
+    **changes,
+) -> InterestPoints:
     """Choose ``n`` interest points on a mesh (:mod:`meshsal.points` for the pipeline).
 
     Parameters
@@ -220,5 +280,4 @@ def interest_points(mesh: Mesh, n: int | None = None, method: str = "attention",
     """
     if n is not None:
         changes["n"] = n
-    return points_by_method(mesh, [method], options, model=model, vertex_saliency=vertex_saliency,
-                            **changes)[method]
+    return points_by_method(mesh, [method], options, model=model, vertex_saliency=vertex_saliency, **changes)[method]

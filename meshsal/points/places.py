@@ -75,4 +75,4 @@ def candidate_places(mesh: Mesh, vertex_saliency: np.ndarray, n: int = 15) -> np
     pool = candidate_pool(mesh, n)
     peaks = field_peaks(np.asarray(vertex_saliency, dtype=np.float64), mesh.faces)
     peaks = peaks[normal_defined(mesh.vertices, mesh.faces)[peaks]]
-    return np.concatenate([pool, peaks[~np.isin(peaks, pool)][:PEAK_FACTOR * int(n)]]).astype(np.int64)
+    return np.concatenate([pool, peaks[~np.isin(peaks, pool)][: PEAK_FACTOR * int(n)]]).astype(np.int64)

@@ -105,12 +105,20 @@ class InterestPoints:
         from meshsal.util.atomic import write_text
 
         frame = Similarity() if frame is None else frame
-        document = {"format": POINTS_FORMAT, "version": POINTS_VERSION, "mesh": str(source),
-                    "units": "source units and frame of the mesh file", "method": self.method,
-                    "best_set": int(self.best_set), "min_spacing": float(frame.length_to_source(self.min_spacing)),
-                    "combination": self.combination, "untouchable": int(self.untouchable),
-                    "settings": settings or {}, "points": self.records(frame),
-                    "vertex_saliency": np.asarray(self.vertex_saliency, np.float64).tolist()}
+        document = {
+            "format": POINTS_FORMAT,
+            "version": POINTS_VERSION,
+            "mesh": str(source),
+            "units": "source units and frame of the mesh file",
+            "method": self.method,
+            "best_set": int(self.best_set),
+            "min_spacing": float(frame.length_to_source(self.min_spacing)),
+            "combination": self.combination,
+            "untouchable": int(self.untouchable),
+            "settings": settings or {},
+            "points": self.records(frame),
+            "vertex_saliency": np.asarray(self.vertex_saliency, np.float64).tolist(),
+        }
         write_text(path, json.dumps(document, indent=1) + "\n")
 
     def records(self, frame: Similarity | None = None) -> list[dict]:
@@ -119,9 +127,18 @@ class InterestPoints:
         frame = Similarity() if frame is None else frame
         positions = frame.to_source(self.positions)
         normals = frame.direction_to_source(self.normals)
-        return [{"id": k + 1, "vertex": int(self.vertex_ids[k]), "position": positions[k].tolist(),
-                 "normal": normals[k].tolist(), "score": float(self.scores[k]), "votes": int(self.votes[k]),
-                 "views": list(self.views[k])} for k in range(len(self))]
+        return [
+            {
+                "id": k + 1,
+                "vertex": int(self.vertex_ids[k]),
+                "position": positions[k].tolist(),
+                "normal": normals[k].tolist(),
+                "score": float(self.scores[k]),
+                "votes": int(self.votes[k]),
+                "views": list(self.views[k]),
+            }
+            for k in range(len(self))
+        ]
 
     def save_csv(self, path, frame: Similarity | None = None) -> None:
         """Write ``id,vertex,x,y,z,nx,ny,nz,score,votes``, one row per point, in ``frame``'s source, atomically."""
@@ -129,8 +146,14 @@ class InterestPoints:
 
         lines = ["id,vertex,x,y,z,nx,ny,nz,score,votes"]
         for r in self.records(frame):
-            lines.append(",".join([str(r["id"]), str(r["vertex"])] + [repr(float(v)) for v in r["position"]]
-                                  + [repr(float(v)) for v in r["normal"]] + [repr(r["score"]), str(r["votes"])]))
+            lines.append(
+                ",".join(
+                    [str(r["id"]), str(r["vertex"])]
+                    + [repr(float(v)) for v in r["position"]]
+                    + [repr(float(v)) for v in r["normal"]]
+                    + [repr(r["score"]), str(r["votes"])]
+                )
+            )
         write_text(path, "\n".join(lines) + "\n")
 
     def to_arrays(self) -> tuple[dict, dict]:
@@ -141,11 +164,16 @@ class InterestPoints:
         arrays : dict ``vertex_ids``, ``positions``, ``normals``, ``scores``, ``votes``
         meta : dict ``best_set``, ``min_spacing``, ``combination``, ``untouchable``, ``views``
         """
-        arrays = {key: np.asarray(getattr(self, key)) for key in ("vertex_ids", "positions", "normals", "scores",
-                                                                   "votes")}
-        meta = {"best_set": int(self.best_set), "min_spacing": float(self.min_spacing),
-                "combination": self.combination, "untouchable": int(self.untouchable),
-                "views": [list(v) for v in self.views]}
+        arrays = {
+            key: np.asarray(getattr(self, key)) for key in ("vertex_ids", "positions", "normals", "scores", "votes")
+        }
+        meta = {
+            "best_set": int(self.best_set),
+            "min_spacing": float(self.min_spacing),
+            "combination": self.combination,
+            "untouchable": int(self.untouchable),
+            "views": [list(v) for v in self.views],
+        }
         return arrays, meta
 
     @classmethod
@@ -161,11 +189,20 @@ class InterestPoints:
         >>> bool(np.array_equal(again.positions, pts.positions)), again.views == pts.views
         (True, True)
         """
-        return cls(vertex_ids=arrays["vertex_ids"], positions=arrays["positions"], normals=arrays["normals"],
-                   scores=arrays["scores"], votes=arrays["votes"], vertex_saliency=vertex_saliency,
-                   views=tuple(tuple(v) for v in meta["views"]), method=method, best_set=meta["best_set"],
-                   min_spacing=meta["min_spacing"], combination=meta.get("combination", ""),
-                   untouchable=meta.get("untouchable", -1))
+        return cls(
+            vertex_ids=arrays["vertex_ids"],
+            positions=arrays["positions"],
+            normals=arrays["normals"],
+            scores=arrays["scores"],
+            votes=arrays["votes"],
+            vertex_saliency=vertex_saliency,
+            views=tuple(tuple(v) for v in meta["views"]),
+            method=method,
+            best_set=meta["best_set"],
+            min_spacing=meta["min_spacing"],
+            combination=meta.get("combination", ""),
+            untouchable=meta.get("untouchable", -1),
+        )
 
     @classmethod
     def load(cls, path) -> InterestPoints:
@@ -196,8 +233,10 @@ def _read_points(path) -> InterestPoints:
         raise ValueError(f"{path}: expected an object with a 'points' list (as written by 'visuotactile points')")
     version = document.get("version", 0) if document.get("format", POINTS_FORMAT) == POINTS_FORMAT else None
     if version is None or not isinstance(version, int) or version > POINTS_VERSION:
-        raise ValueError(f"{path}: not a points file this version reads (format {document.get('format')!r}, "
-                         f"version {document.get('version')!r}; this reads {POINTS_FORMAT} up to {POINTS_VERSION})")
+        raise ValueError(
+            f"{path}: not a points file this version reads (format {document.get('format')!r}, "
+            f"version {document.get('version')!r}; this reads {POINTS_FORMAT} up to {POINTS_VERSION})"
+        )
     items = document["points"]
     if not items:
         raise ValueError(f"{path}: the 'points' list is empty")
@@ -226,12 +265,18 @@ def _read_points(path) -> InterestPoints:
         votes.append(int(item.get("votes", 0)))
         views.append(tuple(int(v) for v in item.get("views", ())))
     N = np.array(normals)
-    return _LoadedPoints(vertex_ids=np.array(vertices, np.int64), positions=np.array(positions),
-                         normals=N / np.linalg.norm(N, axis=1, keepdims=True), scores=np.array(scores),
-                         votes=np.array(votes, np.int64),
-                         vertex_saliency=np.asarray(document.get("vertex_saliency", []), np.float64),
-                         views=tuple(views), method=str(document.get("method", "unknown")),
-                         best_set=int(document.get("best_set", -1)),
-                         min_spacing=float(document.get("min_spacing", 0.0)),
-                         combination=str(document.get("combination", "")),
-                         untouchable=int(document.get("untouchable", -1)), ids=np.array(ids, np.int64))
+    return _LoadedPoints(
+        vertex_ids=np.array(vertices, np.int64),
+        positions=np.array(positions),
+        normals=N / np.linalg.norm(N, axis=1, keepdims=True),
+        scores=np.array(scores),
+        votes=np.array(votes, np.int64),
+        vertex_saliency=np.asarray(document.get("vertex_saliency", []), np.float64),
+        views=tuple(views),
+        method=str(document.get("method", "unknown")),
+        best_set=int(document.get("best_set", -1)),
+        min_spacing=float(document.get("min_spacing", 0.0)),
+        combination=str(document.get("combination", "")),
+        untouchable=int(document.get("untouchable", -1)),
+        ids=np.array(ids, np.int64),
+    )

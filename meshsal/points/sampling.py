@@ -128,9 +128,15 @@ class Suppression:
     refused: int = 0
 
 
-def suppress(points: np.ndarray, min_spacing: float, n: int | None = None, ids: np.ndarray | None = None,
-             taken_points: np.ndarray | None = None, taken_ids: np.ndarray | None = None,
-             accept: Callable[[np.ndarray], np.ndarray] | None = None) -> Suppression:
+def suppress(
+    points: np.ndarray,
+    min_spacing: float,
+    n: int | None = None,
+    ids: np.ndarray | None = None,
+    taken_points: np.ndarray | None = None,
+    taken_ids: np.ndarray | None = None,
+    accept: Callable[[np.ndarray], np.ndarray] | None = None,
+) -> Suppression:
     """Greedy selection in the given order, skipping points too close to one already chosen.
 
     Candidates must come sorted by priority (best first).  A candidate is
@@ -195,7 +201,7 @@ def suppress(points: np.ndarray, min_spacing: float, n: int | None = None, ids: 
         labels = [None] * len(taken_points) if taken_ids is None else list(taken_ids)
         for point, label in zip(taken_points, labels):
             block(point, label)
-    verdict = np.zeros(P.shape[0], np.int8)      # 0 not asked, 1 accepted, -1 refused
+    verdict = np.zeros(P.shape[0], np.int8)  # 0 not asked, 1 accepted, -1 refused
     chosen, refused = [], 0
     i = 0
     while len(chosen) < limit:
@@ -205,7 +211,7 @@ def suppress(points: np.ndarray, min_spacing: float, n: int | None = None, ids: 
         if accept is not None and verdict[ahead[0]] == 0:
             # Where many are refused, many more are asked at once: one call for the thousand
             # refusals on a concave mesh's way to its last point, instead of a thousand calls.
-            batch = ahead[verdict[ahead] == 0][:max(limit - len(chosen), refused)]
+            batch = ahead[verdict[ahead] == 0][: max(limit - len(chosen), refused)]
             verdict[batch] = np.where(np.asarray(accept(batch), bool), 1, -1)
         # Along the line while verdicts are known: refused ones are passed over, chosen ones block.
         for i in ahead:
@@ -224,9 +230,14 @@ def suppress(points: np.ndarray, min_spacing: float, n: int | None = None, ids: 
     return Suppression(np.asarray(chosen, dtype=np.int64), refused)
 
 
-def non_maximum_suppression(points: np.ndarray, min_spacing: float, n: int | None = None,
-                            ids: np.ndarray | None = None, taken_points: np.ndarray | None = None,
-                            taken_ids: np.ndarray | None = None) -> np.ndarray:
+def non_maximum_suppression(
+    points: np.ndarray,
+    min_spacing: float,
+    n: int | None = None,
+    ids: np.ndarray | None = None,
+    taken_points: np.ndarray | None = None,
+    taken_ids: np.ndarray | None = None,
+) -> np.ndarray:
     """The indices :func:`suppress` keeps, with no ``accept`` test.
 
     Returns

@@ -25,8 +25,15 @@ from meshsal.points.rules import Rules
 from meshsal.points.sampling import field_peaks, suppress
 from meshsal.points.touch import pad_rays, pad_touches
 
-__all__ = ["Candidates", "vertex_candidates", "surface_candidates", "TouchFilter", "select", "saliency_fill",
-           "choose_without_views"]
+__all__ = [
+    "Candidates",
+    "vertex_candidates",
+    "surface_candidates",
+    "TouchFilter",
+    "select",
+    "saliency_fill",
+    "choose_without_views",
+]
 
 
 @dataclass(frozen=True)
@@ -48,8 +55,9 @@ class Candidates:
 
     @staticmethod
     def concat(parts) -> Candidates:
-        return Candidates(*(np.concatenate([getattr(p, f) for p in parts])
-                            for f in ("vertex_ids", "positions", "normals", "scores")))
+        return Candidates(
+            *(np.concatenate([getattr(p, f) for p in parts]) for f in ("vertex_ids", "positions", "normals", "scores"))
+        )
 
     @staticmethod
     def empty() -> Candidates:
@@ -92,8 +100,9 @@ class TouchFilter:
         return pad_touches(self.rays, c.positions, c.normals, self.tolerance)
 
 
-def select(first: Candidates, fill: list, rules: Rules, touch: TouchFilter | None = None,
-           usable: np.ndarray | None = None) -> tuple[Candidates, int]:
+def select(
+    first: Candidates, fill: list, rules: Rules, touch: TouchFilter | None = None, usable: np.ndarray | None = None
+) -> tuple[Candidates, int]:
     """Up to ``rules.n`` candidates from ``first``, then from each fill source in turn.
 
     Parameters
@@ -131,8 +140,9 @@ def _suppress(more: Candidates, chosen: Candidates, rules: Rules, touch, usable)
     if need <= 0 or len(more) == 0:
         return more.take(np.empty(0, np.int64)), 0
     accept = None if touch is None else (lambda batch: touch(more.take(batch)))
-    kept = suppress(more.positions, rules.min_spacing, need, more.vertex_ids, chosen.positions, chosen.vertex_ids,
-                    accept)
+    kept = suppress(
+        more.positions, rules.min_spacing, need, more.vertex_ids, chosen.positions, chosen.vertex_ids, accept
+    )
     return more.take(kept.chosen), kept.refused
 
 
@@ -151,13 +161,34 @@ def saliency_fill(mesh: Mesh, vn: np.ndarray, vertex_saliency: np.ndarray, score
     return [peaks, everything]
 
 
-def choose_without_views(mesh: Mesh, vn: np.ndarray, vertex_saliency: np.ndarray, first: Candidates,
-                         fill_score: Callable, rules: Rules, method: str) -> InterestPoints:
+def choose_without_views(
+    mesh: Mesh,
+    vn: np.ndarray,
+    vertex_saliency: np.ndarray,
+    first: Candidates,
+    fill_score: Callable,
+    rules: Rules,
+    method: str,
+) -> InterestPoints:
     """A method that needs no view of its own: ``first``, then the mesh-saliency fill scored by ``fill_score``."""
     checker = TouchFilter(mesh, rules) if rules.touch else None
-    chosen, lost = select(first, saliency_fill(mesh, vn, vertex_saliency, fill_score), rules, checker,
-                          normal_defined(mesh.vertices, mesh.faces))
-    return InterestPoints(vertex_ids=chosen.vertex_ids, positions=chosen.positions, normals=chosen.normals,
-                          scores=chosen.scores, votes=np.zeros(len(chosen), np.int64),
-                          vertex_saliency=vertex_saliency, views=tuple(() for _ in range(len(chosen))),
-                          method=method, best_set=-1, min_spacing=rules.min_spacing, untouchable=lost)
+    chosen, lost = select(
+        first,
+        saliency_fill(mesh, vn, vertex_saliency, fill_score),
+        rules,
+        checker,
+        normal_defined(mesh.vertices, mesh.faces),
+    )
+    return InterestPoints(
+        vertex_ids=chosen.vertex_ids,
+        positions=chosen.positions,
+        normals=chosen.normals,
+        scores=chosen.scores,
+        votes=np.zeros(len(chosen), np.int64),
+        vertex_saliency=vertex_saliency,
+        views=tuple(() for _ in range(len(chosen))),
+        method=method,
+        best_set=-1,
+        min_spacing=rules.min_spacing,
+        untouchable=lost,
+    )

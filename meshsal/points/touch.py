@@ -97,10 +97,13 @@ def pad_rays(mesh: Mesh, pad_width: float, samples: int = 16, scene=None) -> Pad
     inside = a * a + b * b <= radius * radius
     on_coarse = (np.arange(steps) - steps // 2) % COARSE == 0
     lo, hi = mesh.vertices.min(axis=0), mesh.vertices.max(axis=0)
-    return PadRays(scene=embree_scene(mesh) if scene is None else scene, pad_width=float(pad_width),
-                   height=2.0 * float(np.linalg.norm(hi - lo)) + radius,
-                   offsets=np.column_stack([a[inside], b[inside]]),
-                   coarse=(on_coarse[None, :] & on_coarse[:, None])[inside])
+    return PadRays(
+        scene=embree_scene(mesh) if scene is None else scene,
+        pad_width=float(pad_width),
+        height=2.0 * float(np.linalg.norm(hi - lo)) + radius,
+        offsets=np.column_stack([a[inside], b[inside]]),
+        coarse=(on_coarse[None, :] & on_coarse[:, None])[inside],
+    )
 
 
 def _unit_normals(positions, normals) -> tuple[np.ndarray, np.ndarray]:
@@ -119,8 +122,11 @@ def _travel(rays: PadRays, P: np.ndarray, N: np.ndarray, offsets: np.ndarray) ->
     U, V = tangent_frames(N)
     a, b = offsets[:, 0], offsets[:, 1]
     origins = (P + rays.height * N)[:, None] + a[None, :, None] * U[:, None] + b[None, :, None] * V[:, None]
-    hit = rays.scene.run(np.ascontiguousarray(origins.reshape(-1, 3), np.float32),
-                         np.ascontiguousarray(np.repeat(-N, a.size, axis=0), np.float32), output=1)
+    hit = rays.scene.run(
+        np.ascontiguousarray(origins.reshape(-1, 3), np.float32),
+        np.ascontiguousarray(np.repeat(-N, a.size, axis=0), np.float32),
+        output=1,
+    )
     return np.where(hit["primID"] >= 0, hit["tfar"], np.inf).reshape(P.shape[0], a.size).min(axis=1)
 
 
@@ -143,14 +149,17 @@ def _verdicts(rays: PadRays, P: np.ndarray, N: np.ndarray, tolerance: float | No
     return _gap(rays, travel) <= limit
 
 
-def pad_touches(rays: PadRays, positions: np.ndarray, normals: np.ndarray, tolerance: float | None = None) -> np.ndarray:
+def pad_touches(
+    rays: PadRays, positions: np.ndarray, normals: np.ndarray, tolerance: float | None = None
+) -> np.ndarray:
     """:func:`touchable` with the rays already built (:func:`pad_rays`)."""
     P, N = _unit_normals(positions, normals)
     return _verdicts(rays, P, N, tolerance)
 
 
-def contact_gap(mesh: Mesh, positions: np.ndarray, normals: np.ndarray, pad_width: float,
-                samples: int = 16, scene=None) -> np.ndarray:
+def contact_gap(
+    mesh: Mesh, positions: np.ndarray, normals: np.ndarray, pad_width: float, samples: int = 16, scene=None
+) -> np.ndarray:
     """How far above each point a pad pressed along its normal first meets the surface.
 
     Parameters
@@ -187,8 +196,9 @@ def contact_gap(mesh: Mesh, positions: np.ndarray, normals: np.ndarray, pad_widt
     return _gap(rays, _travel(rays, P, N, rays.offsets))
 
 
-def touchable(mesh: Mesh, positions: np.ndarray, normals: np.ndarray, pad_width: float,
-              tolerance: float | None = None, scene=None) -> np.ndarray:
+def touchable(
+    mesh: Mesh, positions: np.ndarray, normals: np.ndarray, pad_width: float, tolerance: float | None = None, scene=None
+) -> np.ndarray:
     """Whether the pad pressed along each normal meets the surface first within ``tolerance`` of the point.
 
     Parameters

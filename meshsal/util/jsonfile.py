@@ -116,16 +116,19 @@ def parse_json(text: str, source, what: str, max_depth: int = MAX_DEPTH):
     try:
         return json.loads(text)
     except json.JSONDecodeError as exc:
-        raise ValueError(f"{source}: not a valid {what}: malformed JSON at line {exc.lineno} "
-                         f"column {exc.colno}: {exc.msg}") from None
+        raise ValueError(
+            f"{source}: not a valid {what}: malformed JSON at line {exc.lineno} column {exc.colno}: {exc.msg}"
+        ) from None
     except RecursionError:
         # Only when max_depth is above what this thread's stack allows.
         raise ValueError(f"{source}: not a valid {what}: nested deeper than Python's recursion limit") from None
     except ValueError as exc:
         if "integer string conversion" not in str(exc):
             raise
-        raise ValueError(f"{source}: not a valid {what}: an integer of more than {sys.get_int_max_str_digits()} "
-                         f"digits (Python's integer-string limit)") from None
+        raise ValueError(
+            f"{source}: not a valid {what}: an integer of more than {sys.get_int_max_str_digits()} "
+            f"digits (Python's integer-string limit)"
+        ) from None
 
 
 def _read_at_most(fh, limit: int, size: int) -> bytes:

@@ -51,8 +51,9 @@ class NpzError(ValueError):
         self.problem = problem
 
 
-def read_npz(path, what: str = "NumPy archive", max_bytes: int = MAX_BYTES,
-             max_array_bytes: int = MAX_ARRAY_BYTES) -> dict[str, np.ndarray]:
+def read_npz(
+    path, what: str = "NumPy archive", max_bytes: int = MAX_BYTES, max_array_bytes: int = MAX_ARRAY_BYTES
+) -> dict[str, np.ndarray]:
     """Every array of the ``.npz`` archive ``path``, a ``what`` (e.g. ``"imprint set"``).
 
     Parameters
@@ -126,8 +127,9 @@ def read_npz(path, what: str = "NumPy archive", max_bytes: int = MAX_BYTES,
             raise NpzError(path, f"{what} does not fit in this machine's memory") from None
 
 
-def _read_members(path: Path, archive: zipfile.ZipFile, what: str, max_bytes: int,
-                  max_array_bytes: int) -> dict[str, np.ndarray]:
+def _read_members(
+    path: Path, archive: zipfile.ZipFile, what: str, max_bytes: int, max_array_bytes: int
+) -> dict[str, np.ndarray]:
     members = archive.infolist()
     for info in members:
         if not info.filename.endswith(".npy"):
@@ -136,8 +138,11 @@ def _read_members(path: Path, archive: zipfile.ZipFile, what: str, max_bytes: in
             raise NpzError(path, f"not {_a(what)}: member {info.filename!r} is encrypted")
     declared = sum(info.file_size for info in members)
     if declared > max_bytes + len(members) * _MAX_HEADER_BYTES:
-        raise NpzError(path, f"{what} too large: its members declare {_size(declared)} inflated, more than the "
-                             f"cap of {_size(max_bytes)}")
+        raise NpzError(
+            path,
+            f"{what} too large: its members declare {_size(declared)} inflated, more than the "
+            f"cap of {_size(max_bytes)}",
+        )
     arrays, total = {}, 0
     for info in members:
         name = info.filename[:-4]
@@ -145,12 +150,17 @@ def _read_members(path: Path, archive: zipfile.ZipFile, what: str, max_bytes: in
             shape, fortran, dtype = _header(path, member, name, what)
             nbytes = math.prod(shape) * dtype.itemsize
             if nbytes > max_array_bytes:
-                raise NpzError(path, f"{what} too large: {name!r} is {shape} {dtype} = {_size(nbytes)}, more than "
-                                     f"the cap of {_size(max_array_bytes)} per array")
+                raise NpzError(
+                    path,
+                    f"{what} too large: {name!r} is {shape} {dtype} = {_size(nbytes)}, more than "
+                    f"the cap of {_size(max_array_bytes)} per array",
+                )
             total += nbytes
             if total > max_bytes:
-                raise NpzError(path, f"{what} too large: its arrays hold more than the cap of {_size(max_bytes)} "
-                                     f"in all (at {name!r})")
+                raise NpzError(
+                    path,
+                    f"{what} too large: its arrays hold more than the cap of {_size(max_bytes)} in all (at {name!r})",
+                )
             arrays[name] = _body(path, member, name, what, shape, fortran, dtype, nbytes)
     return arrays
 
@@ -163,18 +173,23 @@ def _header(path: Path, member, name: str, what: str):
         elif version == (2, 0):
             shape, fortran, dtype = npy_format.read_array_header_2_0(member)
         else:
-            raise NpzError(path, f"not {_a(what)}: {name!r} is a .npy of version {version[0]}.{version[1]}, which "
-                                 f"this reader does not read")
+            raise NpzError(
+                path,
+                f"not {_a(what)}: {name!r} is a .npy of version {version[0]}.{version[1]}, which "
+                f"this reader does not read",
+            )
     except (NpzError, zipfile.BadZipFile, zlib.error, EOFError):
         raise
     except Exception as exc:
         # numpy parses the header text with ast and, for old files, tokenize: a damaged header can raise
         # whatever those raise (ValueError, tokenize.TokenError, RecursionError...).
-        raise NpzError(path, f"damaged {what}: {name!r} has an unreadable .npy header ({type(exc).__name__}: "
-                             f"{exc})") from None
+        raise NpzError(
+            path, f"damaged {what}: {name!r} has an unreadable .npy header ({type(exc).__name__}: {exc})"
+        ) from None
     if dtype.hasobject:
-        raise NpzError(path, f"not {_a(what)}: {name!r} holds Python objects (dtype {dtype}), which are never "
-                             f"unpickled")
+        raise NpzError(
+            path, f"not {_a(what)}: {name!r} holds Python objects (dtype {dtype}), which are never unpickled"
+        )
     if any(n < 0 for n in shape):
         raise NpzError(path, f"damaged {what}: {name!r} declares the shape {shape}")
     return shape, fortran, dtype
@@ -186,7 +201,7 @@ def _body(path: Path, member, name: str, what: str, shape, fortran: bool, dtype,
     buffer = bytearray(nbytes)
     view, done = memoryview(buffer), 0
     while done < nbytes:
-        got = member.readinto(view[done:done + _CHUNK])
+        got = member.readinto(view[done : done + _CHUNK])
         if not got:
             raise NpzError(path, f"damaged or truncated {what}: {name!r} ends after {done} of its {nbytes} bytes")
         done += got

@@ -10,8 +10,9 @@ from typing import TypeVar
 T = TypeVar("T")
 
 
-def progress(items: Iterable[T], total: int | None = None, desc: str = "",
-             quiet: bool = False, stream=None, unit: str = "") -> Iterator[T]:
+def progress(
+    items: Iterable[T], total: int | None = None, desc: str = "", quiet: bool = False, stream=None, unit: str = ""
+) -> Iterator[T]:
     """Yield ``items`` while drawing ``desc [#####.....] k/total elapsed`` on stderr.
 
     Nothing is drawn when ``quiet`` is true.  On a terminal the bar redraws in

@@ -68,8 +68,9 @@ class Registry:
         names = tuple(names)
         bad = [n for n in names if n not in self._entries]
         if bad or not names or len(set(names)) != len(names):
-            raise ValueError(f"unknown or repeated {self.kind}(s) {bad or list(names)}; "
-                             f"choose from {', '.join(self._entries)}")
+            raise ValueError(
+                f"unknown or repeated {self.kind}(s) {bad or list(names)}; choose from {', '.join(self._entries)}"
+            )
         return names
 
     def help_text(self) -> str:

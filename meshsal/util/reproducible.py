@@ -41,8 +41,16 @@ import platform
 import sys
 import warnings
 
-__all__ = ["KERNELS_VARIABLE", "EMBREE_VARIABLE", "KernelPinWarning", "cpu_flags", "kernel_environment",
-           "pin_kernels", "kernels", "main"]
+__all__ = [
+    "KERNELS_VARIABLE",
+    "EMBREE_VARIABLE",
+    "KernelPinWarning",
+    "cpu_flags",
+    "kernel_environment",
+    "pin_kernels",
+    "kernels",
+    "main",
+]
 
 #: "pinned" (the default) or "native": every library picks its kernels by CPU.
 KERNELS_VARIABLE = "VISUOTACTILE_KERNELS"
@@ -54,32 +62,65 @@ IPP_PIN = "sse42"
 
 #: OpenCV's name of each CPU feature above its x86-64 wheels' SSE3 baseline, by its /proc/cpuinfo flag.
 _OPENCV_FEATURES = (
-    ("ssse3", "SSSE3"), ("sse4_1", "SSE4.1"), ("sse4_2", "SSE4.2"), ("popcnt", "POPCNT"), ("avx", "AVX"),
-    ("f16c", "FP16"), ("avx2", "AVX2"), ("fma", "FMA3"), ("avx512f", "AVX512F"), ("avx512cd", "AVX512CD"),
-    ("avx512bw", "AVX512BW"), ("avx512dq", "AVX512DQ"), ("avx512vl", "AVX512VL"), ("avx512er", "AVX512ER"),
-    ("avx512pf", "AVX512PF"), ("avx512ifma", "AVX512IFMA"), ("avx512vbmi", "AVX512VBMI"),
-    ("avx512_vbmi2", "AVX512VBMI2"), ("avx512_vnni", "AVX512VNNI"), ("avx512_bitalg", "AVX512BITALG"),
-    ("avx512_vpopcntdq", "AVX512VPOPCNTDQ"), ("avx512_4vnniw", "AVX5124VNNIW"), ("avx512_4fmaps", "AVX5124FMAPS"),
+    ("ssse3", "SSSE3"),
+    ("sse4_1", "SSE4.1"),
+    ("sse4_2", "SSE4.2"),
+    ("popcnt", "POPCNT"),
+    ("avx", "AVX"),
+    ("f16c", "FP16"),
+    ("avx2", "AVX2"),
+    ("fma", "FMA3"),
+    ("avx512f", "AVX512F"),
+    ("avx512cd", "AVX512CD"),
+    ("avx512bw", "AVX512BW"),
+    ("avx512dq", "AVX512DQ"),
+    ("avx512vl", "AVX512VL"),
+    ("avx512er", "AVX512ER"),
+    ("avx512pf", "AVX512PF"),
+    ("avx512ifma", "AVX512IFMA"),
+    ("avx512vbmi", "AVX512VBMI"),
+    ("avx512_vbmi2", "AVX512VBMI2"),
+    ("avx512_vnni", "AVX512VNNI"),
+    ("avx512_bitalg", "AVX512BITALG"),
+    ("avx512_vpopcntdq", "AVX512VPOPCNTDQ"),
+    ("avx512_4vnniw", "AVX5124VNNIW"),
+    ("avx512_4fmaps", "AVX5124FMAPS"),
 )
 #: OpenCV's AVX-512 groups and the flags each needs, as its CPU detection combines them (disabling a flag
 #: leaves a group on); only the groups both OpenCV 4 and 5 name ("AVX512-CEL" and "AVX512-CLX" are not).
 _OPENCV_GROUPS = (
     ("AVX512-SKX", {"avx512f", "avx512cd", "avx512bw", "avx512dq", "avx512vl"}),
     ("AVX512-KNL", {"avx512f", "avx512cd", "avx512er", "avx512pf"}),
-    ("AVX512-KNM", {"avx512f", "avx512cd", "avx512er", "avx512pf", "avx512_4fmaps", "avx512_4vnniw",
-                    "avx512_vpopcntdq"}),
+    (
+        "AVX512-KNM",
+        {"avx512f", "avx512cd", "avx512er", "avx512pf", "avx512_4fmaps", "avx512_4vnniw", "avx512_vpopcntdq"},
+    ),
     ("AVX512-CNL", {"avx512f", "avx512cd", "avx512bw", "avx512dq", "avx512vl", "avx512ifma", "avx512vbmi"}),
-    ("AVX512-ICL", {"avx512f", "avx512cd", "avx512bw", "avx512dq", "avx512vl", "avx512ifma", "avx512vbmi",
-                    "avx512_vnni", "avx512_vbmi2", "avx512_bitalg", "avx512_vpopcntdq"}),
+    (
+        "AVX512-ICL",
+        {
+            "avx512f",
+            "avx512cd",
+            "avx512bw",
+            "avx512dq",
+            "avx512vl",
+            "avx512ifma",
+            "avx512vbmi",
+            "avx512_vnni",
+            "avx512_vbmi2",
+            "avx512_bitalg",
+            "avx512_vpopcntdq",
+        },
+    ),
 )
 #: NumPy's dispatch targets above its x86-64 baseline, by the first version that has them: grouped by x86-64
 #: level from 2.4, by feature before (a name NumPy does not dispatch is an ImportWarning, its baseline an error).
 _NUMPY_TARGETS = {
     (2, 4): "X86_V3 X86_V4 AVX512_ICL AVX512_SPR",
     (2, 0): "SSSE3 SSE41 POPCNT SSE42 AVX F16C FMA3 AVX2 AVX512F AVX512CD AVX512_KNL AVX512_KNM AVX512_SKX "
-            "AVX512_CLX AVX512_CNL AVX512_ICL AVX512_SPR",
+    "AVX512_CLX AVX512_CNL AVX512_ICL AVX512_SPR",
     (1, 0): "SSSE3 SSE41 POPCNT SSE42 AVX F16C FMA3 AVX2 AVX512F AVX512CD AVX512_KNL AVX512_KNM AVX512_SKX "
-            "AVX512_CLX AVX512_CNL AVX512_ICL",
+    "AVX512_CLX AVX512_CNL AVX512_ICL",
 }
 #: The modules whose loading reads each variable: after that, setting it changes nothing in this process.
 _READ_BY = {
@@ -226,9 +267,13 @@ def pin_kernels() -> dict[str, str]:
             os.environ[name] = value
     if late:
         what = ", ".join(f"{name} (read by {'/'.join(mods)})" for name, mods in late.items())
-        warnings.warn(f"too late to pin {what}: already loaded, so this process keeps its CPU's own kernels. "
-                      f"Call meshsal.util.reproducible.pin_kernels() before importing numpy, scipy or cv2, "
-                      f"or run under `python -m meshsal.util.reproducible`", KernelPinWarning, stacklevel=2)
+        warnings.warn(
+            f"too late to pin {what}: already loaded, so this process keeps its CPU's own kernels. "
+            f"Call meshsal.util.reproducible.pin_kernels() before importing numpy, scipy or cv2, "
+            f"or run under `python -m meshsal.util.reproducible`",
+            KernelPinWarning,
+            stacklevel=2,
+        )
     return {name: os.environ[name] for name in _READ_BY if name in os.environ}
 
 

@@ -28,8 +28,18 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["N_SETS", "VIEWS_PER_SET", "Camera", "View", "view_rig", "eye_position", "image_coords", "pixel_size",
-           "camera_rays", "project"]
+__all__ = [
+    "N_SETS",
+    "VIEWS_PER_SET",
+    "Camera",
+    "View",
+    "view_rig",
+    "eye_position",
+    "image_coords",
+    "pixel_size",
+    "camera_rays",
+    "project",
+]
 
 N_SETS = 18
 VIEWS_PER_SET = 4

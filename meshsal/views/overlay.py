@@ -4,8 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["colormap", "saliency_overlay", "draw_points", "visible_points", "tile", "views_picture",
-           "contact_sheet"]
+__all__ = ["colormap", "saliency_overlay", "draw_points", "visible_points", "tile", "views_picture", "contact_sheet"]
 
 
 def colormap(values: np.ndarray) -> np.ndarray:
@@ -24,8 +23,9 @@ def colormap(values: np.ndarray) -> np.ndarray:
     return bgr[:, ::-1].reshape(*v.shape, 3).copy()
 
 
-def saliency_overlay(rgb: np.ndarray, saliency_map: np.ndarray, mask: np.ndarray | None = None,
-                     alpha: float = 0.55) -> np.ndarray:
+def saliency_overlay(
+    rgb: np.ndarray, saliency_map: np.ndarray, mask: np.ndarray | None = None, alpha: float = 0.55
+) -> np.ndarray:
     """Blend a colour-mapped saliency map over a rendered image, on the object only.
 
     Parameters
@@ -113,7 +113,7 @@ def tile(images, columns: int, gap: int = 2) -> np.ndarray:
     for k, im in enumerate(images):
         r, c = divmod(k, columns)
         y, x = gap + r * (h + gap), gap + c * (w + gap)
-        sheet[y:y + h, x:x + w] = im
+        sheet[y : y + h, x : x + w] = im
     return sheet
 
 
@@ -122,8 +122,7 @@ def _caption(image: np.ndarray, text: str) -> np.ndarray:
 
     img = image.copy()
     scale = max(0.3, img.shape[0] / 600.0)
-    cv2.putText(img, text, (4, int(16 * scale / 0.5)), cv2.FONT_HERSHEY_SIMPLEX, scale, (255, 255, 255), 1,
-                cv2.LINE_AA)
+    cv2.putText(img, text, (4, int(16 * scale / 0.5)), cv2.FONT_HERSHEY_SIMPLEX, scale, (255, 255, 255), 1, cv2.LINE_AA)
     return img
 
 

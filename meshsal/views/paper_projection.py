@@ -26,8 +26,7 @@ def _spherical(view):
     elevation = float(np.arcsin(np.clip(e[1], -1.0, 1.0)))
     azimuth = float(np.arctan2(e[0], e[2]))
     forward = -e
-    up_s = np.array([-np.sin(elevation) * np.sin(azimuth), np.cos(elevation),
-                     -np.sin(elevation) * np.cos(azimuth)])
+    up_s = np.array([-np.sin(elevation) * np.sin(azimuth), np.cos(elevation), -np.sin(elevation) * np.cos(azimuth)])
     roll = float(np.arctan2(np.cross(up_s, cam.up) @ forward, up_s @ cam.up))
     return azimuth, elevation, distance, roll, 1.0 / view.pixel_size
 
@@ -60,8 +59,7 @@ def project_pixel_paper(view, rows, cols, mesh: Mesh) -> np.ndarray:
     azimuth, elevation, distance, roll, ppu = _spherical(view)
     e = np.array([np.cos(elevation) * np.sin(azimuth), np.sin(elevation), np.cos(elevation) * np.cos(azimuth)])
     forward = -e
-    up_s = np.array([-np.sin(elevation) * np.sin(azimuth), np.cos(elevation),
-                     -np.sin(elevation) * np.cos(azimuth)])
+    up_s = np.array([-np.sin(elevation) * np.sin(azimuth), np.cos(elevation), -np.sin(elevation) * np.cos(azimuth)])
     up = np.cos(roll) * up_s + np.sin(roll) * np.cross(forward, up_s)
     right = np.cross(forward, up)
     eye = view.center + distance * e
@@ -77,8 +75,9 @@ def project_pixel_paper(view, rows, cols, mesh: Mesh) -> np.ndarray:
         origins = np.broadcast_to(eye, on_plane.shape)
         directions = on_plane - eye
         directions = directions / np.linalg.norm(directions, axis=1, keepdims=True)
-    hit = embree_scene(mesh).run(np.ascontiguousarray(origins, np.float32), np.ascontiguousarray(directions, np.float32),
-                    output=1)
+    hit = embree_scene(mesh).run(
+        np.ascontiguousarray(origins, np.float32), np.ascontiguousarray(directions, np.float32), output=1
+    )
     out = np.full((rows.size, 3), np.nan)
     ok = hit["primID"] >= 0
     f = hit["primID"][ok]

@@ -112,8 +112,9 @@ def _sample_texture(texture: np.ndarray, uv: np.ndarray) -> np.ndarray:
     maps = np.zeros((2, rows * 1024), np.float32)
     maps[0, :k] = np.mod(uv[:, 0], 1.0) * W - 0.5
     maps[1, :k] = (1.0 - np.mod(uv[:, 1], 1.0)) * H - 0.5
-    out = cv2.remap(texture, maps[0].reshape(rows, 1024), maps[1].reshape(rows, 1024), cv2.INTER_LINEAR,
-                    borderMode=cv2.BORDER_WRAP)
+    out = cv2.remap(
+        texture, maps[0].reshape(rows, 1024), maps[1].reshape(rows, 1024), cv2.INTER_LINEAR, borderMode=cv2.BORDER_WRAP
+    )
     return out.reshape(-1, texture.shape[2])[:k].astype(np.float32) / np.float32(255.0)
 
 
@@ -158,8 +159,16 @@ def _interpolate(corner_values: np.ndarray, w: np.ndarray, u: np.ndarray, v: np.
     return out
 
 
-def _shade(stage: _Stage, camera: Camera, eye: np.ndarray, faces: np.ndarray, corners: np.ndarray,
-           w: np.ndarray, u: np.ndarray, v: np.ndarray) -> np.ndarray:
+def _shade(
+    stage: _Stage,
+    camera: Camera,
+    eye: np.ndarray,
+    faces: np.ndarray,
+    corners: np.ndarray,
+    w: np.ndarray,
+    u: np.ndarray,
+    v: np.ndarray,
+) -> np.ndarray:
     """Colours of the hits at barycentrics (w, u, v), (k, 3) float32, or (k,) for a gray surface.
 
     Gouraud shading: the vertex light interpolated, times the surface colour.
@@ -193,8 +202,12 @@ class _Images:
     @classmethod
     def allocate(cls, views: int, size: int) -> _Images:
         n = size * size
-        return cls(rgb=np.zeros((views, n, 3), np.float32), bary=np.zeros((views, n, 3), np.float32),
-                   depth=np.empty((views, n), np.float32), face_id=np.empty((views, n), np.int32))
+        return cls(
+            rgb=np.zeros((views, n, 3), np.float32),
+            bary=np.zeros((views, n, 3), np.float32),
+            depth=np.empty((views, n), np.float32),
+            face_id=np.empty((views, n), np.int32),
+        )
 
 
 def _scatter(out: np.ndarray, index: np.ndarray, columns) -> None:
@@ -230,10 +243,18 @@ def _render_one(stage: _Stage, camera: Camera, images: _Images, k: int) -> View:
         _scatter(images.rgb[k], seen, rgb.T)
     _scatter(images.bary[k], seen, (w, u, v))
     shape = (grid.size, grid.size)
-    return View(rgb=images.rgb[k].reshape(shape + (3,)), depth=depth.reshape(shape),
-                face_id=face_id.reshape(shape), bary=images.bary[k].reshape(shape + (3,)),
-                faces=stage.mesh.faces, camera=camera, center=stage.center, radius=stage.radius, eye=eye,
-                pixel_size=pixel_size(camera, stage.radius, grid.size))
+    return View(
+        rgb=images.rgb[k].reshape(shape + (3,)),
+        depth=depth.reshape(shape),
+        face_id=face_id.reshape(shape),
+        bary=images.bary[k].reshape(shape + (3,)),
+        faces=stage.mesh.faces,
+        camera=camera,
+        center=stage.center,
+        radius=stage.radius,
+        eye=eye,
+        pixel_size=pixel_size(camera, stage.radius, grid.size),
+    )
 
 
 def _check_size(size) -> int:
@@ -303,14 +324,23 @@ def render_views(mesh: Mesh, cameras, size: int = 256, threads: int | None = Non
         grid = pool.submit(_pixel_grid, size)
         if isinstance(scene, Tracer):
             if scene.mesh is not mesh:
-                raise ValueError(f"scene is a tracer of mesh {scene.mesh.name!r}, not of the mesh to render "
-                                 f"{mesh.name!r}: build it with meshsal.views.tracer.tracer(mesh)")
+                raise ValueError(
+                    f"scene is a tracer of mesh {scene.mesh.name!r}, not of the mesh to render "
+                    f"{mesh.name!r}: build it with meshsal.views.tracer.tracer(mesh)"
+                )
             trace = scene
         else:
             trace = tracer(mesh, scene, executor=pool)
         center, radius = bounding_sphere(mesh.vertices)
-        stage = _Stage(mesh=mesh, tracer=trace, normals=normals, center=center, radius=max(radius, 1e-12),
-                       hull=hull.result(), grid=grid.result())
+        stage = _Stage(
+            mesh=mesh,
+            tracer=trace,
+            normals=normals,
+            center=center,
+            radius=max(radius, 1e-12),
+            hull=hull.result(),
+            grid=grid.result(),
+        )
         images = _Images.allocate(len(cameras), size)
         if workers == 1:
             return [_render_one(stage, c, images, k) for k, c in enumerate(cameras)]

@@ -34,8 +34,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from meshsal.mesh.embree import embree_scene, is_robust
 from meshsal.mesh import Mesh, closed_orientation
+from meshsal.mesh.embree import embree_scene, is_robust
 
 __all__ = ["Tracer", "tracer"]
 
@@ -148,8 +148,9 @@ def _trace_near(mesh: Mesh, reach: np.ndarray, origins: np.ndarray, directions: 
         offset = V - o
         along = offset @ d
         distance = np.sqrt(np.maximum(np.einsum("nd,nd->n", offset, offset) - along * along, 0.0))
-        farthest = np.maximum(np.maximum(np.take(distance, F[:, 0]), np.take(distance, F[:, 1])),
-                              np.take(distance, F[:, 2]))
+        farthest = np.maximum(
+            np.maximum(np.take(distance, F[:, 0]), np.take(distance, F[:, 1])), np.take(distance, F[:, 2])
+        )
         near |= farthest <= reach
     faces = np.flatnonzero(near)
     used, corners = np.unique(F[faces], return_inverse=True)
@@ -190,8 +191,11 @@ def tracer(mesh: Mesh, scene=None, executor: Executor | None = None) -> Tracer:
     reach = _once(lambda: _longest_edges(mesh))
     if scene is not None and is_robust(scene):
         return Tracer(mesh=mesh, fast=None, facing=lambda: 0, robust=lambda: scene, reach=reach)
-    orientation = (executor.submit(closed_orientation, mesh.vertices, mesh.faces).result if executor is not None
-                   else _once(lambda: closed_orientation(mesh.vertices, mesh.faces)))
+    orientation = (
+        executor.submit(closed_orientation, mesh.vertices, mesh.faces).result
+        if executor is not None
+        else _once(lambda: closed_orientation(mesh.vertices, mesh.faces))
+    )
     # Built before the orientation is known: an open mesh wastes it, a closed one needs it at once.
     fast = embree_scene(mesh, robust=False) if scene is None else scene
     return Tracer(mesh=mesh, fast=fast, facing=orientation, robust=_once(lambda: embree_scene(mesh)), reach=reach)
