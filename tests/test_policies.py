@@ -10,7 +10,6 @@ from classify.policies import (
     POLICIES,
     Forecast,
     InfoGainPolicy,
-    LookaheadPolicy,
     RandomPolicy,
     TouchPolicy,
     expected_entropy,
@@ -116,14 +115,11 @@ def test_a_policy_never_sees_the_label_or_an_imprint_it_did_not_touch(world):
     assert np.allclose(seen[0].belief, 0.5) and np.isclose(episode.beliefs.sum(axis=1), 1.0).all()
 
 
-def test_every_built_in_policy_runs_an_episode_and_lookahead_agrees_with_info_gain_at_depth_one(world):
+def test_every_built_in_policy_runs_an_episode(world):
     _, samples, knowledge = world
     for name in POLICIES.names():
         episode = run_episode(POLICIES.get(name)(), samples["ball", 0], knowledge, 3, 16.0, np.random.default_rng(2))
         assert len(episode.touched) == 3 and len(set(episode.touched.tolist())) == 3, name
-    greedy = run_episode(InfoGainPolicy(), samples["ball", 0], knowledge, 1, 16.0, np.random.default_rng(2))
-    one = run_episode(LookaheadPolicy(first=1), samples["ball", 0], knowledge, 1, 16.0, np.random.default_rng(2))
-    assert greedy.touched.tolist() == one.touched.tolist()
 
 
 def test_expected_entropy_is_the_belief_entropy_where_no_hypothesis_knows_the_place():

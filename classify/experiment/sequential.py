@@ -86,11 +86,12 @@ def policy_job(job: PolicyJob) -> PolicyOutcome:
     choice_s = np.zeros(len(job.policies))
     with threadpool_limits(1):
         knowledge = fit_knowledge(job.training, job.recognizer)
+        felt = [knowledge.posterior(test.imprints[0]) for test in job.tests]
         for q, name in enumerate(job.policies):
             seconds = []
             for c, test in enumerate(job.tests):
                 rng = recognition_rng(job.seed, job.replicate, 0, job.names[c], Stream.EPISODE, name_seed(name))
-                episode = run_episode(POLICIES.get(name)(), test, knowledge, K, job.min_spacing, rng)
+                episode = run_episode(POLICIES.get(name)(), test, knowledge, K, job.min_spacing, rng, felt=felt[c])
                 ties = recognition_rng(job.seed, job.replicate, 0, job.names[c], Stream.EPISODE_TIES)
                 picks = decisions(episode.beliefs, ties)
                 last = np.minimum(np.arange(K), len(picks) - 1)

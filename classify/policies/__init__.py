@@ -19,7 +19,6 @@ from classify.policies.knowledge import (
 from classify.policies.policy import (
     POLICIES,
     InfoGainPolicy,
-    LookaheadPolicy,
     PlanPolicy,
     RandomPolicy,
     TouchPolicy,
@@ -39,7 +38,6 @@ __all__ = [
     "TouchPolicy",
     "RandomPolicy",
     "InfoGainPolicy",
-    "LookaheadPolicy",
     "PlanPolicy",
     "POLICIES",
     "expected_entropy",

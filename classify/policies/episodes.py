@@ -67,6 +67,7 @@ def run_episode(
     min_spacing: float,
     rng: np.random.Generator,
     session: int = 0,
+    felt: np.ndarray | None = None,
 ) -> Episode:
     """Let ``policy`` touch the test instance ``sample`` up to ``touches`` times.
 
@@ -85,6 +86,9 @@ def run_episode(
         The policy's own draws.
     session : int
         Which of the sample's acquisition sessions the touches feel.
+    felt : (P, C) float64, optional
+        ``knowledge.posterior`` of that session's imprint at every place, when
+        already computed: it does not depend on the policy.
 
     Returns
     -------
@@ -94,7 +98,8 @@ def run_episode(
 
     places = sample.places
     forecast = knowledge.forecast(places)
-    felt = knowledge.posterior(sample.imprints[session])  # what each place would feel; the policy never sees it
+    if felt is None:
+        felt = knowledge.posterior(sample.imprints[session])  # what each place would feel; the policy never sees it
     belief = np.full(knowledge.n_classes, 1.0 / knowledge.n_classes)
     touched, beliefs, seconds = [], [], []
     for _ in range(touches):

@@ -223,7 +223,7 @@ class KNN(ClassifierMixin, BaseEstimator):
                 if not usable:
                     continue
                 d2 = _sq_distances(X[test], X[train])
-                order = _ranked(d2, keys[train])
+                order = _ranked(d2, keys[train], max(usable))
                 dist = _class_distances(d2, codes[train], n_classes)
                 for k in usable:
                     # The argmax does not depend on the scale, so the fold's own is not needed.
@@ -250,7 +250,7 @@ class KNN(ClassifierMixin, BaseEstimator):
         if X.shape[1] != self.n_features_in_:
             raise ValueError(f"KNN: X has {X.shape[1]} features, the model was fitted with {self.n_features_in_}")
         d2 = _sq_distances(X, self.X_)
-        order = _ranked(d2, self.tiebreak_)[:, : self.k_]
+        order = _ranked(d2, self.tiebreak_, self.k_)
         return _posterior(self.codes_[order], _class_distances(d2, self.codes_, len(self.classes_)), self.scale_)
 
     def predict(self, X):
@@ -313,10 +313,25 @@ def _row_keys(X, codes, seed) -> np.ndarray:
     )
 
 
-def _ranked(d2, tiebreak) -> np.ndarray:
-    """Training indices by increasing distance, equal distances in ``tiebreak`` order, (n, m)."""
-    keys = np.broadcast_to(tiebreak, d2.shape)
-    return np.lexsort((keys, d2), axis=1)
+def _ranked(d2, tiebreak, k: int) -> np.ndarray:
+    """The ``k`` nearest training indices by increasing distance, equal distances in ``tiebreak`` order, (n, k).
+
+    Only the candidates no farther than each row's k-th distance are sorted
+    (all of them, ties at that distance included), so the result is the first
+    ``k`` columns of the full sort.
+    """
+    n, m = d2.shape
+    k = min(int(k), m)
+    out = np.empty((n, k), np.int64)
+    for start in range(0, n, _BLOCK):
+        d = d2[start : start + _BLOCK]
+        kth = np.partition(d, k - 1, axis=1)[:, k - 1 : k]
+        wide = int((d <= kth).sum(axis=1).max())
+        near = np.argpartition(d, wide - 1, axis=1)[:, :wide] if wide < m else np.broadcast_to(np.arange(m), d.shape)
+        rows = np.arange(len(d))[:, None]
+        order = np.lexsort((tiebreak[near], d[rows, near]), axis=1)[:, :k]
+        out[start : start + _BLOCK] = near[rows, order]
+    return out
 
 
 def _class_distances(d2, codes, n_classes) -> np.ndarray:
