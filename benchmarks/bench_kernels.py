@@ -39,8 +39,8 @@ def serve() -> None:
 
     import meshsal
     import tactile
+    from meshsal import render_views, view_rig
     from meshsal.attention import saliency_views
-    from meshsal.views.render import render_views, view_rig
 
     cow = meshsal.objects.toys.make("cow")
     saliency = meshsal.mesh_saliency(cow)

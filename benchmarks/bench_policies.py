@@ -41,28 +41,27 @@ def machine() -> str:
 
 def synthetic(objects: int, places: int, touches: int, seed: int = 0):
     """A TouchKnowledge of random calibrated posteriors, and a test instance's Places, at the given sizes."""
-    from classify.policies import Places, TouchKnowledge
+    from classify.policies import Places, TouchKnowledge, signatures
     from classify.recognizers.fusion import Calibration
     from meshsal.points.learned import FEATURES
 
     rng = np.random.default_rng(seed)
     names = tuple(f"object{j:02d}" for j in range(objects))
-    place_ids, ranked, posteriors, weights = [], [], [], []
-    for _ in range(objects):
-        place_ids.append(np.sort(rng.choice(4 * places, places, replace=False)))
-        ranked.append(rng.permutation(places))
-        posteriors.append(rng.dirichlet(np.full(objects, 0.3), size=(places, touches)))
-        weights.append(np.full((places, touches), 1.0 / touches))
-    knowledge = TouchKnowledge(
-        names, tuple(place_ids), tuple(ranked), tuple(posteriors), tuple(weights), None, Calibration(), "polar"
-    )
-    ids = place_ids[0][ranked[0]]
     test = Places(
-        ids,
+        np.arange(places),
         rng.normal(size=(places, 3)) * 50.0,
         rng.normal(size=(places, 3)),
         rng.random((places, len(FEATURES))),
         np.ones(places, bool),
+    )
+    place_ids, located, posteriors, weights = [], [], [], []
+    for _ in range(objects):
+        place_ids.append(np.sort(rng.choice(4 * places, places, replace=False)))
+        located.append(signatures(test)[rng.permutation(places)])  # every object's places, in another order
+        posteriors.append(rng.dirichlet(np.full(objects, 0.3), size=(places, touches)))
+        weights.append(np.full((places, touches), 1.0 / touches))
+    knowledge = TouchKnowledge(
+        names, tuple(place_ids), tuple(located), tuple(posteriors), tuple(weights), None, Calibration(), "polar"
     )
     return knowledge, test
 
@@ -80,8 +79,8 @@ def main(argv=None) -> int:
     knowledge, places = synthetic(args.objects, args.places, args.touches)
     rng = np.random.default_rng(1)
     with threadpool_limits(1):
-        forecast = knowledge.forecast(len(places))  # warm: imports, first allocations
-        forecast_s = [timed(knowledge.forecast, len(places)) for _ in range(5)]
+        forecast = knowledge.forecast(places)  # warm: imports, first allocations
+        forecast_s = [timed(knowledge.forecast, places) for _ in range(5)]
         states = []
         for r in range(args.repeats):
             touched = tuple(int(t) for t in rng.choice(args.places, r % 4, replace=False))
