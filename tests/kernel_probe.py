@@ -33,23 +33,10 @@ def results_csv(out_dir) -> str:
     """``results.csv`` of a small experiment on the toys: uniform points, 6 each, 2 replicates."""
     from pathlib import Path
 
-    from classify import experiment
-    from classify.experiment.samples import Settings
+    import quick
 
-    settings = Settings(n_points=6, train_instances=2, train_sessions=1)
-    experiment.run_experiment(
-        list(TOYS),
-        methods=("uniform",),
-        classifiers=("knn", "naive_bayes", "decision_tree"),
-        settings=settings,
-        replicates=2,
-        repeats=2,
-        folds=3,
-        n_jobs=1,
-        cache_dir=None,
-        quiet=True,
-        out_dir=out_dir,
-    )
+    config = quick.QUICK.replace(methods=("uniform",), classifiers=("knn", "naive_bayes", "decision_tree"))
+    quick.run(list(TOYS), config, n_jobs=1, out_dir=out_dir)
     return (Path(out_dir) / "results.csv").read_text()
 
 

@@ -5,17 +5,18 @@ import json
 
 import numpy as np
 import pytest
+import quick
 import shapes
+from quick import QUICK, SMALL
 
 import meshsal
 import tactile
 from classify import experiment
 from classify.cli import main
 from classify.experiment.samples import Settings
+from classify.recognizers.classifiers import NAMES
 from classify.reporting.report import CSV_COLUMNS
 from meshsal.objects.instances import random_rotation
-
-SMALL = Settings(n_points=6, train_instances=2, train_sessions=1)
 
 
 def _cup(name, turn=None):
@@ -25,32 +26,15 @@ def _cup(name, turn=None):
 
 
 def test_two_copies_of_one_mesh_cannot_be_told_apart_but_two_objects_can():
+    config = QUICK.replace(methods=("uniform",), protocols=("instance",), replicates=4)
     twins = [_cup("cup_a"), _cup("cup_b", random_rotation(np.random.default_rng(9)))]
-    r = experiment.run_experiment(
-        twins,
-        methods=("uniform",),
-        protocols=("instance",),
-        classifiers=("knn",),
-        settings=SMALL,
-        replicates=4,
-        cache_dir=None,
-        quiet=True,
-    )
+    r = quick.run(twins, config)
     chance = r.cell("uniform", "instance", "knn", 2, False, 1)
     assert chance.ci_low <= 50.0 <= chance.ci_high, chance  # a leak of pose or point would show here
     fused = r.cell("uniform", "instance", "knn", 2, False, 6)
     assert fused.ci_low <= 50.0 <= fused.ci_high, fused
     other = [_cup("cup_a"), shapes.sphere(radius=50.0, n=24).replace(name="ball")]
-    r = experiment.run_experiment(
-        other,
-        methods=("uniform",),
-        protocols=("instance",),
-        classifiers=("knn",),
-        settings=SMALL,
-        replicates=4,
-        cache_dir=None,
-        quiet=True,
-    )
+    r = quick.run(other, config)
     assert r.cell("uniform", "instance", "knn", 2, False, 1).mean > 65.0
     assert r.cell("uniform", "instance", "knn", 2, False, 6).ci_low > 80.0
 
@@ -64,19 +48,9 @@ def _objects():
 
 
 def test_the_rates_of_an_object_set_do_not_depend_on_the_order_objects_are_given_in():
-    kwargs = dict(
-        methods=("random",),
-        classifiers=("knn", "naive_bayes"),
-        settings=SMALL,
-        replicates=2,
-        repeats=2,
-        folds=3,
-        cache_dir=None,
-        quiet=True,
-        n_jobs=1,
-    )
-    given = experiment.run_experiment(_objects(), **kwargs)
-    flipped = experiment.run_experiment(_objects()[::-1], **kwargs)
+    config = QUICK.replace(methods=("random",), classifiers=("knn", "naive_bayes"))
+    given = quick.run(_objects(), config, n_jobs=1)
+    flipped = quick.run(_objects()[::-1], config, n_jobs=1)
     for protocol, k in (("paper", 1), ("instance", 1), ("instance", 4)):
         for c in ("knn", "naive_bayes"):
             key = ("random", protocol, c, 3, True, k)
@@ -84,44 +58,24 @@ def test_the_rates_of_an_object_set_do_not_depend_on_the_order_objects_are_given
 
 
 def test_results_csv_does_not_depend_on_the_order_objects_are_given_in(tmp_path):
-    kwargs = dict(
-        methods=("random", "uniform"),
-        classifiers=("knn",),
-        settings=SMALL,
-        replicates=3,
-        repeats=2,
-        folds=3,
-        cache_dir=None,
-        quiet=True,
-        n_jobs=1,
-    )
-    experiment.run_experiment(_objects(), out_dir=tmp_path / "given", **kwargs)
-    experiment.run_experiment(_objects()[::-1], out_dir=tmp_path / "flipped", **kwargs)
+    config = QUICK.replace(methods=("random", "uniform"), replicates=3)
+    quick.run(_objects(), config, n_jobs=1, out_dir=tmp_path / "given")
+    quick.run(_objects()[::-1], config, n_jobs=1, out_dir=tmp_path / "flipped")
     given = (tmp_path / "given" / "results.csv").read_text()
     assert given == (tmp_path / "flipped" / "results.csv").read_text()  # means, intervals, comparisons
 
 
 def test_results_csv_is_identical_for_one_and_two_jobs(tmp_path):
-    kwargs = dict(methods=("random",), settings=SMALL, replicates=2, repeats=2, folds=3, cache_dir=None, quiet=True)
-    one = experiment.run_experiment(_objects(), n_jobs=1, out_dir=tmp_path / "one", **kwargs)
-    two = experiment.run_experiment(_objects(), n_jobs=2, out_dir=tmp_path / "two", **kwargs)
+    config = QUICK.replace(methods=("random",), classifiers=NAMES)
+    one = quick.run(_objects(), config, n_jobs=1, out_dir=tmp_path / "one")
+    two = quick.run(_objects(), config, n_jobs=2, out_dir=tmp_path / "two")
     assert (tmp_path / "one" / "results.csv").read_text() == (tmp_path / "two" / "results.csv").read_text()
     assert one.rates.keys() == two.rates.keys() and len(one.rates) == 5 * 2 * (1 + 6)
 
 
 def test_every_rate_has_an_interval_and_methods_a_paired_comparison(tmp_path):
-    r = experiment.run_experiment(
-        _objects(),
-        methods=("random", "uniform"),
-        settings=SMALL,
-        replicates=3,
-        repeats=2,
-        folds=3,
-        classifiers=("knn", "naive_bayes"),
-        cache_dir=None,
-        quiet=True,
-        out_dir=tmp_path,
-    )
+    config = QUICK.replace(methods=("random", "uniform"), classifiers=("knn", "naive_bayes"), replicates=3)
+    r = quick.run(_objects(), config, out_dir=tmp_path)
     for c in r.cells:
         assert c.ci_low <= c.mean <= c.ci_high and 0.0 <= c.ci_low and c.ci_high <= 100.0
         assert c.replicates == (3 if c.protocol == "instance" else 2)
@@ -249,21 +203,12 @@ def test_real_imprint_set_gives_table_2_with_folds_grouped_by_point(tmp_path, ca
 def test_results_csv_is_identical_in_process_on_a_local_cluster_and_on_a_tcp_cluster(tmp_path, dask_cluster):
     from classify.runtime.cluster import open_executor
 
-    kwargs = dict(
-        methods=("uniform",),
-        classifiers=("knn", "naive_bayes", "decision_tree"),
-        settings=SMALL,
-        replicates=2,
-        repeats=2,
-        folds=3,
-        cache_dir=None,
-        quiet=True,
-    )
-    experiment.run_experiment(_objects(), n_jobs=1, out_dir=tmp_path / "serial", **kwargs)
+    config = QUICK.replace(methods=("uniform",), classifiers=("knn", "naive_bayes", "decision_tree"))
+    quick.run(_objects(), config, n_jobs=1, out_dir=tmp_path / "serial")
     with open_executor(workers=2) as executor:
-        experiment.run_experiment(_objects(), executor=executor, out_dir=tmp_path / "local", **kwargs)
+        quick.run(_objects(), config, executor=executor, out_dir=tmp_path / "local")
     with open_executor(scheduler=dask_cluster.address) as executor:
-        experiment.run_experiment(_objects(), executor=executor, out_dir=tmp_path / "tcp", **kwargs)
+        quick.run(_objects(), config, executor=executor, out_dir=tmp_path / "tcp")
     serial = (tmp_path / "serial" / "results.csv").read_text()
     assert serial == (tmp_path / "local" / "results.csv").read_text() == (tmp_path / "tcp" / "results.csv").read_text()
 
@@ -286,20 +231,13 @@ def test_real_size_keeps_the_objects_own_millimetres_and_refuses_a_file_without_
 
 
 def test_touch_policies_run_paired_with_the_fixed_plans_and_write_their_rows(tmp_path):
-    r = experiment.run_experiment(
-        _objects()[:2],
+    config = QUICK.replace(
         methods=("uniform", "mesh_saliency"),
         policies=("info_gain", "random"),
         protocols=("instance",),
-        classifiers=("knn",),
         features="polar",
-        settings=SMALL,
-        replicates=2,
-        cache_dir=None,
-        quiet=True,
-        n_jobs=1,
-        out_dir=tmp_path,
     )
+    r = quick.run(_objects()[:2], config, n_jobs=1, out_dir=tmp_path)
     with open(tmp_path / "results.csv") as fh:
         rows = list(csv.DictReader(fh))
     sequential = [row for row in rows if row["protocol"] == "sequential"]
@@ -352,17 +290,8 @@ def test_every_method_and_classifier_of_a_replicate_meets_the_same_instances_dev
     monkeypatch.setattr(stages, "instance_job", spy_job)
     monkeypatch.setattr(protocols, "touch_sets", spy_sets)
     methods = ("uniform", "mesh_saliency")
-    experiment.run_experiment(
-        _objects()[:2],
-        methods=methods,
-        protocols=("instance",),
-        classifiers=("knn", "naive_bayes"),
-        settings=SMALL,
-        replicates=2,
-        cache_dir=None,
-        quiet=True,
-        n_jobs=1,
-    )
+    config = QUICK.replace(methods=methods, protocols=("instance",), classifiers=("knn", "naive_bayes"))
+    quick.run(_objects()[:2], config, n_jobs=1)
     # 2 objects x 2 replicates x (1 test + 2 training sessions) session streams, each met once by every method.
     assert len(acquired) == 2 * 2 * 3 and set(acquired.values()) == {len(methods)}
     runs = list(touch_sets.values())

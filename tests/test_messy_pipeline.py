@@ -6,19 +6,21 @@ neither a vertex candidate nor a surface point (attention, random) whose
 nearest corner has none.
 """
 
+import dataclasses
 import json
 import warnings
 
 import messy
 import numpy as np
 import pytest
+import quick
 import shapes
+from quick import QUICK, SMALL
 
 import meshsal
 import tactile
-from classify import batch, experiment
+from classify import batch
 from classify.cli import main
-from classify.experiment.samples import Settings
 from meshsal.mesh import Mesh, normal_defined
 from meshsal.mesh.io import MeshRepairWarning, load_mesh
 
@@ -138,22 +140,10 @@ def test_a_folder_of_messy_meshes_goes_through_the_batch(tmp_path):
 
 def test_the_experiment_runs_on_messy_objects(files, tmp_path):
     objects = [str(files["composite_double_sided"]), str(files["everything_apart"])]
-    small = Settings(n_points=6, train_instances=2, train_sessions=1, view_size=32)
+    config = QUICK.replace(methods=("uniform", "random"), settings=dataclasses.replace(SMALL, view_size=32))
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", MeshRepairWarning)
-        r = experiment.run_experiment(
-            objects,
-            methods=("uniform", "random"),
-            classifiers=("knn",),
-            settings=small,
-            replicates=2,
-            repeats=2,
-            folds=3,
-            cache_dir=None,
-            quiet=True,
-            n_jobs=1,
-            out_dir=tmp_path,
-        )
+        r = quick.run(objects, config, n_jobs=1, out_dir=tmp_path)
     cell = r.cell("uniform", "instance", "knn", 2, False, 1)
     assert 0.0 <= cell.ci_low <= cell.mean <= cell.ci_high <= 100.0
     assert (tmp_path / "results.csv").exists()
@@ -162,19 +152,10 @@ def test_the_experiment_runs_on_messy_objects(files, tmp_path):
 def test_meshes_built_in_memory_are_repaired_as_files_are(tmp_path):
     composite = CASES["composite_double_sided"]
     mesh = Mesh(vertices=composite.vertices, faces=composite.faces, name="composite")
-    small = Settings(n_points=4, train_instances=2, train_sessions=1, view_size=32)
+    small = dataclasses.replace(SMALL, n_points=4, view_size=32)
+    config = QUICK.replace(methods=("uniform",), protocols=("instance",), settings=small)
     with pytest.warns(MeshRepairWarning, match="composite: .*double-sided"):
-        r = experiment.run_experiment(
-            [mesh, shapes.box(half=30.0, n=12).replace(name="box")],
-            methods=("uniform",),
-            protocols=("instance",),
-            classifiers=("knn",),
-            settings=small,
-            replicates=2,
-            cache_dir=None,
-            quiet=True,
-            n_jobs=1,
-        )
+        r = quick.run([mesh, shapes.box(half=30.0, n=12).replace(name="box")], config, n_jobs=1)
     assert 0.0 <= r.cell("uniform", "instance", "knn", 2, False, 1).mean <= 100.0
 
 
@@ -230,16 +211,6 @@ def test_a_bug_deep_in_a_command_keeps_its_traceback_and_names_the_mesh(files, t
 
 def test_an_error_in_the_experiment_names_the_object(files, monkeypatch):
     fail_in_curvature(monkeypatch, ValueError("curvature went wrong"))
+    config = QUICK.replace(methods=("uniform",), settings=dataclasses.replace(SMALL, n_points=4))
     with pytest.raises(ValueError, match=r"(composite_double_sided|cup)"):
-        experiment.run_experiment(
-            [str(files["composite_double_sided"]), str(files["cup"])],
-            methods=("uniform",),
-            classifiers=("knn",),
-            settings=Settings(n_points=4, train_instances=2, train_sessions=1),
-            replicates=2,
-            repeats=2,
-            folds=3,
-            cache_dir=None,
-            quiet=True,
-            n_jobs=1,
-        )
+        quick.run([str(files["composite_double_sided"]), str(files["cup"])], config, n_jobs=1)

@@ -1,0 +1,17 @@
+"""Small experiments for the tests: a quick :class:`ExperimentConfig` to ``.replace`` and a run without cache or bars."""
+
+from classify.experiment import run_experiment
+from classify.experiment.config import ExperimentConfig, Settings
+
+#: Six points an instance, two training instances of one acquisition session each.
+SMALL = Settings(n_points=6, train_instances=2, train_sessions=1)
+#: k-NN on ``SMALL``: two replicates, and two repeats of three folds in the paper protocol.
+QUICK = ExperimentConfig(classifiers=("knn",), settings=SMALL, replicates=2, repeats=2, folds=3)
+
+
+def run(objects, config=QUICK, **options):
+    """:func:`classify.experiment.run_experiment` with no cache and no progress bars.
+
+    ``options`` are its keywords besides those (``n_jobs``, ``executor``, ``out_dir``).
+    """
+    return run_experiment(objects, config, cache_dir=None, quiet=True, **options)
