@@ -144,3 +144,19 @@ def test_evolutionary_svm_two_classes_decision_sign_follows_classes():
     f = model.decision_function(np.array([[0.1], [3.1]]))
     assert f.shape == (2,) and f[0] < 0 < f[1]
     assert list(model.predict([[0.1], [3.1]])) == ["a", "b"]
+
+
+def test_knn_neighbours_are_the_first_k_of_the_full_sort_ties_included():
+    from classify.recognizers.classifiers import _ranked
+
+    rng = np.random.default_rng(0)
+    for trial in range(60):
+        n, m = int(rng.integers(1, 700)), int(rng.integers(1, 200))
+        levels = int(rng.integers(1, 5)) if trial % 2 else 10**6  # few levels: many ties at the k-th distance
+        d2 = rng.integers(0, levels, size=(n, m)).astype(float)
+        if trial % 7 == 0:
+            d2[:] = 0.0  # every training row equally near (empty imprints)
+        tiebreak = rng.permutation(m).astype(np.uint64)
+        full = np.lexsort((np.broadcast_to(tiebreak, d2.shape), d2), axis=1)
+        for k in (1, 3, 9, m):
+            np.testing.assert_array_equal(_ranked(d2, tiebreak, k), full[:, : min(k, m)])
