@@ -106,7 +106,13 @@ def test_library_versions_report_an_upgrade(monkeypatch):
     before = cache.library_versions()
     real = metadata.version
     monkeypatch.setattr(metadata, "version", lambda name: "999.0" if name == "scipy" else real(name))
-    after = cache.library_versions()
+    assert cache.library_versions() == before  # read once per process
+    # The next process reads them again.
+    cache._installed_versions.cache_clear()
+    try:
+        after = cache.library_versions()
+    finally:
+        cache._installed_versions.cache_clear()
     assert after["scipy"] == "999.0" != before["scipy"]
     assert {k: v for k, v in after.items() if k != "scipy"} == {k: v for k, v in before.items() if k != "scipy"}
 
@@ -158,8 +164,9 @@ def test_the_experiment_misses_when_a_setting_the_mesh_the_code_or_a_library_cha
     real_code = cache.code_fingerprint
     monkeypatch.setattr(cache, "code_fingerprint", lambda *packages: real_code(*packages) + "-edited")
     assert run()[1] == 1 and run()[1] == 0
-    real_version = metadata.version
-    monkeypatch.setattr(metadata, "version", lambda name: "999.0" if name == "numpy" else real_version(name))
+    # An upgrade between runs: the next process reads the new version.
+    real_versions = cache._installed_versions
+    monkeypatch.setattr(cache, "_installed_versions", lambda: {**real_versions(), "numpy": "999.0"})
     assert run()[1] == 1 and run()[1] == 0
     monkeypatch.undo()
     assert run()[1] == 0  # the original entry is still there

@@ -33,12 +33,12 @@ from dataclasses import dataclass
 
 import numpy as np
 from sklearn.metrics import confusion_matrix
-from sklearn.model_selection import StratifiedGroupKFold
 from threadpoolctl import threadpool_limits
 
 from classify.experiment.streams import Stream, recognition_rng
 from classify.policies.episodes import stopping_curve
 from classify.recognizers import touches
+from classify.recognizers.folds import GroupFolds
 from classify.recognizers.fusion import calibrate, fit_calibration, fuse, touch_sets
 from classify.recognizers.touches import Recognizer, point_groups
 from meshsal.util.registry import Registry
@@ -98,7 +98,7 @@ def paper_splits(labels, groups=None, folds=5, repeats=10, seed=0) -> list[Split
         )
     out = []
     for r in range(repeats):
-        kfold = StratifiedGroupKFold(folds, shuffle=True, random_state=seed + r)
+        kfold = GroupFolds(folds, shuffle=True, random_state=seed + r)
         for f, (train, test) in enumerate(kfold.split(np.zeros(len(labels)), labels, groups)):
             out.append(Split(r, f, train, test))
     return out

@@ -280,36 +280,52 @@ def _sessions(mesh, pts, task: SampleTask, scene) -> TouchSample:
     )
 
 
-def place_sample(mesh, seen, vertex_saliency, task: SampleTask, scene) -> PlaceSample:
+def place_sample(mesh, ids, features, task: SampleTask, scene) -> PlaceSample:
     """An instance's candidate places, what vision sees there, and the imprints its sessions give there.
 
-    The places are ``meshsal.points.places.candidate_places``.  The test instance has its one session, a training
-    instance one session too (every place, instead of a method's n points):
-    session 0 of the same streams as the methods' sessions, so the same
-    devices.
+    ``ids`` (P,) are the instance's ``meshsal.points.places.candidate_places``
+    and ``features`` (P, len(FEATURES)) their ``point_features``.  The test
+    instance has its one session, a training instance one session too
+    (every place, instead of a method's n points): session 0 of the same
+    streams as the methods' sessions, so the same devices.
     """
     import tactile
-    from meshsal.attention.rig import attention_maps
     from meshsal.mesh import vertex_normals
-    from meshsal.points.learned import point_features
-    from meshsal.points.places import candidate_places
     from meshsal.points.touch import touchable
 
     settings = task.settings
     vn = vertex_normals(mesh.vertices, mesh.faces)
-    ids = candidate_places(mesh, vertex_saliency, settings.n_points)
     positions, normals = mesh.vertices[ids], vn[ids]
-    pad = settings.sensor.width_mm
     places = Places(
-        ids,
-        positions,
-        normals,
-        point_features(mesh, seen.views, seen.results, attention_maps(seen, "equal"), vertex_saliency, ids, 0.5 * pad),
-        touchable(mesh, positions, normals, pad, scene=scene),
+        ids, positions, normals, features, touchable(mesh, positions, normals, settings.sensor.width_mm, scene=scene)
     )
     rng = instance_rng(settings.seed, task.name, task.replicate, task.index, Stream.SESSION, 0)
     imprints = tactile.acquire(mesh, positions, normals, settings.sensor, settings.perturbation, rng, scene=scene)
     return PlaceSample(places, np.asarray(imprints, np.float32)[None])
+
+
+def _looked_at(mesh, seen, vertex_saliency, settings: Settings, places: bool):
+    """The candidate pool, the places to touch (the pool alone unless ``places``) and what vision sees at them.
+
+    The survey's pool is the places' first rows, and a vertex's features do
+    not depend on which others are asked for, so both are seen once.
+    """
+    from meshsal.attention.rig import attention_maps
+    from meshsal.points.learned import point_features
+    from meshsal.points.places import candidate_places, candidate_pool
+
+    pool = candidate_pool(mesh, settings.n_points)
+    ids = candidate_places(mesh, vertex_saliency, settings.n_points, pool=pool) if places else pool
+    features = point_features(
+        mesh,
+        seen.views,
+        seen.results,
+        attention_maps(seen, "equal"),
+        vertex_saliency,
+        ids,
+        0.5 * settings.sensor.width_mm,
+    )
+    return pool, ids, features
 
 
 def _model_hash(model) -> str:
@@ -389,16 +405,19 @@ def instance_samples(task: SampleTask) -> InstanceSamples:
     for m in missing:
         by_method[m] = _sessions(mesh, picked[m], task, scene)
         cache_mod.store(task.cache_dir, keys[m], by_method[m].to_arrays())
-    if task.survey and survey is None:
+    want_survey, want_places = task.survey and survey is None, task.places and places is None
+    if want_survey or want_places:
+        pool, ids, features = _looked_at(mesh, seen, vertex_saliency, settings, want_places)
+    if want_survey:
         # The test instance is never touched before the test.
         rng = (
             instance_rng(settings.seed, task.name, task.replicate, task.index, Stream.SURVEY)
             if task.index >= 1
             else None
         )
-        survey = touch_survey(mesh, seen, vertex_saliency, settings, scene, rng)
+        survey = touch_survey(mesh, pool, features[: pool.size], settings, scene, rng)
         cache_mod.store(task.cache_dir, survey_key, survey.to_arrays())
-    if task.places and places is None:
-        places = place_sample(mesh, seen, vertex_saliency, task, scene)
+    if want_places:
+        places = place_sample(mesh, ids, features, task, scene)
         cache_mod.store(task.cache_dir, places_key, places.to_arrays())
     return InstanceSamples({m: by_method[m] for m in methods}, survey, places)

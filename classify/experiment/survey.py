@@ -45,14 +45,14 @@ class Survey:
         return Survey(arrays["pool"], arrays["features"], arrays.get("descriptors"))
 
 
-def touch_survey(mesh, seen, vertex_saliency, settings, scene, rng: np.random.Generator | None = None) -> Survey:
+def touch_survey(mesh, pool, features, settings, scene, rng: np.random.Generator | None = None) -> Survey:
     """One instance's candidate pool and their visual features; with ``rng``, one touch of each.
 
     Parameters
     ----------
     mesh : meshsal.Mesh, the instance
-    seen : meshsal.attention.rig.ViewChannels of the instance
-    vertex_saliency : (n_vertices,) float64
+    pool : (P,) int, ``meshsal.points.places.candidate_pool`` of the instance
+    features : (P, len(meshsal.points.learned.FEATURES)) float64, ``point_features`` of the pool
     settings : classify.experiment.config.Settings
     scene : Embree scene of ``mesh``
     rng : numpy Generator, optional
@@ -63,27 +63,17 @@ def touch_survey(mesh, seen, vertex_saliency, settings, scene, rng: np.random.Ge
     """
     import tactile
     from meshsal.mesh import vertex_normals
-    from meshsal.points import attention_maps
-    from meshsal.points.learned import candidate_pool, point_features
     from tactile.features import describe
 
-    pool = candidate_pool(mesh, settings.n_points)
-    features = point_features(
-        mesh,
-        seen.views,
-        seen.results,
-        attention_maps(seen, "equal"),
-        vertex_saliency,
-        pool,
-        0.5 * settings.sensor.width_mm,
-    )
+    pool = np.asarray(pool, np.int64)
+    features = np.asarray(features, np.float64)
     if rng is None:
-        return Survey(pool.astype(np.int64), features)
+        return Survey(pool, features)
     vn = vertex_normals(mesh.vertices, mesh.faces)
     images = tactile.acquire(
         mesh, mesh.vertices[pool], vn[pool], settings.sensor, settings.perturbation, rng, scene=scene
     )
-    return Survey(pool.astype(np.int64), features, describe(np.asarray(images, np.float32), "polar").astype(np.float32))
+    return Survey(pool, features, describe(np.asarray(images, np.float32), "polar").astype(np.float32))
 
 
 def distinctiveness(

@@ -33,6 +33,7 @@ from sklearn.tree import DecisionTreeClassifier
 from sklearn.utils.validation import check_is_fitted
 
 from classify.recognizers.evolutionary_svm import EvolutionarySVM, as_matrix
+from classify.recognizers.folds import GroupFolds
 from meshsal.util.registry import Registry
 
 __all__ = [
@@ -103,15 +104,11 @@ class DeepNet(_Flatten, MLPClassifier):
             self.set_params(batch_size=batch, early_stopping=stopping)
 
     def _fit_grouped(self, X, y, groups):
-        from sklearn.model_selection import StratifiedGroupKFold
-
         smallest = int(np.bincount(np.unique(y, return_inverse=True)[1]).min())
         splits = int(min(max(2, round(1.0 / self.validation_fraction)), len(np.unique(groups)), smallest))
         if splits < 2:
             return super().fit(X, y)
-        train, val = next(
-            StratifiedGroupKFold(splits, shuffle=True, random_state=self.random_state).split(X, y, groups)
-        )
+        train, val = next(GroupFolds(splits, shuffle=True, random_state=self.random_state).split(X, y, groups))
         classes = np.unique(y)
         self.set_params(early_stopping=False, batch_size=int(min(self.batch_size, len(train))))
         best, best_score, stale = None, -np.inf, 0
@@ -271,11 +268,9 @@ def _inner_folds(codes, groups, cv) -> int:
 
 
 def _split(codes, groups, folds, seed):
-    from sklearn.model_selection import StratifiedGroupKFold
-
     if groups is None:
         return StratifiedKFold(folds, shuffle=True, random_state=seed).split(codes, codes)
-    return StratifiedGroupKFold(folds, shuffle=True, random_state=seed).split(codes, codes, groups)
+    return GroupFolds(folds, shuffle=True, random_state=seed).split(codes, codes, groups)
 
 
 def _on_grid(X) -> bool:

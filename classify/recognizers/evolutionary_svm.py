@@ -143,42 +143,48 @@ def solve_dual(K, Y, C=1.0, strategy: Strategy | None = None, **changes):
     F = np.zeros((p, mu))  # fitness W(a)
     S = np.full((p, mu), float(sigma0))  # self-adapted step sizes
     rows = np.arange(p)[:, None]
+    # The loop runs hundreds of generations on small arrays, so gathers go through flat offsets (a fraction of
+    # the cost of 3-index fancy indexing) and K's columns through the rows of its transpose; same values.
+    interleaved = np.r_[0:m:2, 1:m:2]  # a mutation's coordinates (i..., j...) from its draws (i, j, i, j...)
+    Kf, KT = K.ravel(), np.ascontiguousarray(K.T)
+    y_offset = (np.arange(p) * n)[:, None, None]
     stall = 0
     generation = 0
     for generation in range(1, es.max_generations + 1):  # noqa: B007 (read after the loop: generations run)
         parent = rng.integers(0, mu, size=(p, lam))
         sigma = np.clip(S[rows, parent] * np.exp(tau * rng.standard_normal((p, lam))), 1e-6, 1.0)
         idx = rng.integers(0, n, size=(p, lam, m))
-        i, j = idx[..., 0::2], idx[..., 1::2]  # (p, lam, pairs)
-        same = i == j
-        prob, par = rows[..., None], parent[..., None]  # broadcast to (p, lam, pairs)
-        yi, yj = Y[prob, i], Y[prob, j]
-        ai, aj = A[prob, par, i], A[prob, par, j]
-        step = sigma[..., None] * C * rng.standard_normal(i.shape)
+        coords = idx[..., interleaved]  # (p, lam, m): i then j of each pair
+        parent_offset = ((rows * mu + parent) * n)[..., None]
+        yc = Y.ravel()[y_offset + coords]
+        ac = A.ravel()[parent_offset + coords]
+        yi, yj = yc[..., :pairs], yc[..., pairs:]
+        ai, aj = ac[..., :pairs], ac[..., pairs:]
+        same = coords[..., :pairs] == coords[..., pairs:]
+        step = sigma[..., None] * C * rng.standard_normal(same.shape)
         # Repair: moving a_i by t moves a_j by -y_i y_j t; clip t to keep both in [0, C].
         s = -yi * yj
         lo_i, hi_i = -ai, C - ai
-        lo_j = np.where(s > 0, -aj, aj - C)
-        hi_j = np.where(s > 0, C - aj, aj)
+        up = s > 0
+        lo_j = np.where(up, -aj, aj - C)
+        hi_j = np.where(up, C - aj, aj)
         step = np.clip(step, np.maximum(lo_i, lo_j), np.minimum(hi_i, hi_j))
         step[same] = 0.0
         # Pairs inside one offspring must not share a coefficient, or the deltas would add up.
         if pairs > 1:
-            flat = idx.reshape(p, lam, m)
-            srt = np.sort(flat, axis=2)
+            srt = np.sort(idx, axis=2)
             clash = (np.diff(srt, axis=2) == 0).any(axis=2)
             step[clash] = 0.0
         delta = np.concatenate([step, s * step], axis=2)  # moves of coefficients (i..., j...)
-        coords = np.concatenate([i, j], axis=2)
-        yc = np.concatenate([yi, yj], axis=2)
-        g = G[prob, par, coords]
+        g = G.ravel()[parent_offset + coords]
         # W(a + d) - W(a) = g.d - 1/2 d^T Q d over the few touched coordinates.
-        Ksub = K[coords[..., :, None], coords[..., None, :]]  # (p, lam, m, m)
+        Ksub = Kf[coords[..., :, None] * n + coords[..., None, :]]  # (p, lam, m, m)
         qd = yc * np.einsum("plab,plb->pla", Ksub, yc * delta)
         gain = (g * delta).sum(2) - 0.5 * (delta * qd).sum(2)
         cand_F = np.concatenate([F, F[rows, parent] + gain], axis=1)
         best = np.argsort(-cand_F, axis=1, kind="stable")[:, :mu]
-        improved = (cand_F[rows, best].max(1) > F.max(1) + 1e-12).any()
+        kept = cand_F[rows, best]
+        improved = (kept[:, 0] > F.max(1) + 1e-12).any()
         from_child = best >= mu
         child = np.where(from_child, best - mu, 0)
         src = np.where(from_child, parent[rows, child], best)
@@ -190,14 +196,15 @@ def solve_dual(K, Y, C=1.0, strategy: Strategy | None = None, **changes):
             cc = child[pp, mm]
             cidx = coords[pp, cc]  # (q, m)
             cdel = delta[pp, cc]
-            newA[pp[:, None], mm[:, None], cidx] += cdel
-            np.clip(newA, 0.0, C, out=newA)
+            at = (pp[:, None], mm[:, None], cidx)
+            # Only the moved coefficients can leave the box.
+            newA[at] = np.clip(newA[at] + cdel, 0.0, C)
             # G -= Q[:, c] * d_c  with Q[:, c] = y * y_c * K[:, c]
             yq = Y[pp]  # (q, n)
-            kcols = K[:, cidx].transpose(1, 0, 2)  # (q, n, m)
-            newG[pp, mm] -= yq * np.einsum("qnm,qm->qn", kcols, yq[np.arange(len(pp))[:, None], cidx] * cdel)
+            kcols = KT[cidx]  # (q, m, n): the columns K[:, c]
+            newG[pp, mm] -= yq * np.einsum("qmn,qm->qn", kcols, yq[np.arange(len(pp))[:, None], cidx] * cdel)
         A, G, S = newA, newG, newS
-        F = cand_F[rows, best]
+        F = kept
         stall = 0 if improved else stall + 1
         if stall >= es.patience:
             break

@@ -50,7 +50,9 @@ def candidate_pool(mesh: Mesh, n: int = 15) -> np.ndarray:
     return used[farthest_points(points, min(POOL_FACTOR * int(n), used.size), start=start)]
 
 
-def candidate_places(mesh: Mesh, vertex_saliency: np.ndarray, n: int = 15) -> np.ndarray:
+def candidate_places(
+    mesh: Mesh, vertex_saliency: np.ndarray, n: int = 15, pool: np.ndarray | None = None
+) -> np.ndarray:
     """:func:`candidate_pool`, then the ``PEAK_FACTOR * n`` strongest mesh-saliency peaks not in it.
 
     Parameters
@@ -59,6 +61,8 @@ def candidate_places(mesh: Mesh, vertex_saliency: np.ndarray, n: int = 15) -> np
     vertex_saliency : (n_vertices,) float64, :func:`meshsal.mesh.curvature.mesh_saliency`
     n : int
         Points a method would choose; the candidates scale with it.
+    pool : (k,) int, optional
+        ``candidate_pool(mesh, n)`` when the caller has it already.
 
     Returns
     -------
@@ -72,7 +76,7 @@ def candidate_places(mesh: Mesh, vertex_saliency: np.ndarray, n: int = 15) -> np
     >>> places.size, bool(np.all(places[:40] == candidate_pool(cup, n=2)))
     (44, True)
     """
-    pool = candidate_pool(mesh, n)
+    pool = candidate_pool(mesh, n) if pool is None else np.asarray(pool, np.int64)
     peaks = field_peaks(np.asarray(vertex_saliency, dtype=np.float64), mesh.faces)
     peaks = peaks[normal_defined(mesh.vertices, mesh.faces)[peaks]]
     return np.concatenate([pool, peaks[~np.isin(peaks, pool)][: PEAK_FACTOR * int(n)]]).astype(np.int64)

@@ -1,0 +1,42 @@
+"""GroupFolds gives scikit-learn's StratifiedGroupKFold splits, split for split."""
+
+import numpy as np
+import pytest
+from sklearn.model_selection import StratifiedGroupKFold
+
+from classify.recognizers.folds import GroupFolds
+
+
+def _splits(kind, y, groups, n_splits, seed):
+    return [
+        (train.tolist(), test.tolist())
+        for train, test in kind(n_splits, shuffle=True, random_state=seed).split(np.zeros(len(y)), y, groups)
+    ]
+
+
+@pytest.mark.parametrize("trial", range(40))
+def test_the_same_splits_as_scikit_learn(trial):
+    rng = np.random.default_rng(trial)
+    n_classes = int(rng.integers(2, 17))
+    n_splits = int(rng.integers(2, 11))
+    # Groups of one class each (an instance's point) with 1-4 re-touches, as the protocols make them;
+    # every third trial mixes classes inside groups.
+    per_class = int(rng.integers(n_splits, 3 * n_splits + 2))
+    sizes = rng.integers(1, 5, size=n_classes * per_class)
+    y = np.repeat(np.repeat(np.arange(n_classes), per_class), sizes)
+    groups = np.repeat(rng.permutation(len(sizes)), sizes)
+    if trial % 3 == 0:
+        y = rng.permutation(y)
+    order = rng.permutation(len(y))
+    y, groups = y[order], groups[order]
+    assert _splits(GroupFolds, y, groups, n_splits, trial) == _splits(StratifiedGroupKFold, y, groups, n_splits, trial)
+
+
+def test_ties_between_equally_even_folds_go_to_the_emptier_fold():
+    # Equal groups of one class: every fold scores alike until it is filled, so only the tie rule decides.
+    y = np.zeros(12, int)
+    y[6:] = 1
+    groups = np.arange(12)
+    ours = _splits(GroupFolds, y, groups, 3, 4)
+    assert ours == _splits(StratifiedGroupKFold, y, groups, 3, 4)
+    assert [len(test) for _, test in ours] == [4, 4, 4]
