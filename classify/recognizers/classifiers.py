@@ -212,20 +212,10 @@ class KNN(ClassifierMixin, BaseEstimator):
         groups = None if groups is None else np.asarray(groups)[canonical]
         n_classes = len(self.classes_)
         folds = _inner_folds(codes, groups, self.cv)
+        splits = list(_split(codes, groups, folds, self.random_state)) if folds >= 2 and n_classes >= 2 else []
+        hits, self.scale_ = _scan_training_set(X, codes, keys, splits, ks, n_classes)
         self.cv_scores_ = {}
-        if folds >= 2 and n_classes >= 2:
-            hits = {k: 0 for k in ks}
-            for train, test in _split(codes, groups, folds, self.random_state):
-                usable = [k for k in ks if k <= len(train)]
-                if not usable:
-                    continue
-                d2 = _sq_distances(X[test], X[train])
-                order = _ranked(d2, keys[train], max(usable))
-                dist = _class_distances(d2, codes[train], n_classes)
-                for k in usable:
-                    # The argmax does not depend on the scale, so the fold's own is not needed.
-                    proba = _posterior(codes[train][order[:, :k]], dist, 1.0)
-                    hits[k] += int(np.sum(np.argmax(proba, axis=1) == codes[test]))
+        if splits:
             self.cv_scores_ = {k: hits[k] / len(X) for k in ks}
             best = max(self.cv_scores_.values())
             tied = [k for k in ks if self.cv_scores_[k] == best]
@@ -236,7 +226,6 @@ class KNN(ClassifierMixin, BaseEstimator):
         self.X_ = X
         self.codes_ = codes
         self.tiebreak_ = keys
-        self.scale_ = _distance_scale(X)
         self.n_features_in_ = X.shape[1]
         return self
 
@@ -278,9 +267,13 @@ def _on_grid(X) -> bool:
     return bool(np.all(np.abs(codes - np.round(codes)) < 1e-3))
 
 
-def _sq_distances(A, B) -> np.ndarray:
-    """(len(A), len(B)) squared Euclidean distances, the same on every CPU (see KNN's Notes)."""
-    exact = _on_grid(A) and _on_grid(B)
+def _sq_distances(A, B, exact: bool | None = None) -> np.ndarray:
+    """(len(A), len(B)) squared Euclidean distances, the same on every CPU (see KNN's Notes).
+
+    ``exact`` says whether both are on the ADC's grid (default: checked here).
+    """
+    if exact is None:
+        exact = _on_grid(A) and _on_grid(B)
     if exact:
         A, B = np.round(A * _LEVELS), np.round(B * _LEVELS)
     out = np.empty((len(A), len(B)))
@@ -291,6 +284,50 @@ def _sq_distances(A, B) -> np.ndarray:
         out[start : start + _BLOCK] = np.maximum(d2, 0.0)
     # Integer codes: every sum is an integer below 2**53, exact in any order.
     return out / _LEVELS**2 if exact else np.round(out, 9)
+
+
+def _scan_training_set(X, codes, keys, splits, ks, n_classes) -> tuple[dict, float]:
+    """The inner folds' hits per k and the distance scale, from one pass over the training set's distances.
+
+    A block of rows at a time, their distances to every training row serve
+    both: each inner fold reads its test rows' distances to its training
+    rows, and the scale the distance to the nearest other row.  Rows are
+    independent in every step, so the hits are those of fold-by-fold
+    distances.
+
+    Returns
+    -------
+    hits : dict k -> right answers over the inner test folds (0 without splits)
+    scale : float, median distance from a row to its nearest other row (1.0 when undefined or zero)
+    """
+    n = len(X)
+    hits = {k: 0 for k in ks}
+    fold = np.full(n, -1)
+    for f, (_, test) in enumerate(splits):
+        fold[test] = f
+    nearest = np.empty(n)
+    exact = _on_grid(X)
+    for start in range(0, n, _BLOCK):
+        stop = min(start + _BLOCK, n)
+        d2 = _sq_distances(X[start:stop], X, exact)
+        for f, (train, _) in enumerate(splits):
+            usable = [k for k in ks if k <= len(train)]
+            rows = np.flatnonzero(fold[start:stop] == f)
+            if not usable or rows.size == 0:
+                continue
+            sub = d2[np.ix_(rows, train)]
+            order = _ranked(sub, keys[train], max(usable))
+            dist = _class_distances(sub, codes[train], n_classes)
+            for k in usable:
+                # The argmax does not depend on the scale, so the fold's own is not needed.
+                proba = _posterior(codes[train][order[:, :k]], dist, 1.0)
+                hits[k] += int(np.sum(np.argmax(proba, axis=1) == codes[start + rows]))
+        d2[np.arange(stop - start), np.arange(start, stop)] = np.inf
+        nearest[start:stop] = d2.min(axis=1)
+    if n < 2:
+        return hits, 1.0
+    scale = float(np.median(np.sqrt(nearest)))
+    return hits, (scale if scale > 0 else 1.0)
 
 
 def _row_keys(X, codes, seed) -> np.ndarray:
@@ -320,9 +357,15 @@ def _ranked(d2, tiebreak, k: int) -> np.ndarray:
     out = np.empty((n, k), np.int64)
     for start in range(0, n, _BLOCK):
         d = d2[start : start + _BLOCK]
-        kth = np.partition(d, k - 1, axis=1)[:, k - 1 : k]
+        near = np.argpartition(d, k - 1, axis=1)
+        kth = np.take_along_axis(d, near[:, k - 1 : k], axis=1)
         wide = int((d <= kth).sum(axis=1).max())
-        near = np.argpartition(d, wide - 1, axis=1)[:, :wide] if wide < m else np.broadcast_to(np.arange(m), d.shape)
+        if wide >= m:
+            near = np.broadcast_to(np.arange(m), d.shape)
+        elif wide > k:  # ties at the k-th distance: take them all
+            near = np.argpartition(d, wide - 1, axis=1)[:, :wide]
+        else:
+            near = near[:, :k]
         rows = np.arange(len(d))[:, None]
         order = np.lexsort((tiebreak[near], d[rows, near]), axis=1)[:, :k]
         out[start : start + _BLOCK] = near[rows, order]
@@ -332,19 +375,6 @@ def _ranked(d2, tiebreak, k: int) -> np.ndarray:
 def _class_distances(d2, codes, n_classes) -> np.ndarray:
     """(n, n_classes) distance from each row to the nearest training sample of each class."""
     return np.sqrt(np.column_stack([d2[:, codes == c].min(axis=1) for c in range(n_classes)]))
-
-
-def _distance_scale(X) -> float:
-    """Median distance from a training sample to its nearest other one (1.0 when undefined or zero)."""
-    if len(X) < 2:
-        return 1.0
-    nearest = np.empty(len(X))
-    for start in range(0, len(X), _BLOCK):
-        d2 = _sq_distances(X[start : start + _BLOCK], X)
-        d2[np.arange(len(d2)), np.arange(start, start + len(d2))] = np.inf
-        nearest[start : start + _BLOCK] = d2.min(axis=1)
-    scale = float(np.median(np.sqrt(nearest)))
-    return scale if scale > 0 else 1.0
 
 
 def _posterior(neighbour_codes, class_dist, scale):
