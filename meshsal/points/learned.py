@@ -54,23 +54,30 @@ MODEL_FORMAT = "visuotactile.touch_model"
 MODEL_VERSION = 1
 
 
-def _channel_means(mesh: Mesh, views, results) -> tuple[np.ndarray, np.ndarray]:
-    """Per vertex: each channel's mean over the pixels of its faces in the views that see it; view count."""
-    n = mesh.n_vertices
-    sums = np.zeros((len(CHANNELS), n))
-    pixels = np.zeros(n)
-    seen = np.zeros(n)
+def _channel_means(mesh: Mesh, views, results, ids: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """At vertices ``ids`` (k,): each channel's mean over the pixels of their faces in the views that see them
+    (len(CHANNELS), k), and how many views see them (k,)."""
+    unique, back = np.unique(ids, return_inverse=True)
+    k = unique.size
+    # Only the pixels of faces around the asked vertices count: each vertex's sums take the same terms in the
+    # same order as over the whole mesh, at a fraction of the cost.
+    slot = np.full(mesh.n_vertices, -1, np.int64)
+    slot[unique] = np.arange(k)
+    sums = np.zeros((len(CHANNELS), k))
+    pixels = np.zeros(k)
+    seen = np.zeros(k)
     for view, result in zip(views, results):
         hit = view.mask
-        corners = mesh.faces[view.face_id[hit]].ravel()
-        counts = np.bincount(corners, minlength=n)
+        corners = slot[mesh.faces[view.face_id[hit]]].ravel()
+        near = corners >= 0
+        corners = corners[near]
+        counts = np.bincount(corners, minlength=k)
         pixels += counts
         seen += counts > 0
         for c, name in enumerate(CHANNELS):
-            sums[c] += np.bincount(
-                corners, weights=np.repeat(result.channels[name][hit].astype(np.float64), 3), minlength=n
-            )
-    return sums / np.maximum(pixels, 1.0), seen
+            values = np.repeat(result.channels[name][hit].astype(np.float64), 3)[near]
+            sums[c] += np.bincount(corners, weights=values, minlength=k)
+    return (sums / np.maximum(pixels, 1.0))[:, back], seen[back]
 
 
 def point_features(
@@ -104,14 +111,14 @@ def point_features(
     (k, len(FEATURES)) float64
     """
     ids = np.asarray(vertex_ids, dtype=np.int64)
-    means, seen = _channel_means(mesh, views, results)
+    means, seen = _channel_means(mesh, views, results, ids)
     votes, _ = view_votes(
         edge_graph(mesh.vertices, mesh.faces), salient_vertices(mesh, views, maps, threshold), ids, spacing
     )
     curvature = np.abs(mean_curvature(mesh.vertices, mesh.faces))[ids]
     columns = [
-        means[:, ids].T,
-        seen[ids, None],
+        means.T,
+        seen[:, None],
         votes[:, None].astype(np.float64),
         np.asarray(vertex_saliency, np.float64)[ids, None],
         curvature[:, None],
