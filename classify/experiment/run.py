@@ -66,6 +66,10 @@ __all__ = [
     "write_outputs",
 ]
 
+# What a worker process imports as it starts, while the objects load: the stages, scikit-learn, OpenCV, the mesh
+# libraries (2-3 s).
+_WORKER_MODULES = (__name__, "meshsal.points", "meshsal.attention.rig", "meshsal.objects.instances", "tactile")
+
 
 def _object_sets(n_all: int) -> tuple:
     return tuple(sorted({min(4, n_all), n_all}))
@@ -202,12 +206,13 @@ def run_experiment(
     settings = config.settings
     if cache_dir == "default":
         cache_dir = cache_mod.default_dir()
-    objects = load_objects(objects, settings)
     # A touch model needs training instances: the paper protocol has none.
     paper_methods = [m for m in config.methods if m not in MODEL_METHODS]
     timings, measurements, stage = {}, [], InstanceStage({})
-
-    with threadpool_limits(1), nullcontext(executor) if executor is not None else worker_pool(n_jobs) as pool:
+    workers = nullcontext(executor) if executor is not None else worker_pool(n_jobs, preload=_WORKER_MODULES)
+    with threadpool_limits(1), workers as pool:
+        # The workers start while the objects load; a bad file still stops the run before any work.
+        objects = load_objects(objects, settings)
         # Workers render with one thread each; alone, the stage renders with every core.
         runtime = Runtime(pool, cache_dir, None if isinstance(pool, Inline) else 1, quiet)
         if "paper" in config.protocols and paper_methods:

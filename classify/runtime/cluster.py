@@ -53,11 +53,15 @@ class Inline:
         return map(fn, *iterables)
 
 
-def _limit_threads():
-    """Worker initializer: one BLAS/OpenMP thread per worker process, for its whole life."""
+def _start_worker(preload=()):
+    """Worker initializer: one BLAS/OpenMP thread per worker process, for its whole life; ``preload`` imported."""
+    import importlib
+
     from threadpoolctl import threadpool_limits
 
     threadpool_limits(1)
+    for name in preload:
+        importlib.import_module(name)
 
 
 def worker_env() -> dict:
@@ -69,17 +73,25 @@ def worker_env() -> dict:
 
 
 @contextmanager
-def worker_pool(n_jobs: int):
+def worker_pool(n_jobs: int, preload: tuple = ()):
     """``n_jobs`` spawned worker processes with capped BLAS/OpenMP threads (:class:`Inline` for one).
 
     Workers are spawned, not forked: the parent may hold Embree and BLAS threads.
+    They start at once and import the modules named in ``preload`` (the
+    toolkit's take seconds) while the caller goes on, e.g. loading its meshes.
     """
     if int(n_jobs) <= 1:
         yield Inline()
         return
     with ProcessPoolExecutor(
-        int(n_jobs), mp_context=multiprocessing.get_context("spawn"), initializer=_limit_threads
+        int(n_jobs),
+        mp_context=multiprocessing.get_context("spawn"),
+        initializer=_start_worker,
+        initargs=(tuple(preload),),
     ) as pool:
+        # A process is spawned per submitted task, up to n_jobs: these start them all now.
+        for _ in range(int(n_jobs)):
+            pool.submit(int)
         yield pool
 
 
