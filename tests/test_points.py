@@ -444,3 +444,17 @@ def test_plateau_fraction_tells_a_peak_from_a_plateau():
     assert plateau_fraction(peak, mask, erode=0) == pytest.approx(16 / 48**2)
     assert plateau_fraction(flat, mask, erode=0) == 1.0
     assert plateau_fraction(np.zeros((64, 64), np.float32), mask) == 0.0
+
+
+def test_equal_maps_of_the_views_channels_are_their_recombination():
+    from meshsal.attention import combine_maps
+    from meshsal.points import attention_maps, view_channels
+
+    mesh, _, _ = planted_sphere()
+    seen = view_channels(mesh, size=SIZE, threads=1)
+    again = np.stack(
+        [combine_maps(r.channels, v.mask, None, normalize=False) for v, r in zip(seen.views, seen.results)]
+    )
+    np.testing.assert_array_equal(attention_maps(seen, "equal"), again)
+    _, maps = saliency_maps(mesh, size=SIZE, threads=1, combination="equal")
+    np.testing.assert_array_equal(attention_maps(seen, "equal"), maps)

@@ -23,7 +23,10 @@ class ViewChannels:
     """A mesh's 72 rendered views and their eight channel maps: render once, combine as each method needs.
 
     ``views`` list of 72 View in rig order; ``results`` the matching
-    ``meshsal.attention.SaliencyResult`` (their ``channels`` are what count).
+    ``meshsal.attention.SaliencyResult`` as :func:`view_channels` computes
+    them: their ``channels``, and their ``map`` the channels' equal-weight
+    combination without N(.), which :func:`attention_maps` returns for
+    "equal".
     """
 
     views: list
@@ -54,6 +57,9 @@ def attention_maps(seen: ViewChannels, combination: str = "equal", weights=None)
     The same maps as :func:`saliency_maps` with that ``combination`` and
     ``weights`` ("learned" is a weighted sum with the given weights).
     """
+    if combination == "equal" and weights is None:
+        # Combined so already, view by view.
+        return np.stack([r.map for r in seen.results]).astype(np.float32)
     return np.stack(
         [
             combine_maps(r.channels, v.mask, weights, normalize=combination == "itti")
