@@ -41,6 +41,9 @@ absolute paths, so workers read and write the same files wherever they run,
 provided the folder and the store are on a filesystem every worker sees at
 the same path; an entry a task reports written that the client cannot read
 counts as a failure.
+
+Over 500 lines because the store's format, its lock and the run that fills
+it are one contract: a change to one is checked against the others here.
 """
 
 from __future__ import annotations

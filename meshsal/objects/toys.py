@@ -18,6 +18,10 @@ plane is a long cylinder with thin flat wings and fins.
 livery, cup, skin and coat); the geometry of a toy never changes, so its
 shape is its identity.
 
+Over 500 lines because it holds six designs, each a page of parts and
+paint, beside the one pipeline that builds them; a toy is changed by
+reading its design next to the others.
+
 Examples
 --------
 >>> from meshsal import toys
