@@ -18,25 +18,13 @@ does not inflate), and the per-episode cost of the forecast.
 from __future__ import annotations
 
 import argparse
-import os
-import platform
 import statistics
 import sys
-import time
+from functools import partial
 
 import numpy as np
+from benchlib import machine, timed
 from threadpoolctl import threadpool_limits
-
-
-def machine() -> str:
-    """The CPU model, core count and load average: timings mean little without them."""
-    model = platform.processor() or platform.machine()
-    try:
-        with open("/proc/cpuinfo") as fh:
-            model = next(line.split(":", 1)[1].strip() for line in fh if line.startswith("model name"))
-    except (OSError, StopIteration):
-        pass
-    return f"{model}, {os.cpu_count()} cores, load average {' / '.join(f'{x:.2f}' for x in os.getloadavg())}"
 
 
 def synthetic(objects: int, places: int, touches: int, seed: int = 0):
@@ -75,12 +63,12 @@ def main(argv=None) -> int:
     parser.add_argument("--touches", type=int, default=3, help="training touches per place and object")
     parser.add_argument("--repeats", type=int, default=30, help="states each policy chooses from")
     args = parser.parse_args(argv)
-    print(f"Machine: {machine()}\n")
+    print(f"{machine()}\n")
     knowledge, places = synthetic(args.objects, args.places, args.touches)
     rng = np.random.default_rng(1)
     with threadpool_limits(1):
         forecast = knowledge.forecast(places)  # warm: imports, first allocations
-        forecast_s = [timed(knowledge.forecast, places) for _ in range(5)]
+        forecast_s = [timed(partial(knowledge.forecast, places))[1:] for _ in range(5)]
         states = []
         for r in range(args.repeats):
             touched = tuple(int(t) for t in rng.choice(args.places, r % 4, replace=False))
@@ -101,7 +89,7 @@ def main(argv=None) -> int:
         times = {name: [] for name in policies}
         for state in states:
             for name, policy in policies.items():
-                times[name].append(timed(policy.choose, state, np.random.default_rng(0)))
+                times[name].append(timed(partial(policy.choose, state, np.random.default_rng(0)))[1:])
     print(
         f"| what ({args.objects} objects, {args.places} places, {args.touches} training touches each) "
         f"| median wall | median CPU | target |"
@@ -116,13 +104,6 @@ def main(argv=None) -> int:
             f"| {statistics.median(c for _, c in t) * 1e3:.2f} ms | {target} |"
         )
     return 0
-
-
-def timed(fn, *args) -> tuple[float, float]:
-    """(wall, CPU) seconds of one call."""
-    wall, cpu = time.perf_counter(), time.process_time()
-    fn(*args)
-    return time.perf_counter() - wall, time.process_time() - cpu
 
 
 if __name__ == "__main__":

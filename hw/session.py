@@ -30,6 +30,8 @@ __all__ = ["FORMAT", "SCHEMA_VERSION", "Session", "PressRecord", "export_imprint
 FORMAT = "visuotactile-capture-session"
 # 2: a UNIQUE (object, point_id) index in place of version 1's plain one; version 1 files are migrated on opening.
 SCHEMA_VERSION = 2
+# How long an opening waits for another process to release the file.
+_BUSY_SECONDS = 10.0
 
 _SCHEMA = """
 CREATE TABLE meta (key TEXT PRIMARY KEY, value TEXT NOT NULL);
@@ -126,7 +128,7 @@ class Session:
                 raise FileNotFoundError(f"{self.path}: no such capture session")
             self.path.parent.mkdir(parents=True, exist_ok=True)
         try:
-            self._con = sqlite3.connect(self.path, isolation_level=None, timeout=10.0)
+            self._con = sqlite3.connect(self.path, isolation_level=None, timeout=_BUSY_SECONDS)
         except sqlite3.Error as exc:
             raise OSError(f"{self.path}: cannot open the session ({exc})") from None
         try:
@@ -160,7 +162,7 @@ class Session:
             raise sqlite3.DatabaseError("it holds no visuotactile capture session")
         if meta.get("version") != str(SCHEMA_VERSION):
             raise sqlite3.DatabaseError(f"session version {meta.get('version')} is not the supported {SCHEMA_VERSION}")
-        mode = con.execute("PRAGMA journal_mode=WAL").fetchone()[0]
+        mode = self._write_ahead_log()
         if mode.lower() != "wal":
             raise OSError(
                 f"{self.path}: SQLite cannot keep a write-ahead log here (journal mode stays {mode!r}): "
@@ -169,6 +171,22 @@ class Session:
             )
         # FULL: a press is on disk before the next one starts.
         con.execute("PRAGMA synchronous=FULL")
+
+    def _write_ahead_log(self) -> str:
+        """``PRAGMA journal_mode=WAL``, the mode it leaves; asked again while the file is locked.
+
+        Switching a new file to the log needs it alone, and SQLite answers "locked" at once, without
+        the busy wait, while another process opens it beside this one (seen 4 times in 240 openings
+        of 4 processes on 2 busy cores).
+        """
+        deadline = time.monotonic() + _BUSY_SECONDS
+        while True:
+            try:
+                return self._con.execute("PRAGMA journal_mode=WAL").fetchone()[0]
+            except sqlite3.OperationalError as exc:
+                if "locked" not in str(exc) or time.monotonic() > deadline:
+                    raise
+            time.sleep(0.01)
 
     def _tables(self) -> set[str]:
         tables = {r[0] for r in self._con.execute("SELECT name FROM sqlite_master WHERE type='table'")}

@@ -38,16 +38,23 @@ def _cmd_toys(args) -> int:
     return 0
 
 
+def _mesh_subcommand(subparsers, name: str, summary: str, description: str):
+    """A subcommand that reads one MESH and writes into the folder --out."""
+    p = subparsers.add_parser(name, help=summary, description=description)
+    p.add_argument("mesh", type=Path, help="mesh file (OBJ, PLY, OFF, STL) or a toy name (cow, glasses, ...)")
+    p.add_argument("--out", required=True, type=Path, help="output folder")
+    return p
+
+
 def _add_render(subparsers) -> None:
-    p = subparsers.add_parser(
+    p = _mesh_subcommand(
+        subparsers,
         "render",
-        help="render a mesh from the 72 viewpoints",
-        description="Render MESH from the 72 viewpoints of the rig (18 sets of 4 views 90 degrees apart) "
+        "render a mesh from the 72 viewpoints",
+        "Render MESH from the 72 viewpoints of the rig (18 sets of 4 views 90 degrees apart) "
         "as PNG files view_SS_K.png, plus contact_sheet.png. With --saliency, also each "
         "view's saliency map and its eight channel maps.",
     )
-    p.add_argument("mesh", type=Path, help="mesh file (OBJ, PLY, OFF, STL) or a toy name (cow, glasses, ...)")
-    p.add_argument("--out", required=True, type=Path, help="output folder")
     p.add_argument("--size", type=int, default=256, help="image size in pixels (default 256)")
     p.add_argument("--saliency", action="store_true", help="also write saliency and channel maps")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
@@ -97,17 +104,16 @@ def _cmd_render(args) -> int:
 def _add_points(subparsers) -> None:
     from meshsal.points import COMBINATIONS, POINT_METHODS
 
-    p = subparsers.add_parser(
+    p = _mesh_subcommand(
+        subparsers,
         "points",
-        help="choose interest points on a mesh by visual attention (or a baseline)",
-        description="Scale MESH to --size-mm (principal-frame box diagonal), render the 72 views, compute their saliency and choose --n "
+        "choose interest points on a mesh by visual attention (or a baseline)",
+        "Scale MESH to --size-mm (principal-frame box diagonal), render the 72 views, compute their saliency and choose --n "
         "interest points (the paper's pipeline, or a baseline with --method). Writes "
         "saliency.ply (mesh saliency as vertex quality and colours), points.json and points.csv "
         "(ids from 1, in the mesh file's own units and frame), views.png (the best set's four "
         "views, saliency overlaid, points numbered) and contact_sheet.png (all 72 saliency maps).",
     )
-    p.add_argument("mesh", type=Path, help="mesh file (OBJ, PLY, OFF, STL) or a toy name (cow, glasses, ...)")
-    p.add_argument("--out", required=True, type=Path, help="output folder")
     p.add_argument("--n", type=int, default=15, help="number of points (default 15)")
     p.add_argument(
         "--method",

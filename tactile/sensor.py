@@ -37,9 +37,13 @@ __all__ = [
 ]
 
 #: How a pad turns depth into taxel values.
-SENSOR_MODES = Registry("sensor mode")
-SENSOR_MODES.register("contour", None, "the paper's depth-coded image of four plane sections")
-SENSOR_MODES.register("pressure", None, "indentation depth, as a force-resistive array reads it")
+SENSOR_MODES = Registry(
+    "sensor mode",
+    [
+        ("contour", None, "the paper's depth-coded image of four plane sections"),
+        ("pressure", None, "indentation depth, as a force-resistive array reads it"),
+    ],
+)
 MODES = SENSOR_MODES.names()
 PLANES = ("pca", "paper")
 

@@ -150,3 +150,15 @@ def write_obj(path, mesh: Mesh) -> None:
     lines = [f"v {x!r} {y!r} {z!r}" for x, y, z in mesh.vertices.tolist()]
     lines += [f"f {a + 1} {b + 1} {c + 1}" for a, b, c in mesh.faces.tolist()]
     path.write_text("\n".join(lines) + "\n")
+
+
+#: Where :func:`ball_and_domed` puts the dome: a unit direction from the ball's centre.
+DOME_APEX = np.array([0.6, 0.64, 0.48]) / np.linalg.norm([0.6, 0.64, 0.48])
+
+
+def ball_and_domed() -> tuple[Mesh, Mesh]:
+    """Two objects that differ in one place only: a ball of radius 50, and the same ball with a dome on it."""
+    ball = sphere(radius=50.0, n=24).replace(name="ball")
+    angle = np.arccos(np.clip(ball.vertices @ DOME_APEX / 50.0, -1.0, 1.0))
+    domed = Mesh(ball.vertices * (1.0 + 0.25 * np.exp(-((angle / 0.25) ** 2)))[:, None], ball.faces, name="domed")
+    return ball, domed

@@ -51,10 +51,10 @@ def assert_pops_out(m, target):
     assert inside >= 2.0 * outside, f"mean inside {inside:.3f} < 2 x mean outside {outside:.3f}"
 
 
-def disks_stimulus(seed, n_distractors=6):
+def disks_stimulus(seed, n_distractors=6, radii=(14, 24)):
     """Target disk and distractor disks of one radius; returns (rng, target mask, distractor masks)."""
     rng = np.random.default_rng(seed)
-    radius = int(rng.integers(14, 24))
+    radius = int(rng.integers(*radii))
     centers = place(rng, n_distractors + 1, radius)
     masks = [disk((SIZE, SIZE), c, radius) for c in centers]
     return rng, masks[0], masks[1:]
@@ -171,10 +171,7 @@ def test_dkl_isoluminant_s_cone_target(seed):
 
 @pytest.mark.parametrize("seed", SEEDS)
 def test_entropy_noise_patch_on_flat_ground(seed):
-    rng = np.random.default_rng(seed)
-    radius = int(rng.integers(16, 32))
-    (center,) = place(rng, 1, radius)
-    target = disk((SIZE, SIZE), center, radius)
+    rng, target, _ = disks_stimulus(seed, 0, (16, 32))
     img = gray(rng.uniform(0.1, 0.9))
     img[target] = rng.uniform(0.0, 1.0, size=(int(target.sum()), 1))
     assert_pops_out(attention.entropy(img), target)
@@ -182,10 +179,7 @@ def test_entropy_noise_patch_on_flat_ground(seed):
 
 @pytest.mark.parametrize("seed", SEEDS)
 def test_contrast_high_variance_region(seed):
-    rng = np.random.default_rng(seed)
-    radius = int(rng.integers(30, 45))
-    (center,) = place(rng, 1, radius)
-    target = disk((SIZE, SIZE), center, radius)
+    rng, target, _ = disks_stimulus(seed, 0, (30, 45))
     ground = rng.uniform(0.3, 0.7)
     # Low-variance texture everywhere, a high-variance checkerboard in the target.
     img = np.clip(ground + rng.normal(0, 0.02, (SIZE, SIZE, 1)), 0, 1).astype(np.float32)

@@ -110,24 +110,15 @@ sys.exit(main(argv))
 """
 
 
+def _batch_argv(corpus: Path, store: Path, *options: str) -> list[str]:
+    """``visuotactile batch`` of ``corpus`` into ``store`` on one worker, quiet."""
+    return ["batch", str(corpus), "--out", str(store), "--workers", "1", "--quiet", *options]
+
+
 def _driver(after: int, action: str, corpus: Path, store: Path, *options: str) -> subprocess.Popen:
     options = options or ("--methods", "attention,uniform", "--n-points", "6", "--view-size", "32")
     return subprocess.Popen(
-        [
-            sys.executable,
-            "-c",
-            DRIVER,
-            str(after),
-            action,
-            "batch",
-            str(corpus),
-            "--out",
-            str(store),
-            "--workers",
-            "1",
-            "--quiet",
-            *options,
-        ],
+        [sys.executable, "-c", DRIVER, str(after), action, *_batch_argv(corpus, store, *options)],
         stdin=subprocess.PIPE,
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
@@ -245,7 +236,7 @@ def test_one_batch_per_store_a_second_fails_at_once_naming_the_holder(tmp_path, 
     header = (store / "store.json").read_bytes()
     in_flight = _in_flight(store)
     assert len(_finished(store)) == 2 and len(in_flight) == 1
-    assert main(["batch", str(corpus), "--out", str(store), "--workers", "1", "--quiet", *options]) == 1
+    assert main(_batch_argv(corpus, store, *options)) == 1
     err = capsys.readouterr().err
     assert (
         f"visuotactile batch: error: {store}: in use by another batch (process {holder.pid} on "
@@ -338,24 +329,7 @@ def test_a_broken_mesh_is_recorded_and_does_not_stop_the_batch(tmp_path, capsys)
     corpus = _corpus(tmp_path / "corpus", 3)
     (corpus / "broken.obj").write_text("v 0 0 0\nv 1 0 0\nf 1 2 9\n")
     store = tmp_path / "store"
-    assert (
-        main(
-            [
-                "batch",
-                str(corpus),
-                "--out",
-                str(store),
-                "--workers",
-                "1",
-                "--methods",
-                "uniform",
-                "--n-points",
-                "4",
-                "--quiet",
-            ]
-        )
-        == 0
-    )
+    assert main(_batch_argv(corpus, store, "--methods", "uniform", "--n-points", "4")) == 0
     out, err = capsys.readouterr()
     assert "| 3 | 0 | 1 | 0 |" in out and "failures.jsonl" in err
     failures = [json.loads(line) for line in (store / "failures.jsonl").read_text().splitlines()]

@@ -237,71 +237,19 @@ def test_a_batch_of_single_meshes_refuses_the_learned_methods():
 def test_cli_learned_points_from_a_model_file(tmp_path, capsys):
     from classify.cli import main
 
-    assert (
-        main(
-            [
-                "points",
-                "cup",
-                "--method",
-                "learned",
-                "--n",
-                "4",
-                "--size",
-                "32",
-                "--quiet",
-                "--out",
-                str(tmp_path / "none"),
-            ]
-        )
-        != 0
-    )
+    def points(out, *options):
+        return main(["points", "cup", *options, "--n", "4", "--size", "32", "--quiet", "--out", str(tmp_path / out)])
+
+    assert points("none", "--method", "learned") != 0
     assert "--model" in capsys.readouterr().err
     assert not (tmp_path / "none" / "points.json").exists()
     model_path = tmp_path / "model.json"
     one_feature_model("curvature").save(model_path)
-    assert (
-        main(
-            [
-                "points",
-                "cup",
-                "--method",
-                "learned",
-                "--model",
-                str(model_path),
-                "--n",
-                "4",
-                "--size",
-                "32",
-                "--quiet",
-                "--out",
-                str(tmp_path / "o"),
-            ]
-        )
-        == 0
-    )
+    assert points("o", "--method", "learned", "--model", str(model_path)) == 0
     document = json.loads((tmp_path / "o" / "points.json").read_text())
     assert document["method"] == "learned" and len(document["points"]) == 4
     assert document["settings"]["model"] == str(model_path)
-    assert (
-        main(
-            [
-                "points",
-                "cup",
-                "--combination",
-                "learned",
-                "--model",
-                str(model_path),
-                "--n",
-                "4",
-                "--size",
-                "32",
-                "--quiet",
-                "--out",
-                str(tmp_path / "w"),
-            ]
-        )
-        == 0
-    )
+    assert points("w", "--combination", "learned", "--model", str(model_path)) == 0
     document = json.loads((tmp_path / "w" / "points.json").read_text())
     assert document["combination"] == "learned"
     assert document["settings"]["channel_weights"] == dict.fromkeys(CHANNELS, 1.0)

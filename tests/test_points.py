@@ -22,7 +22,6 @@ from meshsal.points import (
 from meshsal.points.sampling import (
     farthest_points,
     field_peaks,
-    non_maximum_suppression,
     random_surface_points,
     suppress,
 )
@@ -103,24 +102,24 @@ def test_field_peaks_finds_every_local_maximum():
     assert np.allclose(GV[peaks[1]], [0.75, 0.7], atol=0.06)
 
 
-def test_non_maximum_suppression_keeps_order_and_spacing():
+def test_suppress_keeps_order_and_spacing():
     rng = np.random.default_rng(0)
     P = rng.random((500, 3))
-    keep = non_maximum_suppression(P, 0.2)
+    keep = suppress(P, 0.2).chosen
     assert keep[0] == 0 and np.all(np.diff(keep) > 0)
     assert pairwise_min(P[keep]) >= 0.2
     # Maximal: every dropped point is too close to a kept one.
     d = np.linalg.norm(P[:, None] - P[keep][None], axis=2).min(axis=1)
     assert np.all(d[np.setdiff1d(np.arange(500), keep)] < 0.2)
-    assert len(non_maximum_suppression(P, 0.2, n=3)) == 3
+    assert len(suppress(P, 0.2, n=3).chosen) == 3
 
 
-def test_non_maximum_suppression_respects_taken_points_and_ids():
+def test_suppress_respects_taken_points_and_ids():
     P = np.array([[0, 0, 0], [1, 0, 0], [2, 0, 0], [3, 0, 0.0]])
-    keep = non_maximum_suppression(P, 0.5, ids=[7, 7, 8, 9], taken_points=[[3.1, 0, 0]], taken_ids=[8])
+    keep = suppress(P, 0.5, ids=[7, 7, 8, 9], taken_points=[[3.1, 0, 0]], taken_ids=[8]).chosen
     assert keep.tolist() == [0]
     with pytest.raises(ValueError, match="min_spacing"):
-        non_maximum_suppression(P, -1.0)
+        suppress(P, -1.0)
 
 
 def greedy_one_by_one(P, spacing, n, ids, ok):

@@ -18,25 +18,16 @@ from classify.policies import (
     stopping_curve,
 )
 from classify.recognizers.touches import Recognizer
-from meshsal.mesh import Mesh, Similarity
+from meshsal.mesh import Similarity
 from meshsal.points.places import POOL_FACTOR
 
 SETTINGS = Settings(n_points=3, view_size=32, train_instances=2, train_sessions=1)
-APEX = np.array([0.6, 0.64, 0.48]) / np.linalg.norm([0.6, 0.64, 0.48])
-
-
-def _ball_and_domed():
-    """Two objects that differ in one place only: a ball, and the same ball with a dome on it."""
-    ball = shapes.sphere(radius=50.0, n=24).replace(name="ball")
-    angle = np.arccos(np.clip(ball.vertices @ APEX / 50.0, -1.0, 1.0))
-    domed = Mesh(ball.vertices * (1.0 + 0.25 * np.exp(-((angle / 0.25) ** 2)))[:, None], ball.faces, name="domed")
-    return ball, domed
 
 
 @pytest.fixture(scope="module")
 def world():
     """Both objects' instances 0 (test), 1, 2 (training) of replicate 0 with their places, and the knowledge."""
-    nominal = {m.name: nominal_mesh(m, SETTINGS) for m in _ball_and_domed()}
+    nominal = {m.name: nominal_mesh(m, SETTINGS) for m in shapes.ball_and_domed()}
     samples = {
         (name, j): instance_samples(SampleTask(mesh, name, (), SETTINGS, 0, j, places=True)).places
         for name, mesh in nominal.items()
@@ -48,7 +39,7 @@ def world():
 
 def test_info_gain_touches_where_the_objects_differ_within_two_touches(world):
     nominal, samples, knowledge = world
-    apex = nominal["domed"].vertices[np.argmax(nominal["domed"].vertices @ APEX)]
+    apex = nominal["domed"].vertices[np.argmax(nominal["domed"].vertices @ shapes.DOME_APEX)]
     d = knowledge.names.index("domed")  # its places are located on its shape as the ball's are on the ball
 
     def under_domed(episode, name):

@@ -1,5 +1,6 @@
 """Imprint sets on disk (round trip, damaged and foreign files) and the ``imprints`` command."""
 
+import dataclasses
 import json
 import re
 
@@ -84,35 +85,11 @@ def test_other_version_is_refused(tmp_path):
 def test_inconsistent_fields_are_refused():
     s = small_set()
     with pytest.raises(ValueError, match="labels"):
-        ImprintSet(
-            imprints=s.imprints,
-            labels=[0, 0, 1, 2, 3],
-            object_names=s.object_names,
-            point_ids=s.point_ids,
-            positions=s.positions,
-            normals=s.normals,
-            sensor=s.sensor,
-        )
+        dataclasses.replace(s, labels=[0, 0, 1, 2, 3])
     with pytest.raises(ValueError, match="sensor"):
-        ImprintSet(
-            imprints=s.imprints,
-            labels=s.labels,
-            object_names=s.object_names,
-            point_ids=s.point_ids,
-            positions=s.positions,
-            normals=s.normals,
-            sensor=Sensor(),
-        )
+        dataclasses.replace(s, sensor=Sensor())
     with pytest.raises(ValueError, match="positions"):
-        ImprintSet(
-            imprints=s.imprints,
-            labels=s.labels,
-            object_names=s.object_names,
-            point_ids=s.point_ids,
-            positions=s.positions[:3],
-            normals=s.normals,
-            sensor=s.sensor,
-        )
+        dataclasses.replace(s, positions=s.positions[:3])
 
 
 def test_subset_keeps_names_and_fields():

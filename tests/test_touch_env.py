@@ -14,19 +14,9 @@ from classify.experiment.env import ENV_ID, TouchEnv, run_policy, touch_state
 from classify.experiment.samples import SampleTask, instance_samples, instance_spec, nominal_mesh
 from classify.policies import InfoGainPolicy, fit_knowledge, run_episode
 from classify.recognizers.touches import Recognizer
-from meshsal.mesh import Mesh
 
 SETTINGS = Settings(n_points=3, view_size=32, train_instances=2, train_sessions=1)
-APEX = np.array([0.6, 0.64, 0.48]) / np.linalg.norm([0.6, 0.64, 0.48])
 KEYS = {"features", "positions", "normals", "valid", "available", "touched", "imprints", "belief", "touches"}
-
-
-def _ball_and_domed():
-    """Two objects that differ in one place only: a ball, and the same ball with a dome on it."""
-    ball = shapes.sphere(radius=50.0, n=24).replace(name="ball")
-    angle = np.arccos(np.clip(ball.vertices @ APEX / 50.0, -1.0, 1.0))
-    domed = Mesh(ball.vertices * (1.0 + 0.25 * np.exp(-((angle / 0.25) ** 2)))[:, None], ball.faces, name="domed")
-    return ball, domed
 
 
 @pytest.fixture(scope="module")
@@ -36,12 +26,12 @@ def cache(tmp_path_factory):
 
 @pytest.fixture(scope="module")
 def env(cache):
-    return TouchEnv(list(_ball_and_domed()), SETTINGS, test_replicates=range(3), cache_dir=cache)
+    return TouchEnv(list(shapes.ball_and_domed()), SETTINGS, test_replicates=range(3), cache_dir=cache)
 
 
 def _sample(name, replicate, cache):
     """The test instance an episode touched, built apart from the env."""
-    mesh = {m.name: m for m in _ball_and_domed()}[name]
+    mesh = {m.name: m for m in shapes.ball_and_domed()}[name]
     return instance_samples(
         SampleTask(nominal_mesh(mesh, SETTINGS), name, (), SETTINGS, replicate, 0, places=True, cache_dir=cache)
     ).places
@@ -61,7 +51,7 @@ def test_gymnasiums_checker_passes_without_a_warning(env):
 
 def test_the_env_made_by_id_is_the_env(env, cache):
     made = gymnasium.make(
-        ENV_ID, objects=list(_ball_and_domed()), settings=SETTINGS, test_replicates=range(3), cache_dir=cache
+        ENV_ID, objects=list(shapes.ball_and_domed()), settings=SETTINGS, test_replicates=range(3), cache_dir=cache
     )
     assert data_equivalence(made.reset(seed=5)[0], env.reset(seed=5)[0], exact=True)
 
@@ -70,7 +60,7 @@ def test_info_gain_through_the_env_touches_what_run_episode_touches(env, cache):
     run = run_policy(env, "info_gain", episodes=6, seed=3)
     assert set(run.objects) == {"ball", "domed"} and run.touches.tolist() == [3] * 6
     # The knowledge fitted apart, on instances 1 and 2 of replicate 0 as the sequential protocol fits it.
-    nominal = {m.name: nominal_mesh(m, SETTINGS) for m in _ball_and_domed()}
+    nominal = {m.name: nominal_mesh(m, SETTINGS) for m in shapes.ball_and_domed()}
     training = {
         (name, j): instance_samples(SampleTask(mesh, name, (), SETTINGS, 0, j, places=True, cache_dir=cache)).places
         for name, mesh in nominal.items()
@@ -154,7 +144,7 @@ def test_the_reward_an_unavailable_place_and_the_automatic_answer(env):
 def test_resets_are_seeded_and_draw_test_instances_training_never_saw(env, cache):
     first, info = env.reset(seed=7)
     assert data_equivalence(first, env.reset(seed=7)[0], exact=True)
-    fresh = TouchEnv(list(_ball_and_domed()), SETTINGS, test_replicates=range(3), seed=7, cache_dir=cache)
+    fresh = TouchEnv(list(shapes.ball_and_domed()), SETTINGS, test_replicates=range(3), seed=7, cache_dir=cache)
     with pytest.raises(gymnasium.error.ResetNeeded):
         fresh.step(0)
     assert data_equivalence(first, fresh.reset()[0], exact=True)  # an unseeded first reset: seed=7
@@ -171,10 +161,10 @@ def test_resets_are_seeded_and_draw_test_instances_training_never_saw(env, cache
 
 def test_bad_arguments_are_refused_before_any_work():
     with pytest.raises(ValueError, match="touch_cost"):
-        TouchEnv(list(_ball_and_domed()), SETTINGS, touch_cost=-0.1)
+        TouchEnv(list(shapes.ball_and_domed()), SETTINGS, touch_cost=-0.1)
     with pytest.raises(ValueError, match="test_replicates"):
-        TouchEnv(list(_ball_and_domed()), SETTINGS, test_replicates=[])
+        TouchEnv(list(shapes.ball_and_domed()), SETTINGS, test_replicates=[])
     with pytest.raises(ValueError, match="nope"):
-        TouchEnv(list(_ball_and_domed()), SETTINGS, classifier="nope")
+        TouchEnv(list(shapes.ball_and_domed()), SETTINGS, classifier="nope")
     with pytest.raises(ValueError, match="two objects"):
-        TouchEnv(list(_ball_and_domed())[:1], SETTINGS)
+        TouchEnv(list(shapes.ball_and_domed())[:1], SETTINGS)

@@ -60,9 +60,13 @@ __all__ = [
 ]
 
 #: The evaluation protocols (this module's docstring describes them).
-PROTOCOL_REGISTRY = Registry("protocol")
-PROTOCOL_REGISTRY.register("paper", None, "the paper's CV, folds grouped by point")
-PROTOCOL_REGISTRY.register("instance", None, "train and test on distinct fresh instances, k-touch fusion")
+PROTOCOL_REGISTRY = Registry(
+    "protocol",
+    [
+        ("paper", None, "the paper's CV, folds grouped by point"),
+        ("instance", None, "train and test on distinct fresh instances, k-touch fusion"),
+    ],
+)
 PROTOCOLS = PROTOCOL_REGISTRY.names()
 
 

@@ -94,13 +94,7 @@ def color(img: np.ndarray) -> np.ndarray:
     The two opponent features (see :func:`opponency`) are each taken through
     the center-surround pyramid, N(.)-normalized and summed.
 
-    Parameters
-    ----------
-    img : (H, W, 3) float32 in [0, 1]
-
-    Returns
-    -------
-    (H, W) float32 in [0, 1]
+    Takes and returns images as :func:`intensity` does.
 
     Examples
     --------
@@ -201,13 +195,7 @@ def orientation(img: np.ndarray) -> np.ndarray:
     bars of a search display are blobs: an odd oblique bar among vertical
     ones on a dense grid scored 1.2x inside/outside.  Here it pops out.
 
-    Parameters
-    ----------
-    img : (H, W, 3) float32 in [0, 1]
-
-    Returns
-    -------
-    (H, W) float32 in [0, 1]
+    Takes and returns images as :func:`intensity` does.
 
     Examples
     --------

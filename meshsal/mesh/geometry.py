@@ -89,12 +89,8 @@ def normal_defined(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
 
     Parameters
     ----------
-    vertices : (n, 3) float64
-    faces : (m, 3) int
-
-    Returns
-    -------
-    (n,) bool
+    vertices, faces : (n, 3) float64 and (m, 3) int
+        The mesh; returns (n,) bool.
 
     Examples
     --------

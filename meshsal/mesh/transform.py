@@ -126,8 +126,7 @@ def principal_diagonal(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndar
 
     Parameters
     ----------
-    vertices : (n, 3) float64
-    faces : (m, 3) int32
+    vertices, faces : (n, 3) float64 and (m, 3) int32
 
     Returns
     -------

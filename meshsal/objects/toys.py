@@ -312,14 +312,8 @@ def _cow() -> _Design:
         colors = _base_colors(
             labels,
             {
-                "body": white,
-                "neck": white,
-                "head": white,
-                "ear": white,
-                "leg": white,
-                "tail": white,
-                "muzzle": _rgb(0.93, 0.66, 0.68),
-                "udder": _rgb(0.93, 0.66, 0.68),
+                **dict.fromkeys(("body", "neck", "head", "ear", "leg", "tail"), white),
+                **dict.fromkeys(("muzzle", "udder"), _rgb(0.93, 0.66, 0.68)),
                 "eye": _rgb(0.04, 0.04, 0.04),
                 "horn": _rgb(0.90, 0.85, 0.70),
                 "hoof": _rgb(0.22, 0.20, 0.18),

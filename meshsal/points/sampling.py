@@ -21,7 +21,6 @@ __all__ = [
     "field_peaks",
     "Suppression",
     "suppress",
-    "non_maximum_suppression",
 ]
 
 
@@ -239,26 +238,3 @@ def suppress(
             if len(chosen) == limit:
                 break
     return Suppression(np.asarray(chosen, dtype=np.int64), refused)
-
-
-def non_maximum_suppression(
-    points: np.ndarray,
-    min_spacing: float,
-    n: int | None = None,
-    ids: np.ndarray | None = None,
-    taken_points: np.ndarray | None = None,
-    taken_ids: np.ndarray | None = None,
-) -> np.ndarray:
-    """The indices :func:`suppress` keeps, with no ``accept`` test.
-
-    Returns
-    -------
-    (j,) int64 indices into ``points``, in the order chosen; no two closer than ``min_spacing``.
-
-    Examples
-    --------
-    >>> P = np.array([[0, 0, 0], [0.05, 0, 0], [1, 0, 0], [0.5, 0, 0.]])
-    >>> non_maximum_suppression(P, 0.4).tolist()
-    [0, 2, 3]
-    """
-    return suppress(points, min_spacing, n, ids, taken_points, taken_ids).chosen

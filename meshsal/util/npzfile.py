@@ -59,6 +59,7 @@ def read_npz(
     Parameters
     ----------
     path : str or Path
+        The archive, read once.
     what : str
         What the file should be; it goes into every error message.
     max_bytes : int

@@ -31,15 +31,19 @@ class Registry:
     >>> _ = fruit.register("apple", 1, "crisp"); _ = fruit.register("pear", 2, "soft")
     >>> fruit.names(), fruit.get("pear"), "apple" in fruit
     (('apple', 'pear'), 2, True)
+    >>> Registry("nut", [("almond", None, "sweet")]).help_text()
+    'almond (sweet)'
     >>> fruit.get("plum")
     Traceback (most recent call last):
     ...
     ValueError: unknown fruit 'plum'; choose from apple, pear
     """
 
-    def __init__(self, kind: str):
+    def __init__(self, kind: str, entries: Iterable[tuple[str, object, str]] = ()):
         self.kind = kind
         self._entries: dict[str, Entry] = {}
+        for name, value, help in entries:
+            self.register(name, value, help)
 
     def register(self, name: str, value=None, help: str = ""):
         """Add a choice; returns ``value`` (so it can decorate a function)."""
