@@ -275,6 +275,34 @@ def test_processes_creating_and_filling_one_session_at_once_never_share_a_point_
         assert sorted(ids) == list(range(n * presses))
 
 
+class _LockedOnce:
+    """A connection whose first switch to the write-ahead log finds the file locked, as SQLite answers,
+    without waiting, while another process opens the new file beside it."""
+
+    def __init__(self, con):
+        self._con, self.refused = con, 0
+
+    def execute(self, sql, *args):
+        if "journal_mode" in sql and not self.refused:
+            self.refused += 1
+            raise sqlite3.OperationalError("database is locked")
+        return self._con.execute(sql, *args)
+
+    def __getattr__(self, name):
+        return getattr(self._con, name)
+
+
+def test_a_new_file_locked_while_it_turns_to_the_log_is_asked_again(tmp_path, monkeypatch):
+    connect, made = sqlite3.connect, []
+    monkeypatch.setattr(sqlite3, "connect", lambda *a, **kw: made.append(_LockedOnce(connect(*a, **kw))) or made[-1])
+    with Session(tmp_path / "s.sqlite") as s:
+        s.ensure_sensor(16, 16)
+    assert [c.refused for c in made] == [1]
+    monkeypatch.setattr(sqlite3, "connect", connect)
+    with Session(tmp_path / "s.sqlite", create=False) as s:
+        assert s.sensor == (16, 16)
+
+
 def test_a_filesystem_without_a_write_ahead_log_is_refused(tmp_path, monkeypatch):
     connect = sqlite3.connect
     # SQLite's VFS for filesystems without POSIX locks has no shared memory, so WAL mode is refused there.
