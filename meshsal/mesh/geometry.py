@@ -90,7 +90,10 @@ def normal_defined(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
     Parameters
     ----------
     vertices, faces : (n, 3) float64 and (m, 3) int
-        The mesh; returns (n,) bool.
+
+    Returns
+    -------
+    (n,) bool
 
     Examples
     --------

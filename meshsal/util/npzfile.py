@@ -59,7 +59,7 @@ def read_npz(
     Parameters
     ----------
     path : str or Path
-        The archive, read once.
+        The ``.npz`` file.
     what : str
         What the file should be; it goes into every error message.
     max_bytes : int
