@@ -26,7 +26,7 @@ if [ ! -f "$marker" ] || [ pyproject.toml -nt "$marker" ]; then
   # CLI, every worker, every test's subprocess) compiled what it imports again: 2.5 of its 4.4 s of imports.
   # Written once here, for what the toolkit imports.
   modules="classify.cli, classify.experiment.run, meshsal.points, meshsal.attention.rig, meshsal.objects.instances"
-  if [ "${VENV_EXTRAS:-}" = test ]; then modules="$modules, classify.experiment.env, distributed, pytest"; fi
+  if [ "${VENV_EXTRAS:-}" = test ]; then modules="$modules, classify.experiment.env, distributed, pytest, xdist"; fi
   env -u PYTHONDONTWRITEBYTECODE .venv/bin/python -c "import $modules"
   touch "$marker"
 fi

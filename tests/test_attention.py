@@ -337,6 +337,34 @@ def test_upsample_puts_coarse_levels_back_in_place(level):
     assert np.unravel_index(np.argmax(back), back.shape) == (96, 160)
 
 
+def _opencv_upsample(m, factor, shape):
+    import cv2
+
+    warp = np.array([[1.0 / factor, 0.0, 0.0], [0.0, 1.0 / factor, 0.0]], np.float32)
+    flags = cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP
+    return cv2.warpAffine(m, warp, (shape[1], shape[0]), flags=flags, borderMode=cv2.BORDER_REPLICATE)
+
+
+@pytest.mark.parametrize(
+    "factor, coarse, shape",
+    [(2, (128, 128), (256, 256)), (4, (64, 64), (256, 256)), (16, (16, 16), (256, 256)), (8, (23, 17), (180, 130))]
+    + [(2, (96, 97), (191, 193)), (4, (40, 33), (157, 130)), (16, (9, 12), (129, 190))],
+)
+def test_large_upsamples_have_the_bits_of_opencvs_warp_with_the_pinned_kernels(factor, coarse, shape):
+    from meshsal.util.reproducible import kernels
+
+    rng = np.random.default_rng(factor)
+    m = rng.standard_normal(coarse).astype(np.float32)
+    m[0, 0], m[1, 1], m[2, 2:6] = -0.0, 0.0, 0.0  # a zero's sign survives as in OpenCV's kernel
+    mine = upsample(m, factor, shape)
+    assert mine.shape == shape and mine.dtype == np.float32
+    theirs = _opencv_upsample(m, factor, shape)
+    if kernels()["opencv"].startswith("baseline"):
+        np.testing.assert_array_equal(mine.view(np.int32), theirs.view(np.int32))
+    else:  # OpenCV's own kernels fuse multiply and add: the same up to a rounding
+        np.testing.assert_allclose(mine, theirs, rtol=0, atol=4e-7 * float(np.abs(m).max()))
+
+
 def test_center_surround_map_is_resolution_independent_in_placement():
     for size in (64, 128, 256, 512):
         f = np.zeros((size, size), np.float32)

@@ -68,6 +68,8 @@ _PEAK_EXCLUSION = 2
 # Maps whose value range is below this are flat: nothing to normalize.
 _FLAT = 1e-6
 _3X3 = np.ones((3, 3), np.uint8)
+# Upsampled maps of at least this many pixels are interpolated in two separable passes, smaller ones by OpenCV.
+_SEPARABLE_PIXELS = 128 * 128
 
 
 def gaussian_pyramid(img: np.ndarray, levels: int = _LEVELS) -> list[np.ndarray]:
@@ -121,7 +123,24 @@ def upsample(m: np.ndarray, factor: int, shape: tuple[int, int]) -> np.ndarray:
     Returns
     -------
     (H, W) float32
+
+    Examples
+    --------
+    >>> upsample(np.array([[0.0, 1.0]], np.float32), 2, (1, 4)).tolist()
+    [[0.0, 0.5, 1.0, 1.0]]
     """
+    factor = int(factor)
+    h, w = m.shape[:2]
+    if (
+        m.ndim == 2
+        and m.dtype == np.float32
+        and factor >= 2
+        and factor & (factor - 1) == 0
+        and shape[0] * shape[1] >= _SEPARABLE_PIXELS
+        and h * factor >= shape[0]
+        and w * factor >= shape[1]
+    ):
+        return _separable_upsample(m, factor, shape)
     inv = 1.0 / factor
     warp = np.array([[inv, 0.0, 0.0], [0.0, inv, 0.0]], np.float32)
     return cv2.warpAffine(
@@ -131,6 +150,49 @@ def upsample(m: np.ndarray, factor: int, shape: tuple[int, int]) -> np.ndarray:
         flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP,
         borderMode=cv2.BORDER_REPLICATE,
     )
+
+
+def _step_differences(m: np.ndarray, axis: int) -> np.ndarray:
+    """``next - this`` along ``axis``, the last one against itself (the replicated border): float32."""
+    d = np.empty_like(m)
+    if axis == 1:
+        np.subtract(m[:, 1:], m[:, :-1], out=d[:, :-1])
+        np.subtract(m[:, -1], m[:, -1], out=d[:, -1])
+    else:
+        np.subtract(m[1:], m[:-1], out=d[:-1])
+        np.subtract(m[-1], m[-1], out=d[-1])
+    return d
+
+
+def _separable_upsample(m: np.ndarray, factor: int, shape: tuple[int, int]) -> np.ndarray:
+    """:func:`upsample` for a power-of-two ``factor``, bit for bit what ``cv2.warpAffine`` gives with the
+    pinned kernels, two to three times faster on a full-size view.
+
+    The sample positions ``i / factor`` are exact in float32 and repeat with
+    period ``factor``, so bilinear interpolation splits into a pass along
+    rows and one along columns with ``factor`` fixed weights.  Each pass
+    computes ``alpha * (next - this) + this`` in float32, rounding after
+    the product and after the sum, in the order of OpenCV's own kernel
+    (without fused multiply-add, which the pin turns off); the border is
+    replicated.
+    """
+    h, w = m.shape
+    weights = np.arange(factor, dtype=np.float32) / np.float32(factor)
+    d = _step_differences(m, axis=1)
+    rows = np.empty((h, w, factor), np.float32)
+    if factor <= 4:
+        # Few phases: one strided pass each; broadcasting over a last axis this short is slow.
+        for p in range(factor):
+            np.multiply(d, weights[p], out=rows[:, :, p])
+            rows[:, :, p] += m
+    else:
+        np.multiply(d[:, :, None], weights, out=rows)
+        rows += m[:, :, None]
+    rows = rows.reshape(h, w * factor)[:, : shape[1]]
+    out = np.empty((h, factor, rows.shape[1]), np.float32)
+    np.multiply(_step_differences(rows, axis=0)[:, None, :], weights[:, None], out=out)
+    out += rows[:, None, :]
+    return out.reshape(h * factor, -1)[: shape[0]]
 
 
 def _range(m: np.ndarray) -> tuple[float, float]:
@@ -242,12 +304,16 @@ def normalize_map(m: np.ndarray, method: str = "maxima", iterations: int = 3) ->
     m = np.asarray(m, dtype=np.float32)
     if m.ndim != 2:
         raise ValueError(f"normalize_map expects a 2-D map, got shape {m.shape}")
-    m = to_unit(m)
-    if not m.any():
-        return m
     if method == "maxima":
-        peaks = (m == cv2.dilate(m, _3X3)) & (m > _PEAK_FLOOR)
-        top_r, top_c = divmod(int(np.argmax(m)), m.shape[1])
+        # to_unit inlined: N(.) runs some seventy times per view, mostly on maps of a few hundred pixels,
+        # where each call's overhead counts.  A map that is not flat keeps a non-zero maximum once scaled.
+        lo, hi = _range(m)
+        if not hi - lo > _FLAT:
+            return np.zeros(m.shape, np.float32)
+        m = (m - lo) * np.float32(1.0 / (hi - lo))
+        peaks = m == cv2.dilate(m, _3X3)
+        peaks &= m > _PEAK_FLOOR
+        top_r, top_c = divmod(int(m.argmax()), m.shape[1])
         # The global maximum's own plateau or shoulder is not a rival peak.
         e = _PEAK_EXCLUSION
         peaks[max(top_r - e, 0) : top_r + e + 1, max(top_c - e, 0) : top_c + e + 1] = False
@@ -257,6 +323,9 @@ def normalize_map(m: np.ndarray, method: str = "maxima", iterations: int = 3) ->
         mean = float(np.float32(float(np.add.reduce(rival)) / rival.size)) if rival.size else 0.0
         return m * np.float32((1.0 - mean) ** 2)
     if method == "iterative":
+        m = to_unit(m)
+        if not m.any():
+            return m
         width = max(m.shape)
         sigma_ex, sigma_inh = _SIGMA_EX * width, _SIGMA_INH * width
         for _ in range(iterations):
