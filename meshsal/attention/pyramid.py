@@ -132,15 +132,14 @@ def upsample(m: np.ndarray, factor: int, shape: tuple[int, int]) -> np.ndarray:
     [[0.0, 0.5, 1.0, 1.0]]
     """
     factor = int(factor)
-    h, w = m.shape[:2]
     if (
         m.ndim == 2
         and m.dtype == np.float32
         and factor >= _SEPARABLE_FACTOR
         and factor & (factor - 1) == 0
         and shape[0] * shape[1] >= _SEPARABLE_PIXELS
-        and h * factor >= shape[0]
-        and w * factor >= shape[1]
+        and m.shape[0] * factor >= shape[0]
+        and m.shape[1] * factor >= shape[1]
     ):
         return _separable_upsample(m, factor, shape)
     inv = 1.0 / factor
@@ -168,7 +167,7 @@ def _step_differences(m: np.ndarray, axis: int) -> np.ndarray:
 
 def _separable_upsample(m: np.ndarray, factor: int, shape: tuple[int, int]) -> np.ndarray:
     """:func:`upsample` for a power-of-two ``factor``, bit for bit what ``cv2.warpAffine`` gives with the
-    pinned kernels, about twice as fast for a factor of 16 to a 256 x 256 view.
+    pinned kernels, 1.4 to 2 times as fast for a factor of 16 to a 256 x 256 view.
 
     The sample positions ``i / factor`` are exact in float32 and repeat with
     period ``factor``, so bilinear interpolation splits into a pass along
