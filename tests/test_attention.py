@@ -13,6 +13,7 @@ from meshsal import attention
 from meshsal.attention.dkl import RGB_TO_LMS, dkl_axes, rgb_to_lms
 from meshsal.attention.local import default_contrast_window, local_entropy
 from meshsal.attention.pyramid import (
+    _warp_upsample,
     across_scale_sum,
     center_surround_map,
     gaussian_pyramid,
@@ -337,14 +338,6 @@ def test_upsample_puts_coarse_levels_back_in_place(level):
     assert np.unravel_index(np.argmax(back), back.shape) == (96, 160)
 
 
-def _opencv_upsample(m, factor, shape):
-    import cv2
-
-    warp = np.array([[1.0 / factor, 0.0, 0.0], [0.0, 1.0 / factor, 0.0]], np.float32)
-    flags = cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP
-    return cv2.warpAffine(m, warp, (shape[1], shape[0]), flags=flags, borderMode=cv2.BORDER_REPLICATE)
-
-
 @pytest.mark.parametrize(
     "factor, coarse, shape",
     [(16, (16, 16), (256, 256)), (16, (8, 8), (128, 128)), (8, (16, 16), (128, 128))]
@@ -358,7 +351,7 @@ def test_large_upsamples_have_the_bits_of_opencvs_warp_with_the_pinned_kernels(f
     rng = np.random.default_rng(factor)
     m = rng.standard_normal(coarse).astype(np.float32)
     m[0, 0], m[1, 1], m[2, 2:6] = -0.0, 0.0, 0.0  # a zero's sign survives as in OpenCV's kernel
-    theirs = _opencv_upsample(m, factor, shape)
+    theirs = _warp_upsample(m, factor, shape)
     with monkeypatch.context() as patch:
         patch.setattr(cv2, "warpAffine", None)  # these sizes take the two separable passes
         mine = upsample(m, factor, shape)
