@@ -138,6 +138,31 @@ def test_evolution_strategy_reaches_the_dual_optimum_of_svc():
     assert w[0] <= w_svc + 1e-6  # SVC's optimum bounds every feasible point
 
 
+@pytest.mark.parametrize("block", [1, 7])
+@pytest.mark.parametrize(
+    "n, problems, lam, generations, patience, stops_at",
+    [(30, 3, 64, 173, 60, 173), (12, 2, 4, 500, 5, 180)],  # the generation cap; a stall, mid-block
+)
+def test_evolution_strategy_run_does_not_depend_on_its_draw_blocks(
+    monkeypatch, block, n, problems, lam, generations, patience, stops_at
+):
+    """The draws are prepared a block of generations at a time: any block size gives the same run, bit for bit."""
+    from classify.recognizers import evolutionary_svm
+
+    rng = np.random.default_rng(3)
+    X = rng.normal(size=(n, 4))
+    K = np.exp(-0.5 * ((X[:, None] - X[None]) ** 2).sum(-1))
+    Y = np.where(rng.random((problems, n)) < 0.4, 1.0, -1.0)
+    runs = []
+    for size in (evolutionary_svm._BLOCK, block):
+        monkeypatch.setattr(evolutionary_svm, "_BLOCK", size)
+        runs.append(solve_dual(K, Y, C=1.0, pairs=2, lam=lam, max_generations=generations, patience=patience))
+    (a0, w0, g0), (a1, w1, g1) = runs
+    assert g0 == g1 == stops_at
+    assert a0.tobytes() == a1.tobytes() and w0.tobytes() == w1.tobytes()
+    assert np.all(a0 >= 0) and np.all(a0 <= 1.0) and np.allclose(np.einsum("pn,pn->p", a0, Y), 0, atol=1e-12)
+
+
 def test_evolutionary_svm_two_classes_decision_sign_follows_classes():
     X = np.array([[0.0], [0.2], [3.0], [3.2]])
     model = classify.make("evolutionary_svm", C=10.0).fit(X, ["a", "a", "b", "b"])

@@ -97,6 +97,53 @@ class Strategy:
     seed: object = 0
 
 
+# Generations whose draws are made and prepared together (fewer when the run stops first).
+_BLOCK = 50
+
+
+class _Block:
+    """The random draws of up to ``count`` generations and everything that depends on them alone.
+
+    The draws are made generation by generation, in the order a one-generation
+    loop would make them, so the run is the same whatever the block size.
+    Arrays have a leading generation axis; ``coords`` (g, p, lam, m) are the
+    coefficients each offspring moves, i then j of each pair; ``sign`` is
+    ``-y_i y_j``, ``up`` where it is positive, ``frozen`` the moves that must
+    not happen (i == j, or pairs sharing a coefficient); ``Q`` (g, p, lam, m,
+    m) the entries ``y_a y_b K_ab`` of the moved coefficients; ``spread`` the
+    log-normal factor of the step size, ``step`` the unit steps.  Multiplying
+    by the labels (+-1) is exact, so ``Q`` gives the bits of multiplying by
+    them one at a time.
+    """
+
+    def __init__(self, rng, K, Y, mu, lam, pairs, count):
+        p, n = Y.shape
+        m = 2 * pairs
+        draws = [
+            (
+                rng.integers(0, mu, size=(p, lam)),
+                rng.standard_normal((p, lam)),
+                rng.integers(0, n, size=(p, lam, m)),
+                rng.standard_normal((p, lam, pairs)),
+            )
+            for _ in range(count)
+        ]
+        self.parent, normal, idx, self.step = (np.stack(d) for d in zip(*draws))
+        self.spread = np.exp(1.0 / np.sqrt(2.0 * pairs) * normal)
+        self.coords = idx[..., np.r_[0:m:2, 1:m:2]]  # draws (i, j, i, j...) reordered to (i..., j...)
+        self.parent_flat = np.arange(p)[:, None] * mu + self.parent
+        self.offsets = self.parent_flat[..., None] * n + self.coords  # into the (p, mu, n) population
+        self.yc = Y.ravel()[(np.arange(p) * n)[:, None, None] + self.coords]
+        self.sign = -self.yc[..., :pairs] * self.yc[..., pairs:]
+        self.up = self.sign > 0
+        self.frozen = self.coords[..., :pairs] == self.coords[..., pairs:]
+        if pairs > 1:
+            srt = np.sort(idx, axis=-1)
+            self.frozen |= (np.diff(srt, axis=-1) == 0).any(axis=-1)[..., None]
+        Ksub = K.ravel()[self.coords[..., :, None] * n + self.coords[..., None, :]]
+        self.Q = self.yc[..., :, None] * Ksub * self.yc[..., None, :]
+
+
 def solve_dual(K, Y, C=1.0, strategy: Strategy | None = None, **changes):
     """Solve several SVM duals sharing one kernel matrix with a (mu+lambda)-ES.
 
@@ -135,79 +182,67 @@ def solve_dual(K, Y, C=1.0, strategy: Strategy | None = None, **changes):
     Y = np.atleast_2d(np.asarray(Y, dtype=np.float64))
     p, n = Y.shape
     rng = np.random.default_rng(es.seed)
-    tau = 1.0 / np.sqrt(2.0 * pairs)
-    m = 2 * pairs
 
     A = np.zeros((p, mu, n))  # parents' coefficients, all start at a = 0
     G = np.ones((p, mu, n))  # gradient 1 - Q a (Q a = y * (K @ (a * y)))
     F = np.zeros((p, mu))  # fitness W(a)
     S = np.full((p, mu), float(sigma0))  # self-adapted step sizes
     rows = np.arange(p)[:, None]
-    # The loop runs hundreds of generations on small arrays, so gathers go through flat offsets (a fraction of
-    # the cost of 3-index fancy indexing) and K's columns through the rows of its transpose; same values.
-    interleaved = np.r_[0:m:2, 1:m:2]  # a mutation's coordinates (i..., j...) from its draws (i, j, i, j...)
-    Kf, KT = K.ravel(), np.ascontiguousarray(K.T)
-    y_offset = (np.arange(p) * n)[:, None, None]
-    stall = 0
-    generation = 0
-    for generation in range(1, es.max_generations + 1):  # noqa: B007 (read after the loop: generations run)
-        parent = rng.integers(0, mu, size=(p, lam))
-        sigma = np.clip(S[rows, parent] * np.exp(tau * rng.standard_normal((p, lam))), 1e-6, 1.0)
-        idx = rng.integers(0, n, size=(p, lam, m))
-        coords = idx[..., interleaved]  # (p, lam, m): i then j of each pair
-        parent_offset = ((rows * mu + parent) * n)[..., None]
-        yc = Y.ravel()[y_offset + coords]
-        ac = A.ravel()[parent_offset + coords]
-        yi, yj = yc[..., :pairs], yc[..., pairs:]
-        ai, aj = ac[..., :pairs], ac[..., pairs:]
-        same = coords[..., :pairs] == coords[..., pairs:]
-        step = sigma[..., None] * C * rng.standard_normal(same.shape)
-        # Repair: moving a_i by t moves a_j by -y_i y_j t; clip t to keep both in [0, C].
-        s = -yi * yj
-        lo_i, hi_i = -ai, C - ai
-        up = s > 0
-        lo_j = np.where(up, -aj, aj - C)
-        hi_j = np.where(up, C - aj, aj)
-        step = np.clip(step, np.maximum(lo_i, lo_j), np.minimum(hi_i, hi_j))
-        step[same] = 0.0
-        # Pairs inside one offspring must not share a coefficient, or the deltas would add up.
-        if pairs > 1:
-            srt = np.sort(idx, axis=2)
-            clash = (np.diff(srt, axis=2) == 0).any(axis=2)
-            step[clash] = 0.0
-        delta = np.concatenate([step, s * step], axis=2)  # moves of coefficients (i..., j...)
-        g = G.ravel()[parent_offset + coords]
-        # W(a + d) - W(a) = g.d - 1/2 d^T Q d over the few touched coordinates.
-        Ksub = Kf[coords[..., :, None] * n + coords[..., None, :]]  # (p, lam, m, m)
-        qd = yc * np.einsum("plab,plb->pla", Ksub, yc * delta)
-        gain = (g * delta).sum(2) - 0.5 * (delta * qd).sum(2)
-        cand_F = np.concatenate([F, F[rows, parent] + gain], axis=1)
-        best = np.argsort(-cand_F, axis=1, kind="stable")[:, :mu]
-        kept = cand_F[rows, best]
-        improved = (kept[:, 0] > F.max(1) + 1e-12).any()
-        from_child = best >= mu
-        child = np.where(from_child, best - mu, 0)
-        src = np.where(from_child, parent[rows, child], best)
-        newA = A[rows, src]
-        newG = G[rows, src]
-        newS = np.where(from_child, sigma[rows, child], S[rows, np.minimum(best, mu - 1)])
-        if from_child.any():
+    # Offsets of each problem's row in flattened (p, x) arrays.
+    row_parents, row_offspring, row_candidates = rows * mu, rows * lam, rows * (mu + lam)
+    KT = np.ascontiguousarray(K.T)
+    generation, stall = 0, 0
+    # The loop runs hundreds of generations on small arrays, where each NumPy call costs more than its
+    # arithmetic: everything that depends on the random draws alone is computed for a block of generations
+    # at once, and the loop keeps only what depends on the population.
+    while generation < es.max_generations and stall < es.patience:
+        block = _Block(rng, K, Y, mu, lam, pairs, min(_BLOCK, es.max_generations - generation))
+        for t in range(len(block.parent)):
+            generation += 1
+            parent, coords, yc = block.parent[t], block.coords[t], block.yc[t]
+            sigma = np.minimum(np.maximum(S.ravel()[block.parent_flat[t]] * block.spread[t], 1e-6), 1.0)
+            step = sigma[..., None] * C * block.step[t]
+            # Repair: moving a_i by t moves a_j by -y_i y_j t; clip t to keep both in [0, C].
+            ac = A.ravel()[block.offsets[t]]
+            ai, aj = ac[..., :pairs], ac[..., pairs:]
+            up = block.up[t]
+            lo_j = np.where(up, -aj, aj - C)
+            hi_j = np.where(up, C - aj, aj)
+            step = np.minimum(np.maximum(step, np.maximum(-ai, lo_j)), np.minimum(C - ai, hi_j))
+            step = np.where(block.frozen[t], 0.0, step)
+            delta = np.concatenate([step, block.sign[t] * step], axis=2)  # moves of coefficients (i..., j...)
+            g = G.ravel()[block.offsets[t]]
+            # W(a + d) - W(a) = g.d - 1/2 d^T Q d over the few touched coordinates.
+            qd = np.einsum("plab,plb->pla", block.Q[t], delta)
+            # np.add.reduce is ndarray.sum without its Python layer.
+            gain = np.add.reduce(g * delta, axis=2) - 0.5 * np.add.reduce(delta * qd, axis=2)
+            cand_F = np.concatenate([F, F.ravel()[block.parent_flat[t]] + gain], axis=1)
+            best = np.argsort(-cand_F, axis=1, kind="stable")[:, :mu]
+            kept = cand_F.ravel()[best + row_candidates]
+            # Rows of F are sorted, best first.
+            improved = (kept[:, 0] > F[:, 0] + 1e-12).any()
+            from_child = best >= mu
+            child = np.where(from_child, best - mu, 0) + row_offspring
+            src = np.where(from_child, parent.ravel()[child], best) + row_parents
+            newA = A.reshape(p * mu, n)[src]
+            newG = G.reshape(p * mu, n)[src]
+            newS = np.where(from_child, sigma.ravel()[child], S.ravel()[np.minimum(best, mu - 1) + row_parents])
             pp, mm = np.nonzero(from_child)
-            cc = child[pp, mm]
-            cidx = coords[pp, cc]  # (q, m)
-            cdel = delta[pp, cc]
-            at = (pp[:, None], mm[:, None], cidx)
-            # Only the moved coefficients can leave the box.
-            newA[at] = np.clip(newA[at] + cdel, 0.0, C)
-            # G -= Q[:, c] * d_c  with Q[:, c] = y * y_c * K[:, c]
-            yq = Y[pp]  # (q, n)
-            kcols = KT[cidx]  # (q, m, n): the columns K[:, c]
-            newG[pp, mm] -= yq * np.einsum("qmn,qm->qn", kcols, yq[np.arange(len(pp))[:, None], cidx] * cdel)
-        A, G, S = newA, newG, newS
-        F = kept
-        stall = 0 if improved else stall + 1
-        if stall >= es.patience:
-            break
+            if len(pp):
+                cc = child[pp, mm]  # flat (p * lam) offspring
+                cidx = coords.reshape(p * lam, -1)[cc]  # (q, m)
+                cdel = delta.reshape(p * lam, -1)[cc]
+                at = ((pp * mu + mm) * n)[:, None] + cidx
+                # Only the moved coefficients can leave the box.
+                newA.ravel()[at] = np.minimum(np.maximum(newA.ravel()[at] + cdel, 0.0), C)
+                # G -= Q[:, c] * d_c  with Q[:, c] = y * y_c * K[:, c]
+                w = yc.reshape(p * lam, -1)[cc] * cdel
+                newG.reshape(p * mu, n)[pp * mu + mm] -= Y[pp] * np.einsum("qmn,qm->qn", KT[cidx], w)
+            A, G, S = newA, newG, newS
+            F = kept
+            stall = 0 if improved else stall + 1
+            if stall >= es.patience:
+                break
     top = np.argmax(F, axis=1)
     return A[np.arange(p), top], F[np.arange(p), top], generation
 
