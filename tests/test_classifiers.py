@@ -8,7 +8,7 @@ from sklearn.model_selection import train_test_split
 from sklearn.svm import SVC
 
 import classify
-from classify.recognizers.evolutionary_svm import solve_dual
+from classify.recognizers.evolutionary_svm import solve_dual, solve_duals
 
 
 def _separable_imprints(n_per_class=30, n_classes=4, seed=0):
@@ -161,6 +161,37 @@ def test_evolution_strategy_run_does_not_depend_on_its_draw_blocks(
     assert g0 == g1 == stops_at
     assert a0.tobytes() == a1.tobytes() and w0.tobytes() == w1.tobytes()
     assert np.all(a0 >= 0) and np.all(a0 <= 1.0) and np.allclose(np.einsum("pn,pn->p", a0, Y), 0, atol=1e-12)
+
+
+def test_duals_solved_together_give_each_run_what_it_gives_alone():
+    """Runs of different sizes, problem counts and stopping generations share one loop; each keeps its own run."""
+    rng = np.random.default_rng(11)
+    problems = []
+    for n, p in [(12, 1), (30, 4), (7, 3), (25, 2)]:
+        X = rng.normal(size=(n, 3))
+        K = np.exp(-0.5 * ((X[:, None] - X[None]) ** 2).sum(-1))
+        problems.append((K, np.where(rng.random((p, n)) < 0.4, 1.0, -1.0)))
+    settings = dict(C=2.0, lam=6, pairs=2, max_generations=300, patience=8)
+    together = solve_duals(problems, **settings)
+    alone = [solve_dual(K, Y, **settings) for K, Y in problems]
+    assert len({g for _, _, g in alone}) > 2  # the runs stop at different generations, mid-block
+    for (a0, w0, g0), (a1, w1, g1), (_, Y) in zip(alone, together, problems):
+        assert g0 == g1 and a1.shape == Y.shape
+        assert a0.tobytes() == a1.tobytes() and w0.tobytes() == w1.tobytes()
+    assert solve_duals([]) == []
+
+
+def test_evolutionary_svms_fitted_together_are_the_models_fitted_one_by_one():
+    X, y = _separable_imprints(n_per_class=8, n_classes=3, seed=4)
+    sets = [(X[i::2], y[i::2]) for i in range(2)] + [(X[y < 2], y[y < 2])]  # a two-class set too
+    template = classify.make("evolutionary_svm", max_generations=120)
+    for together, (Xs, ys) in zip(template.fit_each(sets), sets):
+        alone = clone(template).fit(Xs, ys)
+        assert together is not template and together.get_params() == template.get_params()
+        for name in ("dual_coef_", "intercept_", "support_", "classes_", "fitness_"):
+            assert np.array_equal(getattr(together, name), getattr(alone, name)), name
+        assert np.array_equal(together.predict_proba(X), alone.predict_proba(X))
+    assert not hasattr(template, "dual_coef_")  # the template stays unfitted
 
 
 def test_evolutionary_svm_two_classes_decision_sign_follows_classes():

@@ -58,13 +58,23 @@ def test_paper_job_never_trains_or_selects_on_a_test_imprint(monkeypatch):
 
     def spy_fit(name, params, X_train, y_train, g):
         fits.append(X_train[:, 0].astype(int))
-        return real_fit(name, params, X_train, y_train, g)
+        model = real_fit(name, params, X_train, y_train, g)
+        model.spied_training_tags = fits[-1]
+        return model
 
+    def spy_proba(model, X_test, n):
+        assert not set(model.spied_training_tags.tolist()) & set(X_test[:, 0].astype(int).tolist())
+        predicted.append(X_test[:, 0].astype(int))
+        return real_proba(model, X_test, n)
+
+    real_proba, predicted = touches.posteriors, []
     monkeypatch.setattr(tactile, "select_by_similarity", spy_select, raising=False)
     monkeypatch.setattr(touches, "fit", spy_fit)
+    monkeypatch.setattr(touches, "posteriors", spy_proba)
     splits = protocols.paper_splits(y, groups, 5, 1, 3)
     out = protocols.paper_job(PaperJob(X, y, groups, splits, Recognizer("naive_bayes", True, {}, 0.85), 3))
-    assert len(selected) == len(fits) == 5
+    assert len(selected) == len(fits) == len(predicted) == 5
+    assert sorted(np.concatenate(predicted).tolist()) == list(range(len(y)))  # each imprint predicted once
     for rows, trained, split in zip(selected, fits, splits):
         assert sorted(rows.tolist()) == sorted(split.train.tolist())  # selection saw the training fold only
         assert not set(trained.tolist()) & set(split.test.tolist())
@@ -112,24 +122,50 @@ def test_instance_job_calibrates_on_held_out_instances_and_never_trains_on_the_t
 
     def spy_fit(name, params, X_train, y_train, g):
         fits.append(_tag(X_train))
-        return real_fit(name, params, X_train, y_train, g)
+        model = real_fit(name, params, X_train, y_train, g)
+        model.spied_training_tags = fits[-1]
+        return model
 
     def spy_proba(model, X, n):
-        scored.append(_tag(X))
+        scored.append((model.spied_training_tags, _tag(X)))
         return real_proba(model, X, n)
 
     monkeypatch.setattr(touches, "fit", spy_fit)
     monkeypatch.setattr(touches, "posteriors", spy_proba)
     out = protocols.instance_job(InstanceJob(data, Recognizer("knn", False, {}, 0.85), 5, 50, 0, 0))
     assert len(fits) == 4  # 3 held-out instances, then all of them
-    for trained, held in zip(fits[:3], scored[:3]):
+    held_out = []
+    for trained, held in scored[:3]:  # each held-out instance is scored by the model that never saw it
         trained_instances = set(data.train_instance[trained].tolist())
         held_instances = set(data.train_instance[held].tolist())
-        assert len(held_instances) == 1 and not trained_instances & held_instances
+        assert len(held_instances) == 1 and trained_instances == {1, 2, 3} - held_instances
+        held_out += held_instances
+    assert sorted(held_out) == [1, 2, 3]
+    scored = [tags for _, tags in scored]
     assert all(np.all(f < 10000) for f in fits)  # no test imprint ever trains
     assert sorted(np.concatenate(scored[3:]).tolist()) == sorted(np.concatenate([_tag(t) for t in data.test]).tolist())
     assert out.rates.shape == (5, 3) and np.all(out.rates[0] == 100.0)
     assert out.sets.tolist() == [5, 10, 10, 5, 1]  # C(5, k): fewer than 50 exist
+
+
+def _one_by_one(self, sets):
+    return [self.fit(X, y, groups) for X, y, groups in sets]
+
+
+def test_protocols_fitting_the_evolutionary_svms_together_give_the_outcomes_of_fitting_them_one_by_one(monkeypatch):
+    """The folds' (and the calibration's) duals are solved in one loop: the outcomes are those of one fit at a time."""
+    rec = Recognizer("evolutionary_svm", True, {"evolutionary_svm": {"max_generations": 60}}, 0.85)
+    X, y = _tagged_pool(seed=2)
+    groups = np.arange(len(y)) // 2
+    paper = PaperJob(X, y, groups, protocols.paper_splits(y, groups, 4, 1, 5), rec, 3)
+    instance = InstanceJob(_instance_data(seed=5), rec, 3, 6, 2, 1)
+    together = protocols.paper_job(paper), protocols.instance_job(instance)
+    monkeypatch.setattr(Recognizer, "fit_each", _one_by_one)
+    alone = protocols.paper_job(paper), protocols.instance_job(instance)
+    for a, b in zip(together, alone):
+        for name in ("rates", "confusion", "kept"):
+            assert np.array_equal(getattr(a, name), getattr(b, name)), name
+    assert np.array_equal(together[1].stop_correct, alone[1].stop_correct)
 
 
 def test_instance_job_is_paired_and_deterministic():

@@ -164,14 +164,16 @@ def paper_job(job: PaperJob) -> PaperOutcome:
     with threadpool_limits(1):
         F = describe(X, rec.features)
         pred = np.full(len(y), -1)
-        kept = []
+        kept, fitted = [], []
         for split in job.splits:
             train = select_training(X, y, split.train, rec.threshold) if rec.selection else split.train
             kept.append(len(train) / len(split.train))
             if len(np.unique(y[train])) < 2:
                 pred[split.test] = y[train][0] if len(train) else -1
                 continue
-            model = rec.fit(F[train], y[train], job.groups[train])
+            fitted.append((split, train))
+        models = rec.fit_each([(F[train], y[train], job.groups[train]) for _, train in fitted])
+        for (split, _), model in zip(fitted, models):
             pred[split.test] = np.argmax(touches.posteriors(model, F[split.test], job.n_classes), axis=1)
     hit = pred >= 0
     confusion = _confusion(y[hit], pred[hit], job.n_classes)
@@ -243,23 +245,26 @@ class InstanceOutcome:
     stop_touches: np.ndarray
 
 
-def _fit_selected(data: InstanceData, F, rows, rec: Recognizer):
+def _fit_selected(data: InstanceData, F, row_sets, rec: Recognizer):
+    """A model fitted on each set of training rows (after selection), all fitted together, and the rows kept."""
     X, y = data.train_X, data.train_y
     if rec.selection:
-        rows = select_training(X, y, rows, rec.threshold)
+        row_sets = [select_training(X, y, rows, rec.threshold) for rows in row_sets]
     groups = point_groups(data.train_y, data.train_point, data.train_instance)
-    return rec.fit(F[rows], y[rows], groups[rows]), rows
+    return rec.fit_each([(F[rows], y[rows], groups[rows]) for rows in row_sets]), row_sets
 
 
-def _calibration(data: InstanceData, F, rec: Recognizer, n_classes: int):
-    """Fit on all training instances but one, score the held-out one, for each; fit (eps, T)."""
+def _calibration(data: InstanceData, F, models, row_sets, n_classes: int):
+    """(eps, T) fitted on each training instance's posteriors under the model of all the others.
+
+    ``models`` and ``row_sets`` are those models and their training rows, in
+    the order of the training instances.
+    """
     proba, truth = [], []
-    for held in np.unique(data.train_instance):
-        rest = np.flatnonzero(data.train_instance != held)
-        out = np.flatnonzero(data.train_instance == held)
-        model, rows = _fit_selected(data, F, rest, rec)
+    for held, model, rows in zip(np.unique(data.train_instance), models, row_sets):
         if len(np.unique(data.train_y[rows])) < 2:
             continue
+        out = np.flatnonzero(data.train_instance == held)
         proba.append(touches.posteriors(model, F[out], n_classes))
         truth.append(data.train_y[out])
     if not proba:
@@ -273,8 +278,11 @@ def instance_job(job: InstanceJob) -> InstanceOutcome:
     n_classes = len(data.test)
     with threadpool_limits(1):
         F = describe(data.train_X, rec.features)
-        cal = _calibration(data, F, rec, n_classes)
-        model, rows = _fit_selected(data, F, np.arange(len(data.train_y)), rec)
+        # The calibration's models (each training instance held out in turn) and the final one, fitted together.
+        row_sets = [np.flatnonzero(data.train_instance != held) for held in np.unique(data.train_instance)]
+        models, row_sets = _fit_selected(data, F, [*row_sets, np.arange(len(data.train_y))], rec)
+        cal = _calibration(data, F, models[:-1], row_sets[:-1], n_classes)
+        model, rows = models[-1], row_sets[-1]
         proba = [
             calibrate(touches.posteriors(model, describe(t, rec.features), n_classes), cal)
             if len(t)

@@ -40,11 +40,11 @@ import numbers
 from dataclasses import dataclass
 
 import numpy as np
-from sklearn.base import BaseEstimator, ClassifierMixin
+from sklearn.base import BaseEstimator, ClassifierMixin, clone
 from sklearn.metrics.pairwise import rbf_kernel
 from sklearn.utils.validation import check_is_fitted
 
-__all__ = ["EvolutionarySVM", "Strategy", "solve_dual", "as_matrix"]
+__all__ = ["EvolutionarySVM", "Strategy", "solve_dual", "solve_duals", "as_matrix"]
 
 
 def as_matrix(X, name="X"):
@@ -97,51 +97,197 @@ class Strategy:
     seed: object = 0
 
 
-# Generations whose draws are made and prepared together (fewer when the run stops first).
+# Generations whose draws are made and prepared together (fewer when every run stops first).
 _BLOCK = 50
 
 
 class _Block:
     """The random draws of up to ``count`` generations and everything that depends on them alone.
 
-    The draws are made generation by generation, in the order a one-generation
-    loop would make them, so the run is the same whatever the block size.
-    Arrays have a leading generation axis; ``coords`` (g, p, lam, m) are the
-    coefficients each offspring moves, i then j of each pair; ``sign`` is
-    ``-y_i y_j``, ``up`` where it is positive, ``frozen`` the moves that must
-    not happen (i == j, or pairs sharing a coefficient); ``Q`` (g, p, lam, m,
-    m) the entries ``y_a y_b K_ab`` of the moved coefficients; ``spread`` the
-    log-normal factor of the step size, ``step`` the unit steps.  Multiplying
-    by the labels (+-1) is exact, so ``Q`` gives the bits of multiplying by
-    them one at a time.
+    Rows are the binary problems of all runs: run r owns rows ``rows[r]``.
+    Each run draws from its own generator, generation by generation, in the
+    order a one-generation loop of that run alone would, so a run is the same
+    whatever the block size and whatever runs share its block.  The rows of
+    a run that has stopped, and rows padding a run with fewer problems, get
+    zero draws: they move nothing.  Arrays have a leading generation axis:
+    ``coords`` (g, R, lam, m) are the coefficients each offspring moves, i
+    then j of each pair; ``sign`` is ``-y_i y_j``, ``up`` where it is
+    positive, ``frozen`` the moves that must not happen (i == j, or pairs
+    sharing a coefficient); ``Q`` (g, R, lam, m, m) the entries
+    ``y_a y_b K_ab`` of the moved coefficients; ``spread`` the log-normal
+    factor of the step size, ``step`` the unit steps.  Multiplying by the
+    labels (+-1) is exact, so ``Q`` gives the bits of multiplying by them one
+    at a time.
     """
 
-    def __init__(self, rng, K, Y, mu, lam, pairs, count):
-        p, n = Y.shape
+    def __init__(self, rngs, running, rows, sizes, K, Y, run_of_row, mu, lam, pairs, count):
+        R, n = Y.shape
         m = 2 * pairs
-        draws = [
-            (
-                rng.integers(0, mu, size=(p, lam)),
-                rng.standard_normal((p, lam)),
-                rng.integers(0, n, size=(p, lam, m)),
-                rng.standard_normal((p, lam, pairs)),
-            )
-            for _ in range(count)
-        ]
-        self.parent, normal, idx, self.step = (np.stack(d) for d in zip(*draws))
+        self.parent = np.zeros((count, R, lam), np.int64)
+        normal = np.zeros((count, R, lam))
+        idx = np.zeros((count, R, lam, m), np.int64)
+        self.step = np.zeros((count, R, lam, pairs))
+        for r in running:
+            rng, q = rngs[r], rows[r].stop - rows[r].start
+            draws = [
+                (
+                    rng.integers(0, mu, size=(q, lam)),
+                    rng.standard_normal((q, lam)),
+                    rng.integers(0, sizes[r], size=(q, lam, m)),
+                    rng.standard_normal((q, lam, pairs)),
+                )
+                for _ in range(count)
+            ]
+            for out, drawn in zip((self.parent, normal, idx, self.step), zip(*draws)):
+                out[:, rows[r]] = drawn
         self.spread = np.exp(1.0 / np.sqrt(2.0 * pairs) * normal)
         self.coords = idx[..., np.r_[0:m:2, 1:m:2]]  # draws (i, j, i, j...) reordered to (i..., j...)
-        self.parent_flat = np.arange(p)[:, None] * mu + self.parent
-        self.offsets = self.parent_flat[..., None] * n + self.coords  # into the (p, mu, n) population
-        self.yc = Y.ravel()[(np.arange(p) * n)[:, None, None] + self.coords]
+        self.parent_flat = np.arange(R)[:, None] * mu + self.parent
+        self.offsets = self.parent_flat[..., None] * n + self.coords  # into the (R, mu, n) population
+        self.yc = Y.ravel()[(np.arange(R) * n)[:, None, None] + self.coords]
         self.sign = -self.yc[..., :pairs] * self.yc[..., pairs:]
         self.up = self.sign > 0
         self.frozen = self.coords[..., :pairs] == self.coords[..., pairs:]
         if pairs > 1:
-            srt = np.sort(idx, axis=-1)
-            self.frozen |= (np.diff(srt, axis=-1) == 0).any(axis=-1)[..., None]
-        Ksub = K.ravel()[self.coords[..., :, None] * n + self.coords[..., None, :]]
-        self.Q = self.yc[..., :, None] * Ksub * self.yc[..., None, :]
+            clash = np.zeros(idx.shape[:-1], bool)
+            for a in range(m):
+                for b in range(a + 1, m):
+                    clash |= idx[..., a] == idx[..., b]
+            self.frozen |= clash[..., None]
+        # Row i of each row's run's (n, n) kernel in K, then its entries; signed in place (no new arrays).
+        starts = (run_of_row * n * n)[:, None, None] + self.coords * n
+        self.Q = K.ravel()[starts[..., :, None] + self.coords[..., None, :]]
+        np.multiply(self.Q, self.yc[..., :, None], out=self.Q)
+        np.multiply(self.Q, self.yc[..., None, :], out=self.Q)
+
+
+def solve_duals(problems, C=1.0, strategy: Strategy | None = None, **changes):
+    """:func:`solve_dual` on several kernel matrices at once: what each returns alone, bit for bit.
+
+    The runs (e.g. the training folds of a cross-validation) share one
+    generation loop, so its cost, which on the experiment's sizes is that of
+    calling NumPy rather than of arithmetic, is paid once for all of them;
+    each run keeps its own random generator, its own stopping and its own
+    result.
+
+    Parameters
+    ----------
+    problems : sequence of (K, Y)
+        Each run's (n_r, n_r) kernel matrix and its (p_r, n_r) labels, as
+        :func:`solve_dual` takes them; sizes may differ.
+    C, strategy, **changes
+        As in :func:`solve_dual`, the same for every run.
+
+    Returns
+    -------
+    list of (alpha, fitness, generations), one per run, as :func:`solve_dual` returns them.
+
+    Examples
+    --------
+    >>> K = np.exp(-np.subtract.outer(np.arange(4.0), np.arange(4.0)) ** 2)
+    >>> Y = np.array([[1.0, 1.0, -1.0, -1.0]])
+    >>> both = solve_duals([(K, Y), (K[:3, :3], Y[:, [0, 2, 3]])], C=10.0)
+    >>> bool(np.array_equal(both[0][0], solve_dual(K, Y, C=10.0)[0]))
+    True
+    """
+    es = dataclasses.replace(strategy or Strategy(), **changes)
+    mu, lam, pairs, sigma0 = es.mu, es.lam, es.pairs, es.sigma0
+    Ks = [np.asarray(K, dtype=np.float64) for K, _ in problems]
+    Ys = [np.atleast_2d(np.asarray(Y, dtype=np.float64)) for _, Y in problems]
+    runs = len(Ys)
+    if runs == 0:
+        return []
+    sizes = [Y.shape[1] for Y in Ys]
+    p, n = max(Y.shape[0] for Y in Ys), max(sizes)
+    R = runs * p
+    # Run r owns rows r * p .. r * p + p_r; the rest pad it and never move.
+    rows = [slice(r * p, r * p + Y.shape[0]) for r, Y in enumerate(Ys)]
+    run_of_row = np.repeat(np.arange(runs), p)
+    K = np.zeros((runs, n, n))
+    Y = np.zeros((R, n))
+    for r in range(runs):
+        K[r, : sizes[r], : sizes[r]] = Ks[r]
+        Y[rows[r], : sizes[r]] = Ys[r]
+    KT = np.ascontiguousarray(K.transpose(0, 2, 1)).reshape(runs * n, n)
+    rngs = [np.random.default_rng(es.seed) for _ in range(runs)]
+
+    A = np.zeros((R, mu, n))  # parents' coefficients, all start at a = 0
+    G = np.ones((R, mu, n))  # gradient 1 - Q a (Q a = y * (K @ (a * y)))
+    F = np.zeros((R, mu))  # fitness W(a)
+    S = np.full((R, mu), float(sigma0))  # self-adapted step sizes
+    # Offsets of each row in flattened (R, x) arrays.
+    rows_col = np.arange(R)[:, None]
+    row_parents, row_offspring, row_candidates = rows_col * mu, rows_col * lam, rows_col * (mu + lam)
+    results = [None] * runs
+    stall = np.zeros(runs, np.int64)
+    running = list(range(runs))
+    generation = 0
+    # The loop runs hundreds of generations on small arrays, where each NumPy call costs more than its
+    # arithmetic: everything that depends on the random draws alone is computed for a block of generations
+    # at once, and the loop keeps only what depends on the population.
+    while running and generation < es.max_generations:
+        count = min(_BLOCK, es.max_generations - generation)
+        block = _Block(rngs, running, rows, sizes, K, Y, run_of_row, mu, lam, pairs, count)
+        for t in range(count):
+            generation += 1
+            parent, coords, yc = block.parent[t], block.coords[t], block.yc[t]
+            sigma = np.minimum(np.maximum(S.ravel()[block.parent_flat[t]] * block.spread[t], 1e-6), 1.0)
+            step = sigma[..., None] * C * block.step[t]
+            # Repair: moving a_i by t moves a_j by -y_i y_j t; clip t to keep both in [0, C].
+            ac = A.ravel()[block.offsets[t]]
+            ai, aj = ac[..., :pairs], ac[..., pairs:]
+            up = block.up[t]
+            lo_j = np.where(up, -aj, aj - C)
+            hi_j = np.where(up, C - aj, aj)
+            step = np.minimum(np.maximum(step, np.maximum(-ai, lo_j)), np.minimum(C - ai, hi_j))
+            step = np.where(block.frozen[t], 0.0, step)
+            delta = np.concatenate([step, block.sign[t] * step], axis=2)  # moves of coefficients (i..., j...)
+            g = G.ravel()[block.offsets[t]]
+            # W(a + d) - W(a) = g.d - 1/2 d^T Q d over the few touched coordinates.
+            qd = np.einsum("plab,plb->pla", block.Q[t], delta)
+            # np.add.reduce is ndarray.sum without its Python layer.
+            gain = np.add.reduce(g * delta, axis=2) - 0.5 * np.add.reduce(delta * qd, axis=2)
+            cand_F = np.concatenate([F, F.ravel()[block.parent_flat[t]] + gain], axis=1)
+            best = np.argsort(-cand_F, axis=1, kind="stable")[:, :mu]
+            kept = cand_F.ravel()[best + row_candidates]
+            # Rows of F are sorted, best first.  Rows that do not move never improve.
+            improved = (kept[:, 0] > F[:, 0] + 1e-12).reshape(runs, p).any(axis=1)
+            from_child = best >= mu
+            child = np.where(from_child, best - mu, 0) + row_offspring
+            src = np.where(from_child, parent.ravel()[child], best) + row_parents
+            newA = A.reshape(R * mu, n)[src]
+            newG = G.reshape(R * mu, n)[src]
+            newS = np.where(from_child, sigma.ravel()[child], S.ravel()[np.minimum(best, mu - 1) + row_parents])
+            pp, mm = np.nonzero(from_child)
+            if len(pp):
+                cc = child[pp, mm]  # flat (R * lam) offspring
+                cidx = coords.reshape(R * lam, -1)[cc]  # (q, m)
+                cdel = delta.reshape(R * lam, -1)[cc]
+                at = ((pp * mu + mm) * n)[:, None] + cidx
+                # Only the moved coefficients can leave the box.
+                newA.ravel()[at] = np.minimum(np.maximum(newA.ravel()[at] + cdel, 0.0), C)
+                # G -= Q[:, c] * d_c  with Q[:, c] = y * y_c * K[:, c]
+                w = yc.reshape(R * lam, -1)[cc] * cdel
+                kcols = KT[(run_of_row[pp] * n)[:, None] + cidx]  # (q, m, n): the columns K[:, c] of each run
+                newG.reshape(R * mu, n)[pp * mu + mm] -= Y[pp] * np.einsum("qmn,qm->qn", kcols, w)
+            A, G, S = newA, newG, newS
+            F = kept
+            stall = np.where(improved, 0, stall + 1)
+            for r in [r for r in running if stall[r] >= es.patience]:
+                results[r] = _best_of(A[rows[r]], F[rows[r]], sizes[r], generation)
+                running.remove(r)
+            if not running:
+                break
+    for r in running:  # the generation cap
+        results[r] = _best_of(A[rows[r]], F[rows[r]], sizes[r], generation)
+    return results
+
+
+def _best_of(A, F, n, generation):
+    """A run's result from its population: each problem's fittest parent, cut to the run's size."""
+    top = np.argmax(F, axis=1)
+    rows = np.arange(len(F))
+    return A[rows, top, :n].copy(), F[rows, top].copy(), generation
 
 
 def solve_dual(K, Y, C=1.0, strategy: Strategy | None = None, **changes):
@@ -176,75 +322,7 @@ def solve_dual(K, Y, C=1.0, strategy: Strategy | None = None, **changes):
     >>> bool(abs(a[0] @ [1, 1, -1, -1]) < 1e-9 and w[0] > 0)
     True
     """
-    es = dataclasses.replace(strategy or Strategy(), **changes)
-    mu, lam, pairs, sigma0 = es.mu, es.lam, es.pairs, es.sigma0
-    K = np.asarray(K, dtype=np.float64)
-    Y = np.atleast_2d(np.asarray(Y, dtype=np.float64))
-    p, n = Y.shape
-    rng = np.random.default_rng(es.seed)
-
-    A = np.zeros((p, mu, n))  # parents' coefficients, all start at a = 0
-    G = np.ones((p, mu, n))  # gradient 1 - Q a (Q a = y * (K @ (a * y)))
-    F = np.zeros((p, mu))  # fitness W(a)
-    S = np.full((p, mu), float(sigma0))  # self-adapted step sizes
-    rows = np.arange(p)[:, None]
-    # Offsets of each problem's row in flattened (p, x) arrays.
-    row_parents, row_offspring, row_candidates = rows * mu, rows * lam, rows * (mu + lam)
-    KT = np.ascontiguousarray(K.T)
-    generation, stall = 0, 0
-    # The loop runs hundreds of generations on small arrays, where each NumPy call costs more than its
-    # arithmetic: everything that depends on the random draws alone is computed for a block of generations
-    # at once, and the loop keeps only what depends on the population.
-    while generation < es.max_generations and stall < es.patience:
-        block = _Block(rng, K, Y, mu, lam, pairs, min(_BLOCK, es.max_generations - generation))
-        for t in range(len(block.parent)):
-            generation += 1
-            parent, coords, yc = block.parent[t], block.coords[t], block.yc[t]
-            sigma = np.minimum(np.maximum(S.ravel()[block.parent_flat[t]] * block.spread[t], 1e-6), 1.0)
-            step = sigma[..., None] * C * block.step[t]
-            # Repair: moving a_i by t moves a_j by -y_i y_j t; clip t to keep both in [0, C].
-            ac = A.ravel()[block.offsets[t]]
-            ai, aj = ac[..., :pairs], ac[..., pairs:]
-            up = block.up[t]
-            lo_j = np.where(up, -aj, aj - C)
-            hi_j = np.where(up, C - aj, aj)
-            step = np.minimum(np.maximum(step, np.maximum(-ai, lo_j)), np.minimum(C - ai, hi_j))
-            step = np.where(block.frozen[t], 0.0, step)
-            delta = np.concatenate([step, block.sign[t] * step], axis=2)  # moves of coefficients (i..., j...)
-            g = G.ravel()[block.offsets[t]]
-            # W(a + d) - W(a) = g.d - 1/2 d^T Q d over the few touched coordinates.
-            qd = np.einsum("plab,plb->pla", block.Q[t], delta)
-            # np.add.reduce is ndarray.sum without its Python layer.
-            gain = np.add.reduce(g * delta, axis=2) - 0.5 * np.add.reduce(delta * qd, axis=2)
-            cand_F = np.concatenate([F, F.ravel()[block.parent_flat[t]] + gain], axis=1)
-            best = np.argsort(-cand_F, axis=1, kind="stable")[:, :mu]
-            kept = cand_F.ravel()[best + row_candidates]
-            # Rows of F are sorted, best first.
-            improved = (kept[:, 0] > F[:, 0] + 1e-12).any()
-            from_child = best >= mu
-            child = np.where(from_child, best - mu, 0) + row_offspring
-            src = np.where(from_child, parent.ravel()[child], best) + row_parents
-            newA = A.reshape(p * mu, n)[src]
-            newG = G.reshape(p * mu, n)[src]
-            newS = np.where(from_child, sigma.ravel()[child], S.ravel()[np.minimum(best, mu - 1) + row_parents])
-            pp, mm = np.nonzero(from_child)
-            if len(pp):
-                cc = child[pp, mm]  # flat (p * lam) offspring
-                cidx = coords.reshape(p * lam, -1)[cc]  # (q, m)
-                cdel = delta.reshape(p * lam, -1)[cc]
-                at = ((pp * mu + mm) * n)[:, None] + cidx
-                # Only the moved coefficients can leave the box.
-                newA.ravel()[at] = np.minimum(np.maximum(newA.ravel()[at] + cdel, 0.0), C)
-                # G -= Q[:, c] * d_c  with Q[:, c] = y * y_c * K[:, c]
-                w = yc.reshape(p * lam, -1)[cc] * cdel
-                newG.reshape(p * mu, n)[pp * mu + mm] -= Y[pp] * np.einsum("qmn,qm->qn", KT[cidx], w)
-            A, G, S = newA, newG, newS
-            F = kept
-            stall = 0 if improved else stall + 1
-            if stall >= es.patience:
-                break
-    top = np.argmax(F, axis=1)
-    return A[np.arange(p), top], F[np.arange(p), top], generation
+    return solve_duals([(K, Y)], C, strategy, **changes)[0]
 
 
 class EvolutionarySVM(ClassifierMixin, BaseEstimator):
@@ -317,6 +395,37 @@ class EvolutionarySVM(ClassifierMixin, BaseEstimator):
     def fit(self, X, y):
         """Fit one dual per one-vs-rest problem; X is (N, d) or (N, rows, cols)."""
         self._check_params()
+        X, K, Y = self._problem(X, y)
+        return self._adopt(X, K, Y, solve_dual(K, Y, float(self.C), self._strategy()))
+
+    def fit_each(self, sets):
+        """Clones of this estimator fitted on each ``(X, y)`` of ``sets``, their duals solved together.
+
+        Each model is the one ``clone(self).fit(X, y)`` gives, bit for bit
+        (:func:`solve_duals`), in a fraction of the time when the sets are
+        the folds of a cross-validation.
+
+        Examples
+        --------
+        >>> X = np.array([[0.0], [0.2], [3.0], [3.2], [0.1], [3.1]])
+        >>> y = np.array([0, 0, 1, 1, 0, 1])
+        >>> a, b = EvolutionarySVM(C=10.0).fit_each([(X[:4], y[:4]), (X[2:], y[2:])])
+        >>> bool(np.array_equal(b.dual_coef_, EvolutionarySVM(C=10.0).fit(X[2:], y[2:]).dual_coef_))
+        True
+        """
+        self._check_params()
+        models = [clone(self) for _ in sets]
+        problems = [m._problem(X, y) for m, (X, y) in zip(models, sets)]
+        solutions = solve_duals([(K, Y) for _, K, Y in problems], float(self.C), self._strategy())
+        return [m._adopt(*problem, solution) for m, problem, solution in zip(models, problems, solutions)]
+
+    def _strategy(self) -> Strategy:
+        return Strategy(
+            self.mu, self.lam, self.pairs, self.max_generations, self.patience, self.sigma0, self.random_state
+        )
+
+    def _problem(self, X, y):
+        """Checked ``X``, its kernel matrix and the one-vs-rest labels; sets ``classes_``."""
         X = as_matrix(X)
         y = np.asarray(y)
         if y.shape != (len(X),):
@@ -334,14 +443,11 @@ class EvolutionarySVM(ClassifierMixin, BaseEstimator):
             Y = np.where(codes == 1, 1.0, -1.0)[None]
         else:
             Y = np.where(codes[None, :] == np.arange(len(self.classes_))[:, None], 1.0, -1.0)
-        alpha, self.fitness_, self.n_generations_ = solve_dual(
-            K,
-            Y,
-            float(self.C),
-            Strategy(
-                self.mu, self.lam, self.pairs, self.max_generations, self.patience, self.sigma0, self.random_state
-            ),
-        )
+        return X, K, Y
+
+    def _adopt(self, X, K, Y, solution):
+        """Take the duals' solution: support vectors, coefficients and biases."""
+        alpha, self.fitness_, self.n_generations_ = solution
         self.intercept_ = np.array([_bias(K, a, yy, float(self.C)) for a, yy in zip(alpha, Y)])
         used = (alpha > 0).any(axis=0)
         self.support_ = np.flatnonzero(used)

@@ -63,3 +63,11 @@ class Recognizer:
 
     def fit(self, X, y, groups):
         return fit(self.classifier, self.params or {}, X, y, groups)
+
+    def fit_each(self, sets) -> list:
+        """:meth:`fit` on each ``(X, y, groups)`` of ``sets``: the same models, fitted together where the
+        classifier can (the evolutionary SVM solves the duals of all sets in one loop)."""
+        model = make(self.classifier, **(self.params or {}).get(self.classifier, {}))
+        if hasattr(model, "fit_each"):
+            return model.fit_each([(X, y) for X, y, _ in sets])
+        return [self.fit(X, y, groups) for X, y, groups in sets]
