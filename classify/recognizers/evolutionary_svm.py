@@ -98,7 +98,7 @@ class Strategy:
 
 
 # Generations whose draws are made and prepared together (fewer when every run stops first).
-_BLOCK = 50
+_BLOCK = 25
 
 
 class _Block:
