@@ -23,7 +23,10 @@ The strategy here is a (mu + lambda)-ES:
 * fitness is exact and cheap: every parent keeps the gradient ``1 - Q a``, so
   an offspring's W follows from a few kernel entries instead of a full
   quadratic form, and the whole population of every one-vs-rest problem is
-  evaluated in one vectorised step over a single shared kernel matrix;
+  evaluated in one vectorised step over a single shared kernel matrix
+  (:func:`solve_duals` does the same for several training sets, e.g. the
+  folds of a cross-validation, each with its own kernel matrix, generator
+  and stopping, and gets for each what it gets alone, bit for bit);
 * plus-selection keeps the best ``mu`` of parents and offspring, so W never
   decreases; the run stops after ``max_generations`` or when no offspring has
   improved any parent for ``patience`` generations.
