@@ -112,9 +112,11 @@ class DeepNet(_Flatten, MLPClassifier):
         classes = np.unique(y)
         self.set_params(early_stopping=False, batch_size=int(min(self.batch_size, len(train))))
         best, best_score, stale = None, -np.inf, 0
+        X_train, y_train, X_val, y_val = X[train], y[train], X[val], y[val]
         for epoch in range(self.max_iter):
-            MLPClassifier.partial_fit(self, X[train], y[train], classes=classes)
-            score = float(np.mean(MLPClassifier.predict(self, X[val]) == y[val]))
+            # The classes are needed on the first call only; checking them again on every epoch took its time.
+            MLPClassifier.partial_fit(self, X_train, y_train, classes=None if epoch else classes)
+            score = float(np.mean(MLPClassifier.predict(self, X_val) == y_val))
             if score > best_score + self.tol:
                 best = ([c.copy() for c in self.coefs_], [b.copy() for b in self.intercepts_], epoch + 1)
                 best_score, stale = score, 0
