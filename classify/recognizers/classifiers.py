@@ -114,7 +114,7 @@ class DeepNet(_Flatten, MLPClassifier):
         best, best_score, stale = None, -np.inf, 0
         X_train, y_train, X_val, y_val = X[train], y[train], X[val], y[val]
         for epoch in range(self.max_iter):
-            # The classes are needed on the first call only; checking them again on every epoch took its time.
+            # partial_fit needs the classes on its first call only; given again, it checks them (unique_labels) each epoch.
             MLPClassifier.partial_fit(self, X_train, y_train, classes=None if epoch else classes)
             score = float(np.mean(MLPClassifier.predict(self, X_val) == y_val))
             if score > best_score + self.tol:

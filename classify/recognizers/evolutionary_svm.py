@@ -39,6 +39,7 @@ there are none, as in LIBSVM.
 from __future__ import annotations
 
 import dataclasses
+import itertools
 import numbers
 from dataclasses import dataclass
 
@@ -104,10 +105,44 @@ class Strategy:
 _BLOCK = 25
 
 
+@dataclass(frozen=True, eq=False)
+class _Runs:
+    """Several runs' problems as rows of one padded layout.
+
+    ``K`` (runs, n, n) the kernel matrices and ``KT`` their transposes as
+    (runs * n, n) rows, zero-padded to the largest ``n``; ``Y`` (runs * p, n)
+    the labels, run r owning rows ``rows[r]`` (its ``p_r`` problems; the rest
+    of its ``p`` rows are zeros and never move); ``sizes`` each run's ``n_r``;
+    ``run_of_row`` (runs * p,) the run of each row.
+    """
+
+    K: np.ndarray
+    KT: np.ndarray
+    Y: np.ndarray
+    rows: list
+    sizes: list
+    run_of_row: np.ndarray
+
+    @classmethod
+    def of(cls, problems) -> _Runs:
+        Ks = [np.asarray(K, dtype=np.float64) for K, _ in problems]
+        Ys = [np.atleast_2d(np.asarray(Y, dtype=np.float64)) for _, Y in problems]
+        sizes = [Y.shape[1] for Y in Ys]
+        runs, p, n = len(Ys), max(Y.shape[0] for Y in Ys), max(sizes)
+        rows = [slice(r * p, r * p + Y.shape[0]) for r, Y in enumerate(Ys)]
+        K = np.zeros((runs, n, n))
+        Y = np.zeros((runs * p, n))
+        for r in range(runs):
+            K[r, : sizes[r], : sizes[r]] = Ks[r]
+            Y[rows[r], : sizes[r]] = Ys[r]
+        KT = np.ascontiguousarray(K.transpose(0, 2, 1)).reshape(runs * n, n)
+        return cls(K, KT, Y, rows, sizes, np.repeat(np.arange(runs), p))
+
+
 class _Block:
     """The random draws of up to ``count`` generations and everything that depends on them alone.
 
-    Rows are the binary problems of all runs: run r owns rows ``rows[r]``.
+    Rows are the binary problems of all runs (:class:`_Runs`).
     Each run draws from its own generator, generation by generation, in the
     order a one-generation loop of that run alone would, so a run is the same
     whatever the block size and whatever runs share its block.  The rows of
@@ -123,43 +158,43 @@ class _Block:
     at a time.
     """
 
-    def __init__(self, rngs, running, rows, sizes, K, Y, run_of_row, mu, lam, pairs, count):
-        R, n = Y.shape
+    def __init__(self, rngs, running, runs: _Runs, mu, lam, pairs, count):
+        R, n = runs.Y.shape
         m = 2 * pairs
         self.parent = np.zeros((count, R, lam), np.int64)
         normal = np.zeros((count, R, lam))
         idx = np.zeros((count, R, lam, m), np.int64)
         self.step = np.zeros((count, R, lam, pairs))
         for r in running:
-            rng, q = rngs[r], rows[r].stop - rows[r].start
+            rng, own = rngs[r], runs.rows[r]
+            q = own.stop - own.start
             draws = [
                 (
                     rng.integers(0, mu, size=(q, lam)),
                     rng.standard_normal((q, lam)),
-                    rng.integers(0, sizes[r], size=(q, lam, m)),
+                    rng.integers(0, runs.sizes[r], size=(q, lam, m)),
                     rng.standard_normal((q, lam, pairs)),
                 )
                 for _ in range(count)
             ]
             for out, drawn in zip((self.parent, normal, idx, self.step), zip(*draws)):
-                out[:, rows[r]] = drawn
+                out[:, own] = drawn
         self.spread = np.exp(1.0 / np.sqrt(2.0 * pairs) * normal)
         self.coords = idx[..., np.r_[0:m:2, 1:m:2]]  # draws (i, j, i, j...) reordered to (i..., j...)
         self.parent_flat = np.arange(R)[:, None] * mu + self.parent
         self.offsets = self.parent_flat[..., None] * n + self.coords  # into the (R, mu, n) population
-        self.yc = Y.ravel()[(np.arange(R) * n)[:, None, None] + self.coords]
+        self.yc = runs.Y.ravel()[(np.arange(R) * n)[:, None, None] + self.coords]
         self.sign = -self.yc[..., :pairs] * self.yc[..., pairs:]
         self.up = self.sign > 0
         self.frozen = self.coords[..., :pairs] == self.coords[..., pairs:]
         if pairs > 1:
             clash = np.zeros(idx.shape[:-1], bool)
-            for a in range(m):
-                for b in range(a + 1, m):
-                    clash |= idx[..., a] == idx[..., b]
+            for a, b in itertools.combinations(range(m), 2):
+                clash |= idx[..., a] == idx[..., b]
             self.frozen |= clash[..., None]
         # Row i of each row's run's (n, n) kernel in K, then its entries; signed in place (no new arrays).
-        starts = (run_of_row * n * n)[:, None, None] + self.coords * n
-        self.Q = K.ravel()[starts[..., :, None] + self.coords[..., None, :]]
+        starts = (runs.run_of_row * n * n)[:, None, None] + self.coords * n
+        self.Q = runs.K.ravel()[starts[..., :, None] + self.coords[..., None, :]]
         np.multiply(self.Q, self.yc[..., :, None], out=self.Q)
         np.multiply(self.Q, self.yc[..., None, :], out=self.Q)
 
@@ -195,23 +230,11 @@ def solve_duals(problems, C=1.0, strategy: Strategy | None = None, **changes):
     """
     es = dataclasses.replace(strategy or Strategy(), **changes)
     mu, lam, pairs, sigma0 = es.mu, es.lam, es.pairs, es.sigma0
-    Ks = [np.asarray(K, dtype=np.float64) for K, _ in problems]
-    Ys = [np.atleast_2d(np.asarray(Y, dtype=np.float64)) for _, Y in problems]
-    runs = len(Ys)
-    if runs == 0:
+    if not problems:
         return []
-    sizes = [Y.shape[1] for Y in Ys]
-    p, n = max(Y.shape[0] for Y in Ys), max(sizes)
-    R = runs * p
-    # Run r owns rows r * p .. r * p + p_r; the rest pad it and never move.
-    rows = [slice(r * p, r * p + Y.shape[0]) for r, Y in enumerate(Ys)]
-    run_of_row = np.repeat(np.arange(runs), p)
-    K = np.zeros((runs, n, n))
-    Y = np.zeros((R, n))
-    for r in range(runs):
-        K[r, : sizes[r], : sizes[r]] = Ks[r]
-        Y[rows[r], : sizes[r]] = Ys[r]
-    KT = np.ascontiguousarray(K.transpose(0, 2, 1)).reshape(runs * n, n)
+    layout = _Runs.of(problems)
+    runs, (R, n) = len(problems), layout.Y.shape
+    Y, rows, sizes = layout.Y, layout.rows, layout.sizes
     rngs = [np.random.default_rng(es.seed) for _ in range(runs)]
 
     A = np.zeros((R, mu, n))  # parents' coefficients, all start at a = 0
@@ -230,7 +253,7 @@ def solve_duals(problems, C=1.0, strategy: Strategy | None = None, **changes):
     # at once, and the loop keeps only what depends on the population.
     while running and generation < es.max_generations:
         count = min(_BLOCK, es.max_generations - generation)
-        block = _Block(rngs, running, rows, sizes, K, Y, run_of_row, mu, lam, pairs, count)
+        block = _Block(rngs, running, layout, mu, lam, pairs, count)
         for t in range(count):
             generation += 1
             parent, coords, yc = block.parent[t], block.coords[t], block.yc[t]
@@ -254,7 +277,7 @@ def solve_duals(problems, C=1.0, strategy: Strategy | None = None, **changes):
             best = np.argsort(-cand_F, axis=1, kind="stable")[:, :mu]
             kept = cand_F.ravel()[best + row_candidates]
             # Rows of F are sorted, best first.  Rows that do not move never improve.
-            improved = (kept[:, 0] > F[:, 0] + 1e-12).reshape(runs, p).any(axis=1)
+            improved = (kept[:, 0] > F[:, 0] + 1e-12).reshape(runs, -1).any(axis=1)
             from_child = best >= mu
             child = np.where(from_child, best - mu, 0) + row_offspring
             src = np.where(from_child, parent.ravel()[child], best) + row_parents
@@ -271,7 +294,7 @@ def solve_duals(problems, C=1.0, strategy: Strategy | None = None, **changes):
                 newA.ravel()[at] = np.minimum(np.maximum(newA.ravel()[at] + cdel, 0.0), C)
                 # G -= Q[:, c] * d_c  with Q[:, c] = y * y_c * K[:, c]
                 w = yc.reshape(R * lam, -1)[cc] * cdel
-                kcols = KT[(run_of_row[pp] * n)[:, None] + cidx]  # (q, m, n): the columns K[:, c] of each run
+                kcols = layout.KT[(layout.run_of_row[pp] * n)[:, None] + cidx]  # (q, m, n): each run's K[:, c]
                 newG.reshape(R * mu, n)[pp * mu + mm] -= Y[pp] * np.einsum("qmn,qm->qn", kcols, w)
             A, G, S = newA, newG, newS
             F = kept
@@ -290,7 +313,7 @@ def _best_of(A, F, n, generation):
     """A run's result from its population: each problem's fittest parent, cut to the run's size."""
     top = np.argmax(F, axis=1)
     rows = np.arange(len(F))
-    return A[rows, top, :n].copy(), F[rows, top].copy(), generation
+    return A[rows, top, :n], F[rows, top], generation  # fancy indexing copies
 
 
 def solve_dual(K, Y, C=1.0, strategy: Strategy | None = None, **changes):
