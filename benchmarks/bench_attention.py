@@ -2,9 +2,11 @@
 
 Prints Markdown tables: time per channel for all 72 views at 256 x 256 of
 the textured cow and of the hand toy at 150 mm (concave, painted per
-vertex), views in a thread pool; the full ``saliency_views`` (all channels
-+ combination), also with OpenCV's own threads off (``cv2.setNumThreads(1)``:
-does OpenCV's pool fight the views' pool?) and on one thread; and mesh
+vertex), stacks of views in a thread pool as ``saliency_views`` takes them;
+the full ``saliency_views`` (all channels + combination), beside it with one
+view per stack (the per-view calls on small maps it replaces), with
+OpenCV's own threads off (``cv2.setNumThreads(1)``: does OpenCV's pool
+fight the views' pool?) and on one thread; and mesh
 saliency on nefertiti (a relief), on a subdivided nefertiti of about 200k
 vertices and on the hand refined to 124k faces.  Times are medians of
 ``--repeats`` runs, wall and process CPU time (all threads); the machine
@@ -33,7 +35,8 @@ from benchlib import DEFAULT_MESHES, hand_124k, hand_150mm, machine
 
 import meshsal
 from meshsal import attention
-from meshsal.attention.combine import channel_function
+from meshsal.attention import combine
+from meshsal.attention.combine import image_channels_stack
 from meshsal.mesh.curvature import mesh_saliency
 from meshsal.views import cameras as cameras_mod
 from meshsal.views import render
@@ -55,11 +58,35 @@ def median_time(fn, repeats: int) -> tuple[float, float]:
     return statistics.median(walls), statistics.median(cpus)
 
 
+def median_times_alternating(fns, repeats: int) -> list[tuple[float, float]]:
+    """:func:`median_time` of several functions run in turn, so a drift of the machine's speed hits them alike."""
+    walls, cpus = [[] for _ in fns], [[] for _ in fns]
+    for _ in range(repeats):
+        for k, fn in enumerate(fns):
+            start, cpu = time.perf_counter(), time.process_time()
+            fn()
+            walls[k].append(time.perf_counter() - start)
+            cpus[k].append(time.process_time() - cpu)
+    return [(statistics.median(w), statistics.median(c)) for w, c in zip(walls, cpus)]
+
+
 def channel_over_views(name, views, vertex_saliency, pool):
     if name == "curvature":
         return list(pool.map(lambda v: attention.curvature(v, vertex_saliency), views))
-    fn = channel_function(name)
-    return list(pool.map(lambda v: fn(v.rgb), views))
+    stacks = [views[k : k + combine._VIEWS_PER_STACK] for k in range(0, len(views), combine._VIEWS_PER_STACK)]
+    return list(pool.map(lambda stack: image_channels_stack([v.rgb for v in stack], [name]), stacks))
+
+
+def one_view_per_stack(fn):
+    def run():
+        per_stack = combine._VIEWS_PER_STACK
+        combine._VIEWS_PER_STACK = 1
+        try:
+            return fn()
+        finally:
+            combine._VIEWS_PER_STACK = per_stack
+
+    return run
 
 
 def bench_channels(mesh, label: str, size: int, repeats: int, threads: int) -> None:
@@ -79,7 +106,9 @@ def bench_channels(mesh, label: str, size: int, repeats: int, threads: int) -> N
                 (name, *median_time(lambda name=name: channel_over_views(name, views, vertex_saliency, pool), repeats))
             )
     rows.append(("sum of channels", sum(r[1] for r in rows), sum(r[2] for r in rows)))
-    rows.append(("saliency_views (8 channels + combination)", *median_time(whole(threads), repeats)))
+    stacked, single = median_times_alternating([whole(threads), one_view_per_stack(whole(threads))], repeats)
+    rows.append(("saliency_views (8 channels + combination)", *stacked))
+    rows.append(("saliency_views, one view per stack", *single))
     default = cv2.getNumThreads()
     cv2.setNumThreads(1)
     try:
@@ -97,11 +126,12 @@ def bench_channels(mesh, label: str, size: int, repeats: int, threads: int) -> N
     print("|---|---:|---:|---:|")
     for name, wall, cpu in rows:
         print(f"| {name} | {wall:.3f} | {cpu:.3f} | {1000 * cpu / n:.2f} |")
-    wall, cpu = rows[-3][1:]
+    wall, cpu = rows[-4][1:]
     print(
         f"\nTarget: saliency_views of all views <= 1.5 s on 2 cores; measured {wall:.2f} s wall, "
         f"{cpu:.2f} s CPU (load average at the end: {os.getloadavg()[0]:.1f}). "
-        f"Rendering the views, not included: {render_s:.2f} s."
+        f"Rendering the views, not included: {render_s:.2f} s. Stacks of {combine._VIEWS_PER_STACK} views "
+        f"against one view per stack, run in turn: {single[0] / stacked[0]:.2f}x the speed."
     )
 
 

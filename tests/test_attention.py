@@ -378,3 +378,87 @@ def test_dkl_axes_ignore_luminance():
     # A pure luminance pattern leaves the DKL channel silent.
     img = np.ascontiguousarray(np.repeat(ramp, 50, axis=0))
     assert attention.intensity(img).any() and not attention.dkl(img).any()
+
+
+def _n_by_definition(m: np.ndarray) -> np.ndarray:
+    """N(.) "maxima" of one map, written out plainly: the reference the stacked code must equal bit for bit."""
+    import cv2
+
+    lo, hi = float(m.min()), float(m.max())
+    if not hi - lo > 1e-6:
+        return np.zeros(m.shape, np.float32)
+    m = (m - lo) * np.float32(1.0 / (hi - lo))
+    peaks = (m == cv2.dilate(m, np.ones((3, 3), np.uint8))) & (m > 0.1)
+    r, c = np.unravel_index(int(m.argmax()), m.shape)
+    peaks[max(r - 2, 0) : r + 3, max(c - 2, 0) : c + 3] = False
+    mean = float(m[peaks].mean()) if peaks.any() else 0.0
+    return m * np.float32((1.0 - mean) ** 2)
+
+
+def test_normalize_maps_gives_each_map_n_by_its_definition():
+    import cv2
+
+    from meshsal.attention.pyramid import normalize_maps
+
+    rng = np.random.default_rng(7)
+    maps = []
+    # Rival peaks from none to hundreds: sums of fewer than 8 values, of 8 to 128 and of more, pairwise.
+    for n_peaks in (0, 1, 2, 3, 5, 7, 8, 9, 15, 16, 40, 130, 300):
+        m = np.zeros((64, 64), np.float32)
+        spots = rng.choice(64 * 64, size=n_peaks + 1, replace=False)
+        m.ravel()[spots] = rng.uniform(0.2, 1.0, size=spots.size).astype(np.float32)
+        m += rng.uniform(0, 0.01, size=m.shape).astype(np.float32)
+        maps.append(m)
+    maps.append(np.full((64, 64), 2.5, np.float32))  # flat: zeros
+    plateau = np.zeros((64, 64), np.float32)
+    plateau[10:14, 20:30] = 1.0  # a tie for the maximum
+    maps.append(plateau)
+    maps.append(cv2.GaussianBlur(rng.random((64, 64)).astype(np.float32), (0, 0), 2))
+    maps = np.stack(maps)
+    got = normalize_maps(maps)
+    assert got.dtype == np.float32 and got.shape == maps.shape
+    for k, m in enumerate(maps):
+        np.testing.assert_array_equal(got[k].view(np.int32), _n_by_definition(m).view(np.int32), err_msg=str(k))
+        np.testing.assert_array_equal(normalize_map(m), got[k])
+    # The order of the stack changes nothing.
+    np.testing.assert_array_equal(normalize_maps(maps[::-1]), got[::-1])
+    with pytest.raises(ValueError, match="stack"):
+        normalize_maps(maps[0])
+
+
+@pytest.mark.parametrize("shape", [(64, 64), (100, 140), (37, 50), (8, 9)])
+def test_conspicuity_maps_of_a_stack_are_each_images_own(shape):
+    from meshsal.attention.pyramid import conspicuity_maps
+
+    rng = np.random.default_rng(shape[0])
+    features = rng.random((5, 2, *shape)).astype(np.float32)
+    features[1] = 0.0  # a blank image among the others
+    features[2, :, : shape[0] // 3, : shape[1] // 3] += 2.0  # a planted bright corner
+    together = conspicuity_maps(features)
+    assert together.shape == (5, *shape) and together.dtype == np.float32
+    assert not together[1].any()
+    for k in range(5):
+        alone = conspicuity_maps(features[k : k + 1])[0]
+        np.testing.assert_array_equal(together[k].view(np.int32), alone.view(np.int32))
+        np.testing.assert_array_equal(alone, attention.pyramid.conspicuity_map(list(features[k])))
+    np.testing.assert_array_equal(conspicuity_maps(features[::-1]), together[::-1])
+
+
+def test_image_channels_of_a_stack_are_each_images_own():
+    from meshsal.attention.combine import image_channels, image_channels_stack
+
+    rng = np.random.default_rng(3)
+    imgs = rng.random((4, 72, 96, 3)).astype(np.float32)
+    imgs[1] = 0.5  # flat: no symmetry, no contrast
+    imgs[2, 20:40, 30:60] = (0.9, 0.1, 0.1)  # a red patch
+    imgs[3] = np.concatenate([imgs[3, :, :48], imgs[3, :, :48][:, ::-1]], axis=1)  # mirror-symmetric
+    stacked = image_channels_stack(imgs)
+    assert set(stacked) == set(attention.IMAGE_CHANNELS)
+    for k, img in enumerate(imgs):
+        for name, m in image_channels(img).items():
+            np.testing.assert_array_equal(stacked[name][k].view(np.int32), m.view(np.int32), err_msg=f"{name} {k}")
+    assert not stacked["symmetry"][1].any() and stacked["symmetry"][3].max() > stacked["symmetry"][0].max()
+    with pytest.raises(ValueError, match="at least one image"):
+        image_channels_stack(imgs[:0])
+    with pytest.raises(ValueError, match="intensity"):
+        image_channels_stack(imgs * 2.0, ["intensity"])

@@ -229,3 +229,23 @@ def test_saliency_views_matches_one_by_one(sphere):
     for v, r in zip(views, batch):
         # OpenCV may split work differently across threads: equal up to float32 rounding.
         np.testing.assert_allclose(r.map, saliency(v, sphere, vertex_saliency=field).map, atol=1e-5)
+
+
+def test_saliency_views_does_not_depend_on_how_views_are_stacked(sphere, monkeypatch):
+    from meshsal.attention import combine
+
+    cams = [c for s in view_rig()[:3] for c in s]
+    # Views of two sizes: a stack only holds views of one.
+    views = [render(sphere, c, size=48 if k in (4, 5) else 40) for k, c in enumerate(cams)]
+    field = sphere.vertices[:, 1] ** 2
+    runs = {}
+    for per_stack in (1, 5, 18):
+        monkeypatch.setattr(combine, "_VIEWS_PER_STACK", per_stack)
+        runs[per_stack] = attention.saliency_views(views, sphere, vertex_saliency=field, threads=1)
+    for k, view in enumerate(views):
+        alone = saliency(view, sphere, vertex_saliency=field)
+        for run in runs.values():
+            assert run[k].map.shape == view.mask.shape
+            np.testing.assert_array_equal(run[k].map, alone.map)
+            for name in CHANNELS:
+                np.testing.assert_array_equal(run[k].channels[name], alone.channels[name], err_msg=name)

@@ -16,9 +16,9 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-from meshsal.attention.pyramid import check_image, conspicuity_map
+from meshsal.attention.pyramid import check_image, conspicuity_map, conspicuity_maps
 
-__all__ = ["RGB_TO_LMS", "srgb_to_linear", "rgb_to_lms", "dkl_axes", "dkl"]
+__all__ = ["RGB_TO_LMS", "srgb_to_linear", "rgb_to_lms", "dkl_axes", "dkl", "dkl_stack"]
 
 _SRGB_TO_XYZ = np.array(
     [[0.4124, 0.3576, 0.1805], [0.2126, 0.7152, 0.0722], [0.0193, 0.1192, 0.9505]], dtype=np.float64
@@ -90,3 +90,8 @@ def dkl(img: np.ndarray) -> np.ndarray:
     """
     img = check_image(img, "dkl")
     return conspicuity_map(list(dkl_axes(img)))
+
+
+def dkl_stack(imgs) -> np.ndarray:
+    """:func:`dkl` of each image of a stack (n, H, W, 3), bit for bit: (n, H, W) float32."""
+    return conspicuity_maps(np.stack([np.stack(dkl_axes(check_image(img, "dkl"))) for img in imgs]))

@@ -14,11 +14,23 @@ from meshsal.attention.pyramid import (
     center_surround_map,
     check_image,
     conspicuity_map,
+    conspicuity_maps,
     gaussian_pyramid,
     upsample,
 )
 
-__all__ = ["intensity", "color", "orientation", "orientation_energy", "opponency", "gabor_energy", "ORIENTATIONS_DEG"]
+__all__ = [
+    "intensity",
+    "color",
+    "orientation",
+    "intensity_stack",
+    "color_stack",
+    "orientation_stack",
+    "orientation_energy",
+    "opponency",
+    "gabor_energy",
+    "ORIENTATIONS_DEG",
+]
 
 ORIENTATIONS_DEG = (0.0, 45.0, 90.0, 135.0)
 
@@ -60,6 +72,11 @@ def intensity(img: np.ndarray) -> np.ndarray:
     """
     img = check_image(img, "intensity")
     return center_surround_map(_intensity(img))
+
+
+def intensity_stack(imgs) -> np.ndarray:
+    """:func:`intensity` of each image of a stack (n, H, W, 3), bit for bit: (n, H, W) float32."""
+    return conspicuity_maps(np.stack([_intensity(check_image(img, "intensity")) for img in imgs])[:, None])
 
 
 def opponency(img: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -105,6 +122,11 @@ def color(img: np.ndarray) -> np.ndarray:
     """
     img = check_image(img, "color")
     return conspicuity_map(list(opponency(img)))
+
+
+def color_stack(imgs) -> np.ndarray:
+    """:func:`color` of each image of a stack (n, H, W, 3), bit for bit: (n, H, W) float32."""
+    return conspicuity_maps(np.stack([np.stack(opponency(check_image(img, "color"))) for img in imgs]))
 
 
 def _gabor_pair(theta_deg: float) -> tuple[np.ndarray, np.ndarray]:
@@ -213,3 +235,8 @@ def orientation(img: np.ndarray) -> np.ndarray:
     """
     energy = orientation_energy(img)
     return conspicuity_map(list(energy))
+
+
+def orientation_stack(imgs) -> np.ndarray:
+    """:func:`orientation` of each image of a stack (n, H, W, 3), bit for bit: (n, H, W) float32."""
+    return conspicuity_maps(np.stack([orientation_energy(img) for img in imgs]))

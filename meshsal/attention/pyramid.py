@@ -41,8 +41,10 @@ __all__ = [
     "DELTAS",
     "gaussian_pyramid",
     "normalize_map",
+    "normalize_maps",
     "across_scale_sum",
     "conspicuity_map",
+    "conspicuity_maps",
     "conspicuity_from_pyramids",
     "scale_pairs",
     "center_surround_map",
@@ -65,6 +67,8 @@ _GLOBAL_INH = 0.02
 # those within 2 pixels (Chebyshev) of the global maximum belong to it.
 _PEAK_FLOOR = 0.1
 _PEAK_EXCLUSION = 2
+# NumPy sums fewer values than this one after another, more pairwise.
+_SEQUENTIAL_SUM = 8
 # Maps whose value range is below this are flat: nothing to normalize.
 _FLAT = 1e-6
 _3X3 = np.ones((3, 3), np.uint8)
@@ -72,6 +76,8 @@ _3X3 = np.ones((3, 3), np.uint8)
 # size), are interpolated in two separable passes; OpenCV's warp is as fast or faster on the others.
 _SEPARABLE_PIXELS = 128 * 128
 _SEPARABLE_FACTOR = 8
+# A stack of at least this many maps takes the separable passes whatever their size: one call, not one per map.
+_SEPARABLE_MAPS = 4
 
 
 def gaussian_pyramid(img: np.ndarray, levels: int = _LEVELS) -> list[np.ndarray]:
@@ -159,20 +165,21 @@ def _warp_upsample(m: np.ndarray, factor: int, shape: tuple[int, int]) -> np.nda
 
 
 def _step_differences(m: np.ndarray, axis: int) -> np.ndarray:
-    """``next - this`` along ``axis``, the last one against itself (the replicated border): float32."""
+    """``next - this`` along ``axis`` (-1 or -2), the last one against itself (the replicated border): float32."""
     d = np.empty_like(m)
-    if axis == 1:
-        np.subtract(m[:, 1:], m[:, :-1], out=d[:, :-1])
-        np.subtract(m[:, -1], m[:, -1], out=d[:, -1])
+    if axis == -1:
+        np.subtract(m[..., 1:], m[..., :-1], out=d[..., :-1])
+        np.subtract(m[..., -1], m[..., -1], out=d[..., -1])
     else:
-        np.subtract(m[1:], m[:-1], out=d[:-1])
-        np.subtract(m[-1], m[-1], out=d[-1])
+        np.subtract(m[..., 1:, :], m[..., :-1, :], out=d[..., :-1, :])
+        np.subtract(m[..., -1, :], m[..., -1, :], out=d[..., -1, :])
     return d
 
 
 def _separable_upsample(m: np.ndarray, factor: int, shape: tuple[int, int]) -> np.ndarray:
-    """:func:`upsample` for a power-of-two ``factor``, bit for bit what :func:`_warp_upsample` gives with
-    the pinned kernels, 1.4 to 2 times as fast for a factor of 16 to a 256 x 256 view.
+    """:func:`upsample` of a map or a stack of maps (..., h, w) by a power-of-two ``factor``, bit for bit
+    what :func:`_warp_upsample` gives each map with the pinned kernels, 1.4 to 2 times as fast for a
+    factor of 16 to a 256 x 256 view, and one call for a whole stack.
 
     The sample positions ``i / factor`` are exact in float32 and repeat with
     period ``factor``, so bilinear interpolation splits into a pass along
@@ -182,17 +189,41 @@ def _separable_upsample(m: np.ndarray, factor: int, shape: tuple[int, int]) -> n
     (without fused multiply-add, which the pin turns off); the border is
     replicated.
     """
-    h, w = m.shape
+    *lead, h, w = m.shape
     weights = np.arange(factor, dtype=np.float32) / np.float32(factor)
-    d = _step_differences(m, axis=1)
-    rows = np.empty((h, w, factor), np.float32)
-    np.multiply(d[:, :, None], weights, out=rows)
-    rows += m[:, :, None]
-    rows = rows.reshape(h, w * factor)[:, : shape[1]]
-    out = np.empty((h, factor, rows.shape[1]), np.float32)
-    np.multiply(_step_differences(rows, axis=0)[:, None, :], weights[:, None], out=out)
-    out += rows[:, None, :]
-    return out.reshape(h * factor, -1)[: shape[0]]
+    d = _step_differences(m, axis=-1)
+    rows = np.empty((*lead, h, w, factor), np.float32)
+    np.multiply(d[..., None], weights, out=rows)
+    rows += m[..., None]
+    rows = rows.reshape(*lead, h, w * factor)[..., : shape[1]]
+    out = np.empty((*lead, h, factor, rows.shape[-1]), np.float32)
+    np.multiply(_step_differences(rows, axis=-2)[..., :, None, :], weights[:, None], out=out)
+    out += rows[..., :, None, :]
+    return out.reshape(*lead, h * factor, -1)[..., : shape[0], :]
+
+
+def _upsample_stack(maps: np.ndarray, factor: int, shape: tuple[int, int]) -> np.ndarray:
+    """:func:`upsample` of each map of a stack (n, h, w) float32: (n, H, W) float32.
+
+    Large power-of-two factors take the separable passes for the whole stack
+    at once (the same bits as OpenCV's warp with the pinned kernels) when it
+    holds several maps or as many pixels as :func:`upsample` asks of one; the
+    rest are warped map by map.
+    """
+    factor = int(factor)
+    n, h, w = maps.shape
+    if (
+        factor >= _SEPARABLE_FACTOR
+        and factor & (factor - 1) == 0
+        and (n >= _SEPARABLE_MAPS or n * shape[0] * shape[1] >= _SEPARABLE_PIXELS)
+        and h * factor >= shape[0]
+        and w * factor >= shape[1]
+    ):
+        return _separable_upsample(maps, factor, shape)
+    out = np.empty((n, *shape), np.float32)
+    for k in range(n):
+        out[k] = _warp_upsample(maps[k], factor, shape)
+    return out
 
 
 def _range(m: np.ndarray) -> tuple[float, float]:
@@ -305,23 +336,7 @@ def normalize_map(m: np.ndarray, method: str = "maxima", iterations: int = 3) ->
     if m.ndim != 2:
         raise ValueError(f"normalize_map expects a 2-D map, got shape {m.shape}")
     if method == "maxima":
-        # to_unit inlined: N(.) runs some seventy times per view, mostly on maps of a few hundred pixels,
-        # where each call's overhead counts.  A map that is not flat keeps a non-zero maximum once scaled.
-        lo, hi = _range(m)
-        if not hi - lo > _FLAT:
-            return np.zeros(m.shape, np.float32)
-        m = (m - lo) * np.float32(1.0 / (hi - lo))
-        peaks = m == cv2.dilate(m, _3X3)
-        peaks &= m > _PEAK_FLOOR
-        top_r, top_c = divmod(int(m.argmax()), m.shape[1])
-        # The global maximum's own plateau or shoulder is not a rival peak.
-        e = _PEAK_EXCLUSION
-        peaks[max(top_r - e, 0) : top_r + e + 1, max(top_c - e, 0) : top_c + e + 1] = False
-        rival = m[peaks]
-        # The mean as ndarray.mean() takes it (a float32 sum, divided in float64, rounded to float32),
-        # without its call overhead, which counted on the small maps of a pyramid.
-        mean = float(np.float32(float(np.add.reduce(rival)) / rival.size)) if rival.size else 0.0
-        return m * np.float32((1.0 - mean) ** 2)
+        return normalize_maps(m[None])[0]
     if method == "iterative":
         m = to_unit(m)
         if not m.any():
@@ -333,6 +348,112 @@ def normalize_map(m: np.ndarray, method: str = "maxima", iterations: int = 3) ->
             m = np.maximum(m + dog - _GLOBAL_INH, 0.0, dtype=np.float32)
         return m
     raise ValueError(f"normalize_map method must be 'iterative' or 'maxima', got {method!r}")
+
+
+def _unit_scales(maps: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Per map of a stack (n, h, w) float32: its minimum, the float32 factor that takes its range to
+    [0, 1] as :func:`to_unit` computes it (from the float64 range), and whether it is not flat."""
+    flat = maps.reshape(maps.shape[0], -1)
+    lo, hi = flat.min(axis=1), flat.max(axis=1)
+    span = hi.astype(np.float64) - lo.astype(np.float64)
+    live = span > _FLAT
+    scale = np.zeros(maps.shape[0], np.float32)
+    scale[live] = (1.0 / span[live]).astype(np.float32)
+    return lo, scale, live
+
+
+def _to_unit_stack(maps: np.ndarray) -> np.ndarray:
+    """:func:`to_unit` of each map of a stack (n, h, w) float32."""
+    lo, scale, live = _unit_scales(maps)
+    out = (maps - lo[:, None, None]) * scale[:, None, None]
+    out[~live] = 0.0
+    return out
+
+
+def _dilate_3x3(maps: np.ndarray) -> np.ndarray:
+    """Maximum over each pixel's 3 x 3 neighbourhood inside its map, for a stack (n, h, w) float32.
+
+    One ``cv2.dilate`` of the maps laid one under the other, a row of -inf
+    after each, so no neighbourhood reaches into the next map: what the
+    dilation of each map alone gives (a maximum is exact).
+    """
+    n, h, w = maps.shape
+    tall = np.empty((n, h + 1, w), np.float32)
+    tall[:, :h] = maps
+    tall[:, h] = -np.inf
+    return cv2.dilate(tall.reshape(n * (h + 1), w), _3X3).reshape(n, h + 1, w)[:, :h]
+
+
+def normalize_maps(maps: np.ndarray) -> np.ndarray:
+    """Itti's N(.) ("maxima", see :func:`normalize_map`) of each map of a stack, bit for bit map by map.
+
+    One pass over the whole stack: N(.) runs some seventy times per view, on
+    maps of a few hundred pixels, where each call's overhead counted.
+
+    Parameters
+    ----------
+    maps : (n, h, w) array
+
+    Returns
+    -------
+    (n, h, w) float32
+
+    Examples
+    --------
+    >>> one = np.zeros((2, 16, 16), np.float32); one[:, 8, 8] = 1.0; one[1, 2, 2] = 0.8
+    >>> [round(float(m.max()), 2) for m in normalize_maps(one)]
+    [1.0, 0.04]
+    """
+    maps = np.asarray(maps, dtype=np.float32)
+    if maps.ndim != 3:
+        raise ValueError(f"normalize_maps expects a stack of 2-D maps (n, h, w), got shape {maps.shape}")
+    n, h, w = maps.shape
+    if not maps.size:
+        return np.zeros(maps.shape, np.float32)
+    lo, scale, live = _unit_scales(maps)
+    m = maps - lo[:, None, None]
+    m *= scale[:, None, None]
+    # A flat map is all zeros now: no peaks.
+    peaks = m == _dilate_3x3(m)
+    peaks &= m > _PEAK_FLOOR
+    top_r, top_c = np.divmod(m.reshape(n, -1).argmax(axis=1), w)
+    # The global maximum's own plateau or shoulder is not a rival peak.
+    e = _PEAK_EXCLUSION
+    near_r = np.abs(np.arange(h) - top_r[:, None]) <= e
+    near_c = np.abs(np.arange(w) - top_c[:, None]) <= e
+    peaks &= ~(near_r[:, :, None] & near_c[:, None, :])
+    counts = np.count_nonzero(peaks.reshape(n, -1), axis=1)
+    # Each map's rivals in row-major order, as m[peaks] gives them.  Their float32 sum must be NumPy's
+    # pairwise sum of that array, which below 8 values adds them one after another: so do all maps at
+    # once, each padded with zeros (adding +0 changes no positive sum).  Maps with the same larger number
+    # of rivals are summed as the rows of one array, which NumPy sums row by row in the order it sums
+    # each (np.add.reduceat sums in another).
+    rivals = np.append(m[peaks], np.float32(0.0))
+    starts = np.cumsum(counts) - counts
+    slots = np.arange(_SEQUENTIAL_SUM)
+    padded = rivals[np.where(slots < counts[:, None], starts[:, None] + slots, rivals.size - 1)]
+    sums = padded[:, 0].copy()
+    for k in range(1, _SEQUENTIAL_SUM):
+        sums += padded[:, k]
+    many = counts >= _SEQUENTIAL_SUM
+    if many.any():
+        for count in set(counts[many].tolist()):
+            which = np.flatnonzero(counts == count)
+            sums[which] = np.add.reduce(rivals[starts[which, None] + np.arange(count)], axis=1)
+    # The mean as ndarray.mean() takes it: the float32 sum divided in float64, rounded to float32.
+    means = (sums.astype(np.float64) / np.maximum(counts, 1)).astype(np.float32).astype(np.float64)
+    m *= ((1.0 - means) ** 2).astype(np.float32)[:, None, None]
+    if not live.all():
+        m[~live] = 0.0
+    return m
+
+
+def _pyramid_stack(maps: np.ndarray, levels: int = _LEVELS) -> list[np.ndarray]:
+    """:func:`gaussian_pyramid` of each map of a stack (n, H, W), level by level: a list of (n, h_k, w_k)."""
+    pyramid = [np.ascontiguousarray(maps, dtype=np.float32)]
+    while len(pyramid) < levels and min(pyramid[-1].shape[1:]) >= 2:
+        pyramid.append(np.stack([cv2.pyrDown(m) for m in pyramid[-1]]))
+    return pyramid
 
 
 def scale_pairs(levels: int) -> list[tuple[int, int]]:
@@ -355,6 +476,25 @@ def scale_pairs(levels: int) -> list[tuple[int, int]]:
     return pairs
 
 
+def _across_scale(pyramid: Sequence[np.ndarray]) -> np.ndarray:
+    """:func:`across_scale_sum` of a stack: ``pyramid`` a list of levels (n, h_k, w_k); (n, h, w) float32."""
+    n = pyramid[0].shape[0]
+    pairs = scale_pairs(len(pyramid))
+    if not pairs:
+        return np.zeros((n, 1, 1), np.float32)
+    top = max(c for c, _ in pairs)
+    total = np.zeros(pyramid[top].shape, np.float32)
+    for c, s in pairs:
+        center = pyramid[c]
+        surround = _upsample_stack(pyramid[s], 2 ** (s - c), center.shape[1:])
+        # |F(c) - F(s)| rounds as cv2.absdiff does: one float32 difference, then its magnitude.
+        fmap = normalize_maps(np.abs(center - surround))
+        for _ in range(top - c):
+            fmap = np.stack([cv2.pyrDown(m) for m in fmap])
+        total += fmap
+    return total
+
+
 def across_scale_sum(pyramid: Sequence[np.ndarray]) -> np.ndarray:
     """Sum of N(|F(c) - F(s)|) over the center-surround pairs, at the center scale 4.
 
@@ -368,19 +508,48 @@ def across_scale_sum(pyramid: Sequence[np.ndarray]) -> np.ndarray:
     (scale 4 for images of 256 pixels; see :func:`scale_pairs`); a (1, 1)
     zero map if the pyramid has a single level.
     """
-    pairs = scale_pairs(len(pyramid))
-    if not pairs:
-        return np.zeros((1, 1), np.float32)
-    top = max(c for c, _ in pairs)
-    total = np.zeros(pyramid[top].shape, np.float32)
-    for c, s in pairs:
-        center = pyramid[c]
-        surround = upsample(pyramid[s], 2 ** (s - c), center.shape)
-        fmap = normalize_map(cv2.absdiff(center, surround))
-        for _ in range(top - c):
-            fmap = cv2.pyrDown(fmap)
-        total += fmap
-    return total
+    return _across_scale([np.asarray(level, np.float32)[None] for level in pyramid])[0]
+
+
+def _conspicuity(pyramid: Sequence[np.ndarray], features: int, shape: tuple[int, int]) -> np.ndarray:
+    """Conspicuity maps (n, H, W) from the pyramid (levels (n * features, h_k, w_k)) of n images' features."""
+    small = normalize_maps(_across_scale(pyramid))
+    small = small.reshape(-1, features, *small.shape[1:])
+    total = small[:, 0]
+    for k in range(1, features):
+        total = total + small[:, k]
+    top = max((c for c, _ in scale_pairs(len(pyramid))), default=0)
+    return _to_unit_stack(_upsample_stack(normalize_maps(total), 2**top, shape))
+
+
+def conspicuity_maps(features: np.ndarray, shape: tuple[int, int] | None = None) -> np.ndarray:
+    """:func:`conspicuity_map` of many images at once, bit for bit image by image.
+
+    Parameters
+    ----------
+    features : (n, k, H, W) float
+        ``k`` feature images of each of ``n`` images (e.g. the four
+        orientation energies of 18 views).
+    shape : (H, W), optional
+        Output size; the features' size by default.
+
+    Returns
+    -------
+    (n, H, W) float32 in [0, 1]
+
+    Examples
+    --------
+    >>> f = np.zeros((2, 1, 64, 64), np.float32); f[0, 0, 8:16, 40:48] = f[1, 0, 40:48, 8:16] = 1.0
+    >>> peaks = [np.unravel_index(int(m.argmax()), m.shape) for m in conspicuity_maps(f)]
+    >>> [(int(r) // 8, int(c) // 8) for r, c in peaks]  # on each image's own square
+    [(1, 5), (5, 1)]
+    """
+    features = np.asarray(features, dtype=np.float32)
+    if features.ndim != 4 or not features.shape[1]:
+        raise ValueError(f"conspicuity_maps expects features (n, k, H, W) with k >= 1, got shape {features.shape}")
+    n, k, h, w = features.shape
+    pyramid = _pyramid_stack(features.reshape(n * k, h, w))
+    return _conspicuity(pyramid, k, shape or (h, w))
 
 
 def conspicuity_map(features: Sequence[np.ndarray], shape: tuple[int, int] | None = None) -> np.ndarray:
@@ -400,13 +569,13 @@ def conspicuity_map(features: Sequence[np.ndarray], shape: tuple[int, int] | Non
     -------
     (H, W) float32 in [0, 1]
     """
-    if not features:
+    if not len(features):
         raise ValueError("conspicuity_map needs at least one feature image")
     h, w = features[0].shape[:2]
     for f in features:
         if f.shape != (h, w):
             raise ValueError(f"feature images differ in shape: {(h, w)} and {f.shape}")
-    return conspicuity_from_pyramids([gaussian_pyramid(f) for f in features], shape or (h, w))
+    return conspicuity_maps(np.stack(features)[None], shape)[0]
 
 
 def conspicuity_from_pyramids(pyramids: Sequence[Sequence[np.ndarray]], shape: tuple[int, int]) -> np.ndarray:
@@ -421,13 +590,8 @@ def conspicuity_from_pyramids(pyramids: Sequence[Sequence[np.ndarray]], shape: t
     -------
     (H, W) float32 in [0, 1]
     """
-    total = None
-    for pyramid in pyramids:
-        small = normalize_map(across_scale_sum(pyramid))
-        total = small if total is None else total + small
-    total = normalize_map(total)
-    top = max((c for c, _ in scale_pairs(len(pyramids[0]))), default=0)
-    return to_unit(upsample(total, 2**top, shape))
+    levels = [np.stack([np.asarray(p[k], np.float32) for p in pyramids]) for k in range(len(pyramids[0]))]
+    return _conspicuity(levels, len(pyramids), shape)[0]
 
 
 def center_surround_map(feature: np.ndarray) -> np.ndarray:

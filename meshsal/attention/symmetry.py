@@ -51,9 +51,9 @@ import numpy as np
 from numpy.lib.stride_tricks import as_strided
 
 from meshsal.attention.local import luma
-from meshsal.attention.pyramid import center_surround_map, check_image, gaussian_pyramid, upsample
+from meshsal.attention.pyramid import center_surround_map, check_image, conspicuity_maps, gaussian_pyramid, upsample
 
-__all__ = ["symmetry"]
+__all__ = ["symmetry", "symmetry_stack"]
 
 
 # Pyramid levels measured: level 1 keeps texture of a pixel or two of the
@@ -247,3 +247,14 @@ def symmetry(img: np.ndarray) -> np.ndarray:
     if not top > 0.0:
         return np.zeros(img.shape[:2], np.float32)
     return center_surround_map(feature) * np.float32(top)
+
+
+def symmetry_stack(imgs) -> np.ndarray:
+    """:func:`symmetry` of each image of a stack (n, H, W, 3), bit for bit: (n, H, W) float32."""
+    features = np.stack([_mirror_feature(luma(check_image(img, "symmetry"))) for img in imgs])
+    out = np.zeros(features.shape, np.float32)
+    tops = features.reshape(len(features), -1).max(axis=1).astype(np.float64)
+    some = np.flatnonzero(tops > 0.0)
+    if some.size:
+        out[some] = conspicuity_maps(features[some, None]) * tops[some, None, None].astype(np.float32)
+    return out
