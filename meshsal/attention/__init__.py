@@ -13,7 +13,8 @@ contrast channels.  Each image channel is a plain function
 
 ``curvature(view, vertex_saliency)`` renders per-vertex mesh saliency
 into a view, ``saliency(view, mesh)`` combines the eight channels and
-``saliency_views(views, mesh)`` does so for many views in a thread pool;
+``saliency_views(views, mesh)`` does so for many views in a thread pool, in stacks
+(``image_channels_stack``: the channels of many images at once, bit for bit each one's own);
 ``view_channels(mesh)`` renders a mesh's 72 views and computes their channels
 once, ``attention_maps`` combines them as a method needs (``rig``).
 """
@@ -28,6 +29,7 @@ from meshsal.attention.combine import (
     curvature,
     erode_mask,
     image_channels,
+    image_channels_stack,
     plateau_fraction,
     saliency,
     saliency_views,
@@ -54,6 +56,7 @@ __all__ = [
     "erode_mask",
     "gaussian_pyramid",
     "image_channels",
+    "image_channels_stack",
     "intensity",
     "normalize_map",
     "orientation",
