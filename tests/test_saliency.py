@@ -249,3 +249,16 @@ def test_saliency_views_does_not_depend_on_how_views_are_stacked(sphere, monkeyp
             np.testing.assert_array_equal(run[k].map, alone.map)
             for name in CHANNELS:
                 np.testing.assert_array_equal(run[k].channels[name], alone.channels[name], err_msg=name)
+
+
+@pytest.mark.parametrize("q", [0.0, 12.5, 50.0, 50.5, 87.0, 99.9, 100.0])
+def test_percentiles_of_rows_are_numpys_bit_for_bit(q):
+    from meshsal.attention.combine import _percentiles
+
+    rng = np.random.default_rng(int(q * 10))
+    for n in (1, 2, 7, 1000, 16383):
+        values = rng.random((3, n), dtype=np.float32)
+        values[1] = np.round(values[1] * 4) / 4  # ties
+        got = _percentiles(values, q)
+        assert got.dtype == np.float32
+        np.testing.assert_array_equal(got, [np.float32(np.percentile(row, q)) for row in values])

@@ -13,7 +13,7 @@ import numpy as np
 from meshsal.attention.dkl import dkl, dkl_stack
 from meshsal.attention.itti import color, color_stack, intensity, intensity_stack, orientation, orientation_stack
 from meshsal.attention.local import contrast, entropy
-from meshsal.attention.pyramid import normalize_maps, scale_to_max
+from meshsal.attention.pyramid import _FLAT, normalize_maps, scale_to_max
 from meshsal.attention.symmetry import symmetry, symmetry_stack
 from meshsal.util.registry import Registry
 
@@ -240,26 +240,26 @@ def _check_weights(weights: Mapping[str, float] | None) -> dict[str, float]:
     return out
 
 
-def _percentile(values: np.ndarray, q: float) -> np.float32:
-    """``np.percentile(values, q)`` of a 1-D float32 array, bit for bit, from two order statistics.
+def _percentiles(values: np.ndarray, q: float) -> np.ndarray:
+    """``np.percentile(row, q)`` of each row of a float32 array (c, n), bit for bit, from two order statistics.
 
     NumPy's default ("linear") method partitions at four places; the two
     values it interpolates between are all it needs (0.04 against 0.38 ms
-    for 16k values, eight times per view).  It interpolates as NumPy does
-    for a Python float ``q``, in float32.
+    for 16k values).  It interpolates as NumPy does for a Python float
+    ``q``, in float32.
     """
-    n = values.size
+    n = values.shape[1]
     virtual = (n - 1) * (float(q) / 100.0)
     if virtual >= n - 1:
-        return np.float32(values.max())
+        return values.max(axis=1)
     k = int(np.floor(virtual))
     gamma = virtual - k
-    ordered = np.partition(values, k)
-    below, above = ordered[k], ordered[k + 1 :].min()
+    ordered = np.partition(values, k, axis=1)
+    below, above = ordered[:, k], ordered[:, k + 1 :].min(axis=1)
     step = above - below
     if gamma >= 0.5:
-        return np.float32(above - step * np.float32(1.0 - gamma))
-    return np.float32(below + step * np.float32(gamma))
+        return above - step * np.float32(1.0 - gamma)
+    return below + step * np.float32(gamma)
 
 
 def combine_maps(
@@ -319,25 +319,30 @@ def combine_maps(
     pixels = np.flatnonzero(inside)
     h, wd = inside.shape
     small = (max(1, wd // 16), max(1, h // 16))
-    cuts, gains = [], []
-    for name, weight in w.items():
-        if weight == 0:
-            continue
+    names = [name for name, weight in w.items() if weight != 0]
+    for name in names:
         if name not in channels:
-            raise ValueError(f"channel {name!r} has weight {weight} but its map was not given")
-        ch = np.asarray(channels[name], np.float32)
-        if ch.shape != inside.shape:
-            raise ValueError(f"channel {name!r} has shape {ch.shape}, the mask {inside.shape}")
-        cut = scale_to_max(np.where(inside, ch, np.float32(0.0)))
-        if floor is not None and pixels.size:
-            # Not rescaled (see ``floor``).
-            cut = np.maximum(cut - _percentile(cut.ravel()[pixels], floor), np.float32(0.0))
-        cuts.append(cut)
-        gains.append(weight)
+            raise ValueError(f"channel {name!r} has weight {w[name]} but its map was not given")
+        shape = np.shape(channels[name])
+        if shape != inside.shape:
+            raise ValueError(f"channel {name!r} has shape {shape}, the mask {inside.shape}")
+    gains = [w[name] for name in names]
+    # The channels cut to the silhouette, each scaled to its maximum (scale_to_max), all in one array.
+    cuts = np.zeros((len(names), h, wd), np.float32)
+    for k, name in enumerate(names):
+        np.copyto(cuts[k], channels[name], where=inside, casting="unsafe")
+    flat = cuts.reshape(len(names), -1)
+    top = flat.max(axis=1).astype(np.float64)
+    lit = top > _FLAT
+    cuts *= np.divide(1.0, top, out=np.zeros_like(top), where=lit).astype(np.float32)[:, None, None]
+    if floor is not None and pixels.size:
+        # Not rescaled (see ``floor``).
+        cuts -= _percentiles(flat[:, pixels], floor)[:, None, None]
+        np.maximum(cuts, np.float32(0.0), out=cuts)
     if normalize:
         # N(.) of every channel that responds, in one pass.
-        live = [k for k, cut in enumerate(cuts) if cut.any()]
-        if live:
+        live = np.flatnonzero(flat.any(axis=1))
+        if live.size:
             shrunk = np.stack([cv2.resize(cuts[k], small, interpolation=cv2.INTER_AREA) for k in live])
             for k, amplitude in zip(live, normalize_maps(shrunk).reshape(len(live), -1).max(axis=1)):
                 gains[k] *= float(amplitude)

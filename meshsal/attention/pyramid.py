@@ -365,8 +365,10 @@ def _unit_scales(maps: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 def _to_unit_stack(maps: np.ndarray) -> np.ndarray:
     """:func:`to_unit` of each map of a stack (n, h, w) float32."""
     lo, scale, live = _unit_scales(maps)
-    out = (maps - lo[:, None, None]) * scale[:, None, None]
-    out[~live] = 0.0
+    out = maps - lo[:, None, None]
+    out *= scale[:, None, None]
+    if not live.all():
+        out[~live] = 0.0
     return out
 
 
