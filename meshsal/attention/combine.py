@@ -58,8 +58,8 @@ _STACKED = {
     symmetry: symmetry_stack,
 }
 # Views a thread takes at once in saliency_views: enough to share the pyramids' per-call costs, few enough
-# that two threads share 72 views evenly (18: 0.77 s on one thread at 128 px, against 0.82 s for 12 and
-# 0.78 s for 36; 1.31 s on two at 256 px, against 1.37 and 1.45 s).
+# that two threads share 72 views evenly.  Tried on 72 views (1, 4, 6, 9, 12, 18 and 36; one thread at
+# 128 px, two at 256 px, two runs): 18 and 36 were the fastest, within the machine's noise of each other.
 _VIEWS_PER_STACK = 18
 
 
