@@ -72,7 +72,7 @@ def test_paper_job_never_trains_or_selects_on_a_test_imprint(monkeypatch):
     monkeypatch.setattr(touches, "fit", spy_fit)
     monkeypatch.setattr(touches, "posteriors", spy_proba)
     splits = protocols.paper_splits(y, groups, 5, 1, 3)
-    out = protocols.paper_job(PaperJob(X, y, groups, splits, Recognizer("naive_bayes", True, {}, 0.85), 3))
+    (out,) = protocols.paper_job(PaperJob(X, y, groups, splits, (Recognizer("naive_bayes", True, {}, 0.85),), 3))
     assert len(selected) == len(fits) == len(predicted) == 5
     assert sorted(np.concatenate(predicted).tolist()) == list(range(len(y)))  # each imprint predicted once
     for rows, trained, split in zip(selected, fits, splits):
@@ -157,11 +157,11 @@ def test_protocols_fitting_the_evolutionary_svms_together_give_the_outcomes_of_f
     rec = Recognizer("evolutionary_svm", True, {"evolutionary_svm": {"max_generations": 60}}, 0.85)
     X, y = _tagged_pool(seed=2)
     groups = np.arange(len(y)) // 2
-    paper = PaperJob(X, y, groups, protocols.paper_splits(y, groups, 4, 1, 5), rec, 3)
+    paper = PaperJob(X, y, groups, protocols.paper_splits(y, groups, 4, 1, 5), (rec,), 3)
     instance = InstanceJob(_instance_data(seed=5), rec, 3, 6, 2, 1)
-    together = protocols.paper_job(paper), protocols.instance_job(instance)
+    together = protocols.paper_job(paper)[0], protocols.instance_job(instance)
     monkeypatch.setattr(Recognizer, "fit_each", _one_by_one)
-    alone = protocols.paper_job(paper), protocols.instance_job(instance)
+    alone = protocols.paper_job(paper)[0], protocols.instance_job(instance)
     for a, b in zip(together, alone):
         for name in ("rates", "confusion", "kept"):
             assert np.array_equal(getattr(a, name), getattr(b, name)), name
@@ -212,8 +212,37 @@ def test_folds_grouped_by_point_keep_a_points_twins_out_of_its_test_fold():
 
     def rate(groups):
         splits = protocols.paper_splits(y, groups, folds=5, repeats=1, seed=0)
-        return protocols.paper_job(PaperJob(X, y, groups, tuple(splits), rec, 2)).rates.mean()
+        return protocols.paper_job(PaperJob(X, y, groups, tuple(splits), (rec,), 2))[0].rates.mean()
 
     grouped = rate(touches.point_groups(y, point))
     assert 25.0 <= grouped <= 75.0  # chance: no twin ever trains
     assert rate(np.arange(len(y))) > 90.0  # imprints on their own: the twins leak
+
+
+@pytest.mark.parametrize("drops", [False, True])
+def test_a_fold_selection_leaves_whole_is_fitted_once_and_every_outcome_is_its_own(monkeypatch, drops):
+    """One classifier without and with selection in one job: the outcomes of each alone, and a training fold
+    selection leaves whole is fitted once (four folds: four fits, eight when selection drops imprints)."""
+    X, y = _tagged_pool(seed=3)
+    groups = np.arange(len(y)) // 2
+    splits = protocols.paper_splits(y, groups, 4, 1, 5)
+    monkeypatch.setattr(
+        tactile,
+        "select_by_similarity",
+        lambda Xs, ys, threshold=0.85: Xs[:, 0, 0] % 3 != 0 if drops else Xs[:, 0, 0] >= 0,
+    )
+    real_fit, fits = touches.fit, []
+
+    def counting_fit(*args):
+        fits.append(args[2][:, 0].astype(int))
+        return real_fit(*args)
+
+    monkeypatch.setattr(touches, "fit", counting_fit)
+    pair = tuple(Recognizer("naive_bayes", selection, {}, 0.85) for selection in (False, True))
+    both = protocols.paper_job(PaperJob(X, y, groups, splits, pair, 3))
+    assert len(fits) == (8 if drops else 4)
+    assert both[1].kept == pytest.approx(2 / 3, abs=0.05) if drops else both[1].kept == 1.0
+    for rec, together in zip(pair, both):
+        (alone,) = protocols.paper_job(PaperJob(X, y, groups, splits, (rec,), 3))
+        for name in ("rates", "confusion", "kept"):
+            assert np.array_equal(getattr(together, name), getattr(alone, name)), name

@@ -130,17 +130,19 @@ def _confusion(truth, guess, n_classes) -> np.ndarray:
 
 @dataclass(frozen=True, eq=False)
 class PaperJob:
-    """One repeat of the paper protocol: the pool of imprints, its folds, how to recognize.
+    """One repeat of the paper protocol: the pool of imprints, its folds, the ways to recognize.
 
     ``X`` (N, rows, cols) imprints, ``y`` (N,) object labels, ``groups`` (N,)
-    (:func:`point_groups`), ``splits`` the repeat's folds, ``n_classes``.
+    (:func:`point_groups`), ``splits`` the repeat's folds, ``recognizers``
+    a tuple of :class:`Recognizer` (e.g. one classifier without and with
+    selection), ``n_classes``.
     """
 
     X: np.ndarray
     y: np.ndarray
     groups: np.ndarray
     splits: tuple
-    recognizer: Recognizer
+    recognizers: tuple
     n_classes: int
 
 
@@ -158,26 +160,52 @@ class PaperOutcome:
     kept: float
 
 
-def paper_job(job: PaperJob) -> PaperOutcome:
-    """Every fold of one repeat: fit on the (selected) training fold, predict the test fold."""
-    X, y, rec = job.X, job.y, job.recognizer
+def paper_job(job: PaperJob) -> tuple[PaperOutcome, ...]:
+    """Every fold of one repeat, for each recognizer: fit on the (selected) training fold, predict the test fold.
+
+    A fold that two recognizers train the same model on (one classifier,
+    its parameters and features, the same rows: selection kept every
+    imprint) is fitted once; the models of one classifier are fitted
+    together (:meth:`Recognizer.fit_each`).  Returns one outcome per
+    recognizer, in order.
+    """
+    X, y = job.X, job.y
     with threadpool_limits(1):
-        F = describe(X, rec.features)
-        pred = np.full(len(y), -1)
-        kept, fitted = [], []
-        for split in job.splits:
-            train = select_training(X, y, split.train, rec.threshold) if rec.selection else split.train
-            kept.append(len(train) / len(split.train))
-            if len(np.unique(y[train])) < 2:
-                pred[split.test] = y[train][0] if len(train) else -1
-                continue
-            fitted.append((split, train))
-        models = rec.fit_each([(F[train], y[train], job.groups[train]) for _, train in fitted])
-        for (split, _), model in zip(fitted, models):
-            pred[split.test] = np.argmax(touches.posteriors(model, F[split.test], job.n_classes), axis=1)
+        described, plans, sets, index = {}, [], [], {}
+        for rec in job.recognizers:
+            if rec.features not in described:
+                described[rec.features] = describe(X, rec.features)
+            pred, kept, uses = np.full(len(y), -1), [], []
+            for split in job.splits:
+                train = select_training(X, y, split.train, rec.threshold) if rec.selection else split.train
+                kept.append(len(train) / len(split.train))
+                if len(np.unique(y[train])) < 2:
+                    pred[split.test] = y[train][0] if len(train) else -1
+                    continue
+                model = (rec.classifier, repr(rec.params), rec.features)
+                key = (*model, np.asarray(train).tobytes())
+                if key not in index:
+                    index[key] = len(sets)
+                    sets.append((model, rec, train))
+                uses.append((split, index[key]))
+            plans.append((described[rec.features], pred, kept, uses))
+        models = [None] * len(sets)
+        for model in dict.fromkeys(m for m, _, _ in sets):
+            mine = [k for k, (m, _, _) in enumerate(sets) if m == model]
+            rec, F = sets[mine[0]][1], described[model[2]]
+            fitted = rec.fit_each([(F[sets[k][2]], y[sets[k][2]], job.groups[sets[k][2]]) for k in mine])
+            for k, fit in zip(mine, fitted):
+                models[k] = fit
+        for F, pred, _, uses in plans:
+            for split, k in uses:
+                pred[split.test] = np.argmax(touches.posteriors(models[k], F[split.test], job.n_classes), axis=1)
+    return tuple(_paper_outcome(y, pred, kept, job.n_classes) for _, pred, kept, _ in plans)
+
+
+def _paper_outcome(y, pred, kept, n_classes) -> PaperOutcome:
     hit = pred >= 0
-    confusion = _confusion(y[hit], pred[hit], job.n_classes)
-    rates = np.array([100.0 * np.mean(pred[y == c] == c) for c in range(job.n_classes)])
+    confusion = _confusion(y[hit], pred[hit], n_classes)
+    rates = np.array([100.0 * np.mean(pred[y == c] == c) for c in range(n_classes)])
     return PaperOutcome(rates, confusion, float(np.mean(kept)))
 
 

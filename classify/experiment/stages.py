@@ -309,23 +309,31 @@ def paper_recognition(
     seed = config.settings.seed
     splits = paper_splits(y, groups, config.folds, config.repeats, seed)
     jobs = [(c, s, r) for c, s in _recognizers(config) for r in range(config.repeats)]
+    # One job per classifier and repeat, with and without selection: a fold selection leaves whole is fitted once.
+    shared = [(c, r) for c in config.classifiers for r in range(config.repeats)]
     work = [
         PaperJob(
             X,
             y,
             groups,
             tuple(x for x in splits if x.repeat == r),
-            Recognizer(c, s, config.params, config.threshold, config.features),
+            tuple(Recognizer(c, s, config.params, config.threshold, config.features) for s in (False, True)),
             n,
         )
-        for c, s, r in jobs
+        for c, r in shared
     ]
     key = _recognition_key(
         "paper",
         (X, y, groups),
         [config.folds, config.repeats, seed, config.threshold, config.params, jobs, config.features],
     )
-    outcomes = _run_jobs(runtime, key, PaperOutcome, paper_job, work, f"paper: {method}, {n} objects")
+
+    def run():
+        done = runtime.map(paper_job, work, f"paper: {method}, {n} objects")
+        by_job = {(c, s, r): o for (c, r), pair in zip(shared, done) for s, o in zip((False, True), pair)}
+        return _outcome_arrays([by_job[j] for j in jobs])
+
+    outcomes = _outcomes_from(cache_mod.cached(runtime.cache_dir, key, run), PaperOutcome, len(jobs))
     out = []
     for c, s in _recognizers(config):
         mine = [o for (cj, sj, _), o in zip(jobs, outcomes) if (cj, sj) == (c, s)]
