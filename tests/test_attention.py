@@ -440,7 +440,6 @@ def test_conspicuity_maps_of_a_stack_are_each_images_own(shape):
     for k in range(5):
         alone = conspicuity_maps(features[k : k + 1])[0]
         np.testing.assert_array_equal(together[k].view(np.int32), alone.view(np.int32))
-        np.testing.assert_array_equal(alone, attention.pyramid.conspicuity_map(list(features[k])))
     np.testing.assert_array_equal(conspicuity_maps(features[::-1]), together[::-1])
 
 

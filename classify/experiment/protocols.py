@@ -171,10 +171,13 @@ def paper_job(job: PaperJob) -> tuple[PaperOutcome, ...]:
     """
     X, y = job.X, job.y
     with threadpool_limits(1):
-        described, plans, sets, index = {}, [], [], {}
+        # described: features -> F; trains: (classifier, params, features) -> (recognizer, its training row sets);
+        # where: (that model, rows) -> the model's number among them.
+        described, trains, where, plans = {}, {}, {}, []
         for rec in job.recognizers:
             if rec.features not in described:
                 described[rec.features] = describe(X, rec.features)
+            model = (rec.classifier, repr(rec.params), rec.features)
             pred, kept, uses = np.full(len(y), -1), [], []
             for split in job.splits:
                 train = select_training(X, y, split.train, rec.threshold) if rec.selection else split.train
@@ -182,23 +185,21 @@ def paper_job(job: PaperJob) -> tuple[PaperOutcome, ...]:
                 if len(np.unique(y[train])) < 2:
                     pred[split.test] = y[train][0] if len(train) else -1
                     continue
-                model = (rec.classifier, repr(rec.params), rec.features)
-                key = (*model, np.asarray(train).tobytes())
-                if key not in index:
-                    index[key] = len(sets)
-                    sets.append((model, rec, train))
-                uses.append((split, index[key]))
+                rows = trains.setdefault(model, (rec, []))[1]
+                key = (model, np.asarray(train).tobytes())
+                if key not in where:
+                    where[key] = len(rows)
+                    rows.append(train)
+                uses.append((split, model, where[key]))
             plans.append((described[rec.features], pred, kept, uses))
-        models = [None] * len(sets)
-        for model in dict.fromkeys(m for m, _, _ in sets):
-            mine = [k for k, (m, _, _) in enumerate(sets) if m == model]
-            rec, F = sets[mine[0]][1], described[model[2]]
-            fitted = rec.fit_each([(F[sets[k][2]], y[sets[k][2]], job.groups[sets[k][2]]) for k in mine])
-            for k, fit in zip(mine, fitted):
-                models[k] = fit
+        fitted = {
+            model: rec.fit_each([(described[model[2]][t], y[t], job.groups[t]) for t in rows])
+            for model, (rec, rows) in trains.items()
+        }
         for F, pred, _, uses in plans:
-            for split, k in uses:
-                pred[split.test] = np.argmax(touches.posteriors(models[k], F[split.test], job.n_classes), axis=1)
+            for split, model, k in uses:
+                scores = touches.posteriors(fitted[model][k], F[split.test], job.n_classes)
+                pred[split.test] = np.argmax(scores, axis=1)
     return tuple(_paper_outcome(y, pred, kept, job.n_classes) for _, pred, kept, _ in plans)
 
 

@@ -278,10 +278,15 @@ def _outcomes_from(arrays, cls, count):
     ]
 
 
-def _run_jobs(runtime: Runtime, key: str, cls, run, jobs: list, desc: str) -> list:
-    """``run(job)`` for every job, in order, through the cache (one entry for all of them)."""
-    found = cache_mod.cached(runtime.cache_dir, key, lambda: _outcome_arrays(runtime.map(run, jobs, desc)))
-    return _outcomes_from(found, cls, len(jobs))
+def _run_jobs(runtime: Runtime, key: str, cls, run, jobs: list, desc: str, outcomes=None) -> list:
+    """``run(job)`` for every job, in order, through the cache (one entry for all of them).
+
+    ``outcomes`` (given a job per several outcomes) turns the jobs' results into the list of outcomes.
+    """
+    spread = outcomes or (lambda done: done)
+    found = cache_mod.cached(runtime.cache_dir, key, lambda: _outcome_arrays(spread(runtime.map(run, jobs, desc))))
+    # Every outcome stores each of its fields.
+    return _outcomes_from(found, cls, len(found) // len(dataclasses.fields(cls)))
 
 
 def _recognition_key(kind, arrays, parts):
@@ -328,12 +333,11 @@ def paper_recognition(
         [config.folds, config.repeats, seed, config.threshold, config.params, jobs, config.features],
     )
 
-    def run():
-        done = runtime.map(paper_job, work, f"paper: {method}, {n} objects")
+    def in_job_order(done):
         by_job = {(c, s, r): o for (c, r), pair in zip(shared, done) for s, o in zip((False, True), pair)}
-        return _outcome_arrays([by_job[j] for j in jobs])
+        return [by_job[j] for j in jobs]
 
-    outcomes = _outcomes_from(cache_mod.cached(runtime.cache_dir, key, run), PaperOutcome, len(jobs))
+    outcomes = _run_jobs(runtime, key, PaperOutcome, paper_job, work, f"paper: {method}, {n} objects", in_job_order)
     out = []
     for c, s in _recognizers(config):
         mine = [o for (cj, sj, _), o in zip(jobs, outcomes) if (cj, sj) == (c, s)]

@@ -32,9 +32,13 @@ def point_groups(labels, points, instances=None) -> np.ndarray:
     return np.unique(keys, axis=1, return_inverse=True)[1].reshape(-1).astype(np.int64)
 
 
+def _model(name: str, params: dict):
+    return make(name, **params.get(name, {}))
+
+
 def fit(name: str, params: dict, X, y, groups=None):
     """``classify.make(name, **params[name])`` fitted on ``X, y``, with ``groups`` where its fit takes them."""
-    model = make(name, **params.get(name, {}))
+    model = _model(name, params)
     if "groups" in inspect.signature(model.fit).parameters:
         return model.fit(X, y, groups=groups)
     return model.fit(X, y)
@@ -67,7 +71,7 @@ class Recognizer:
     def fit_each(self, sets) -> list:
         """:meth:`fit` on each ``(X, y, groups)`` of ``sets``: the same models, fitted together where the
         classifier can (the evolutionary SVM solves the duals of all sets in one loop)."""
-        model = make(self.classifier, **(self.params or {}).get(self.classifier, {}))
+        model = _model(self.classifier, self.params or {})
         if hasattr(model, "fit_each"):
             return model.fit_each([(X, y) for X, y, _ in sets])
         return [self.fit(X, y, groups) for X, y, groups in sets]

@@ -13,7 +13,7 @@ import numpy as np
 from meshsal.attention.dkl import dkl, dkl_stack
 from meshsal.attention.itti import color, color_stack, intensity, intensity_stack, orientation, orientation_stack
 from meshsal.attention.local import contrast, entropy
-from meshsal.attention.pyramid import _FLAT, normalize_maps, scale_to_max
+from meshsal.attention.pyramid import _stack_to_max, normalize_maps, scale_to_max
 from meshsal.attention.symmetry import symmetry, symmetry_stack
 from meshsal.util.registry import Registry
 
@@ -327,14 +327,12 @@ def combine_maps(
         if shape != inside.shape:
             raise ValueError(f"channel {name!r} has shape {shape}, the mask {inside.shape}")
     gains = [w[name] for name in names]
-    # The channels cut to the silhouette, each scaled to its maximum (scale_to_max), all in one array.
+    # The channels cut to the silhouette, each scaled to its maximum, all in one array.
     cuts = np.zeros((len(names), h, wd), np.float32)
     for k, name in enumerate(names):
         np.copyto(cuts[k], channels[name], where=inside, casting="unsafe")
+    _stack_to_max(cuts)
     flat = cuts.reshape(len(names), -1)
-    top = flat.max(axis=1).astype(np.float64)
-    lit = top > _FLAT
-    cuts *= np.divide(1.0, top, out=np.zeros_like(top), where=lit).astype(np.float32)[:, None, None]
     if floor is not None and pixels.size:
         # Not rescaled (see ``floor``).
         cuts -= _percentiles(flat[:, pixels], floor)[:, None, None]
@@ -437,8 +435,8 @@ def saliency_views(
 ) -> list[SaliencyResult]:
     """:func:`saliency` of many views of one mesh, in a thread pool, bit for bit view by view.
 
-    The mesh saliency is computed once.  Each thread takes up to a dozen
-    views of one size at once (:func:`image_channels_stack`): per view, the
+    The mesh saliency is computed once.  Each thread takes up to 18 views
+    of one size at once (:func:`image_channels_stack`): per view, the
     center-surround pyramids' hundreds of calls on small maps, each of which
     held Python's lock and handed it over between threads, become a share of
     a few calls on the stack.

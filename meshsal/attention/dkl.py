@@ -16,7 +16,7 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-from meshsal.attention.pyramid import check_image, conspicuity_map, conspicuity_maps
+from meshsal.attention.pyramid import check_image, conspicuity_maps
 
 __all__ = ["RGB_TO_LMS", "srgb_to_linear", "rgb_to_lms", "dkl_axes", "dkl", "dkl_stack"]
 
@@ -88,8 +88,7 @@ def dkl(img: np.ndarray) -> np.ndarray:
     -------
     (H, W) float32 in [0, 1]
     """
-    img = check_image(img, "dkl")
-    return conspicuity_map(list(dkl_axes(img)))
+    return dkl_stack([img])[0]
 
 
 def dkl_stack(imgs) -> np.ndarray:

@@ -10,14 +10,7 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-from meshsal.attention.pyramid import (
-    center_surround_map,
-    check_image,
-    conspicuity_map,
-    conspicuity_maps,
-    gaussian_pyramid,
-    upsample,
-)
+from meshsal.attention.pyramid import check_image, conspicuity_maps, gaussian_pyramid, upsample
 
 __all__ = [
     "intensity",
@@ -70,8 +63,7 @@ def intensity(img: np.ndarray) -> np.ndarray:
     >>> m.shape, bool(m[30, 100] > 0.5)
     ((128, 128), True)
     """
-    img = check_image(img, "intensity")
-    return center_surround_map(_intensity(img))
+    return intensity_stack([img])[0]
 
 
 def intensity_stack(imgs) -> np.ndarray:
@@ -120,8 +112,7 @@ def color(img: np.ndarray) -> np.ndarray:
     >>> bool(color(img)[30, 100] > 0.5)
     True
     """
-    img = check_image(img, "color")
-    return conspicuity_map(list(opponency(img)))
+    return color_stack([img])[0]
 
 
 def color_stack(imgs) -> np.ndarray:
@@ -233,8 +224,7 @@ def orientation(img: np.ndarray) -> np.ndarray:
     >>> bool(abs(r - 80) < 16 and abs(c - 144) < 16)
     True
     """
-    energy = orientation_energy(img)
-    return conspicuity_map(list(energy))
+    return orientation_stack([img])[0]
 
 
 def orientation_stack(imgs) -> np.ndarray:

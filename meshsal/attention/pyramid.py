@@ -137,18 +137,9 @@ def upsample(m: np.ndarray, factor: int, shape: tuple[int, int]) -> np.ndarray:
     >>> upsample(np.array([[0.0, 1.0]], np.float32), 2, (1, 4)).tolist()
     [[0.0, 0.5, 1.0, 1.0]]
     """
-    factor = int(factor)
-    if (
-        m.ndim == 2
-        and m.dtype == np.float32
-        and factor >= _SEPARABLE_FACTOR
-        and factor & (factor - 1) == 0
-        and shape[0] * shape[1] >= _SEPARABLE_PIXELS
-        and m.shape[0] * factor >= shape[0]
-        and m.shape[1] * factor >= shape[1]
-    ):
-        return _separable_upsample(m, factor, shape)
-    return _warp_upsample(m, factor, shape)
+    if m.ndim == 2 and m.dtype == np.float32:
+        return _upsample_stack(m[None], factor, shape)[0]
+    return _warp_upsample(m, int(factor), shape)
 
 
 def _warp_upsample(m: np.ndarray, factor: int, shape: tuple[int, int]) -> np.ndarray:
@@ -254,6 +245,13 @@ def scale_to_max(m: np.ndarray) -> np.ndarray:
     if not top > _FLAT:
         return np.zeros(m.shape, np.float32)
     return m * np.float32(1.0 / top)
+
+
+def _stack_to_max(maps: np.ndarray) -> np.ndarray:
+    """:func:`scale_to_max` of each map of a stack (n, h, w) float32, in place; returns ``maps``."""
+    top = maps.reshape(len(maps), -1).max(axis=1).astype(np.float64)
+    maps *= np.divide(1.0, top, out=np.zeros_like(top), where=top > _FLAT).astype(np.float32)[:, None, None]
+    return maps
 
 
 def check_image(img, name: str = "img") -> np.ndarray:
@@ -450,11 +448,16 @@ def normalize_maps(maps: np.ndarray) -> np.ndarray:
     return m
 
 
+def _pyr_down_each(maps: np.ndarray) -> np.ndarray:
+    """``cv2.pyrDown`` of each map of a stack (n, h, w), one call per map (a multi-channel call rounds otherwise)."""
+    return np.stack([cv2.pyrDown(m) for m in maps])
+
+
 def _pyramid_stack(maps: np.ndarray, levels: int = _LEVELS) -> list[np.ndarray]:
     """:func:`gaussian_pyramid` of each map of a stack (n, H, W), level by level: a list of (n, h_k, w_k)."""
     pyramid = [np.ascontiguousarray(maps, dtype=np.float32)]
     while len(pyramid) < levels and min(pyramid[-1].shape[1:]) >= 2:
-        pyramid.append(np.stack([cv2.pyrDown(m) for m in pyramid[-1]]))
+        pyramid.append(_pyr_down_each(pyramid[-1]))
     return pyramid
 
 
@@ -492,7 +495,7 @@ def _across_scale(pyramid: Sequence[np.ndarray]) -> np.ndarray:
         # |F(c) - F(s)| rounds as cv2.absdiff does: one float32 difference, then its magnitude.
         fmap = normalize_maps(np.abs(center - surround))
         for _ in range(top - c):
-            fmap = np.stack([cv2.pyrDown(m) for m in fmap])
+            fmap = _pyr_down_each(fmap)
         total += fmap
     return total
 

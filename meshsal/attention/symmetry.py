@@ -51,7 +51,7 @@ import numpy as np
 from numpy.lib.stride_tricks import as_strided
 
 from meshsal.attention.local import luma
-from meshsal.attention.pyramid import center_surround_map, check_image, conspicuity_maps, gaussian_pyramid, upsample
+from meshsal.attention.pyramid import check_image, conspicuity_maps, gaussian_pyramid, upsample
 
 __all__ = ["symmetry", "symmetry_stack"]
 
@@ -241,20 +241,16 @@ def symmetry(img: np.ndarray) -> np.ndarray:
     >>> peak(np.hstack([half, half[:, ::-1]])), peak(np.hstack([half, half]))  # mirrored; repeated
     (0.57, 0.02)
     """
-    img = check_image(img, "symmetry")
-    feature = _mirror_feature(luma(img))
-    top = float(feature.max())
-    if not top > 0.0:
-        return np.zeros(img.shape[:2], np.float32)
-    return center_surround_map(feature) * np.float32(top)
+    return symmetry_stack([img])[0]
 
 
 def symmetry_stack(imgs) -> np.ndarray:
     """:func:`symmetry` of each image of a stack (n, H, W, 3), bit for bit: (n, H, W) float32."""
     features = np.stack([_mirror_feature(luma(check_image(img, "symmetry"))) for img in imgs])
     out = np.zeros(features.shape, np.float32)
-    tops = features.reshape(len(features), -1).max(axis=1).astype(np.float64)
+    tops = features.reshape(len(features), -1).max(axis=1)
     some = np.flatnonzero(tops > 0.0)
     if some.size:
-        out[some] = conspicuity_maps(features[some, None]) * tops[some, None, None].astype(np.float32)
+        # Scaled by the strongest axis evidence (see the module notes).
+        out[some] = conspicuity_maps(features[some, None]) * tops[some, None, None]
     return out
