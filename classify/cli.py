@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+import warnings
 
 
 def register(subparsers) -> None:
@@ -312,6 +313,20 @@ def main(argv: list[str] | None = None) -> int:
 
     pin_kernels()
     args = build_parser().parse_args(argv)
+    with warnings.catch_warnings():
+        # A user reads what was repaired in which file, not the line of our code that said so.
+        warnings.showwarning = _warning_printer(args.command)
+        return _run(args)
+
+
+def _warning_printer(command: str):
+    def show(message, category, filename, lineno, file=None, line=None):
+        print(f"visuotactile {command}: warning: {message} ({category.__name__})", file=file or sys.stderr)
+
+    return show
+
+
+def _run(args) -> int:
     try:
         return int(args.func(args) or 0)
     except (ValueError, OSError) as exc:

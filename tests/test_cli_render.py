@@ -93,3 +93,17 @@ def test_render_takes_a_toy_name_for_a_mesh(tmp_path):
 def test_a_missing_mesh_that_is_no_toy_fails_naming_it(tmp_path, capsys):
     assert main(["render", str(tmp_path / "teapot.obj"), "--out", str(tmp_path / "v"), "--quiet"]) == 1
     assert "teapot.obj" in capsys.readouterr().err
+
+
+def test_a_repair_warning_names_the_file_and_not_our_source_line(tmp_path, capsys):
+    mesh = icosphere(radius=10.0, subdivisions=2)
+    path = tmp_path / "stray.obj"
+    lines = [f"v {x} {y} {z}" for x, y, z in mesh.vertices] + ["v 99 99 99"]
+    path.write_text("\n".join(lines + [f"f {a + 1} {b + 1} {c + 1}" for a, b, c in mesh.faces]) + "\n")
+    assert main(["render", str(path), "--out", str(tmp_path / "v"), "--size", "16", "--quiet"]) == 0
+    err = capsys.readouterr().err
+    warned = [line for line in err.splitlines() if "warning" in line]
+    assert len(warned) == 1, err
+    assert warned[0].startswith("visuotactile render: warning: ") and str(path) in warned[0]
+    assert "unreferenced" in warned[0] and warned[0].endswith("(MeshRepairWarning)")
+    assert ".py:" not in err
