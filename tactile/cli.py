@@ -90,6 +90,7 @@ def _cmd_imprints(args) -> int:
         mesh = scale_to_principal(load_object(args.mesh), args.size_mm)
         positions = mesh.transform.apply(source_positions)
         normals = mesh.transform.apply_direction(normals)
+        _check_on_surface(mesh, positions, ids, args)
         images = imprints(mesh, positions, normals, sensor)
         result = ImprintSet(
             imprints=images,
@@ -106,3 +107,24 @@ def _cmd_imprints(args) -> int:
         write_png(picture, imprint_grid(images, [f"#{i}" for i in ids]))
     print(f"wrote {len(images)} {sensor.mode} imprints of {args.mesh} to {args.out} and {picture}")
     return 0
+
+
+# Points are exact surface points; a thousandth of the object's size leaves room for the loader's vertex merging.
+_ON_SURFACE = 1e-3
+
+
+def _check_on_surface(mesh, positions, ids, args) -> None:
+    """Refuse points that are not on this mesh: pressed from off the surface, the pad would feel nothing real."""
+    import numpy as np
+
+    from meshsal.mesh.geometry import surface_distance
+
+    off = surface_distance(mesh.vertices, mesh.faces, positions)
+    far = np.flatnonzero(off > _ON_SURFACE * args.size_mm)
+    if far.size:
+        worst = far[np.argmax(off[far])]
+        raise ValueError(
+            f"{args.points}: {far.size} of {len(off)} points lie off the surface of {args.mesh} (point #{ids[worst]} "
+            f"by {off[worst]:.3g} mm at {args.size_mm:g} mm): they were chosen on another mesh, or on another "
+            "version of this one"
+        )

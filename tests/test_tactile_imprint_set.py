@@ -148,6 +148,47 @@ def test_imprints_command_writes_set_and_picture(tmp_path):
     assert picture is not None and picture.shape[0] > 16 * 8 and picture.shape[1] > 2 * 16 * 8
 
 
+def _face_points(mesh, path):
+    """A points.json of the centroids of every 7th face (surface points that are no vertex), in file units."""
+    faces = mesh.faces[::7]
+    centroids = mesh.vertices[faces].mean(axis=1)
+    normals = np.cross(*(mesh.vertices[faces[:, k]] - mesh.vertices[faces[:, 0]] for k in (1, 2)))
+    normals /= np.linalg.norm(normals, axis=1, keepdims=True)
+    write_points(path, 1.0, centroids, normals.tolist())
+    return len(faces)
+
+
+@pytest.mark.parametrize("other", ["box", "edited"])
+def test_imprints_command_refuses_points_off_the_meshs_surface(tmp_path, capsys, other):
+    from classify.cli import main
+
+    ball = shapes.icosphere(radius=1.0, subdivisions=2)
+    shapes.write_obj(tmp_path / "ball.obj", ball)
+    n = _face_points(ball, tmp_path / "points.json")
+    out = tmp_path / "set.npz"
+    args = ["--points", str(tmp_path / "points.json"), "--out", str(out)]
+    assert main(["imprints", str(tmp_path / "ball.obj"), *args]) == 0
+    assert len(ImprintSet.load(out)) == n
+    out.unlink()
+    if other == "box":
+        mesh = shapes.box(half=1.0, n=8)
+    else:
+        V = ball.vertices.copy()
+        V[0] *= 1.2
+        mesh = dataclasses.replace(ball, vertices=V)
+    shapes.write_obj(tmp_path / f"{other}.obj", mesh)
+    capsys.readouterr()
+    assert main(["imprints", str(tmp_path / f"{other}.obj"), *args]) == 1
+    err = capsys.readouterr().err
+    assert f"{tmp_path / 'points.json'}: " in err and f"off the surface of {tmp_path / other}.obj" in err, err
+    off = int(re.search(r"(\d+) of (\d+) points lie off", err).group(1))
+    assert 1 <= off <= n and f"of {n} points" in err
+    if other == "edited":
+        # Only the faces around the moved vertex left the surface.
+        assert off < n
+    assert not out.exists()
+
+
 @pytest.mark.parametrize(
     "content,message",
     [

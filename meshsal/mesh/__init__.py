@@ -11,6 +11,7 @@ from meshsal.mesh.geometry import (
     half_edges,
     normal_defined,
     ring_max,
+    surface_distance,
     vertex_adjacency,
     vertex_normals,
 )
@@ -26,6 +27,7 @@ __all__ = [
     "normal_defined",
     "bounding_sphere",
     "closed_orientation",
+    "surface_distance",
     "half_edges",
     "vertex_adjacency",
     "ring_max",

@@ -15,6 +15,7 @@ __all__ = [
     "normal_defined",
     "NORMAL_TOLERANCE",
     "bounding_sphere",
+    "surface_distance",
     "closed_orientation",
     "half_edges",
     "vertex_adjacency",
@@ -172,6 +173,32 @@ def bounding_sphere(vertices: np.ndarray) -> tuple[np.ndarray, float]:
     center = 0.5 * (V.T.min(axis=1) + V.T.max(axis=1))
     offset = V - center
     return center, float(np.sqrt(np.einsum("ij,ij->i", offset, offset).max()))
+
+
+def surface_distance(vertices: np.ndarray, faces: np.ndarray, points: np.ndarray) -> np.ndarray:
+    """Distance from each point to the nearest point of the surface, (k,) float64.
+
+    Parameters
+    ----------
+    vertices : (n, 3) float
+    faces : (m, 3) int
+    points : (k, 3) float
+
+    Examples
+    --------
+    >>> V = np.array([[0.0, 0, 0], [1, 0, 0], [0, 1, 0]])
+    >>> surface_distance(V, np.array([[0, 1, 2]]), [[0.2, 0.2, 0.5], [2.0, 0.0, 0.0]]).round(6).tolist()
+    [0.5, 1.0]
+    """
+    import igl
+
+    V = np.ascontiguousarray(vertices, dtype=np.float64)
+    F = np.ascontiguousarray(faces, dtype=np.int64)
+    P = np.ascontiguousarray(np.asarray(points, dtype=np.float64).reshape(-1, 3))
+    if len(P) == 0:
+        return np.zeros(0)
+    squared, _, _ = igl.point_mesh_squared_distance(P, V, F)
+    return np.sqrt(squared)
 
 
 def half_edges(faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
