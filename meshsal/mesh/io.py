@@ -67,8 +67,9 @@ def _read_checked(path: Path, max_bytes: int | None) -> bytes:
 
 
 def _pymeshlab_load(path: Path):
-    import pymeshlab
+    from meshsal.util.meshlab import import_pymeshlab
 
+    pymeshlab = import_pymeshlab()
     ms = pymeshlab.MeshSet()
     params = {"unify_vertices": False} if path.suffix.lower() == ".stl" else {}
     try:

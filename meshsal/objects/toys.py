@@ -203,8 +203,10 @@ def _design_field(design: _Design):
 
 def _mesh(design: _Design):
     import igl
-    import pymeshlab
 
+    from meshsal.util.meshlab import import_pymeshlab
+
+    pymeshlab = import_pymeshlab()
     field, lo, hi = _design_field(design)
     # mesh_field's snapping keeps marching cubes free of the slivers it leaves near grid nodes.
     V, F = sdf.mesh_field(field, lo, hi, design.spacing)
