@@ -248,6 +248,7 @@ def _experiment(args) -> int:
         run_experiment,
         run_real,
     )
+    from classify.experiment.run import WORKER_MODULES
     from classify.recognizers.classifiers import NAMES
     from classify.runtime.cluster import open_executor
 
@@ -280,7 +281,8 @@ def _experiment(args) -> int:
         print(format_tables(result, title="Table 2 layout (real imprints)"))
         return 0
     cache_dir = "default" if args.cache_dir is None else (None if args.cache_dir.lower() == "none" else args.cache_dir)
-    with open_executor(workers=args.workers, scheduler=args.scheduler, n_jobs=args.jobs, **_cluster(args)) as executor:
+    cluster = {**_cluster(args), "preload": WORKER_MODULES}
+    with open_executor(workers=args.workers, scheduler=args.scheduler, n_jobs=args.jobs, **cluster) as executor:
         result = run_experiment(
             args.objects, config, executor=executor, cache_dir=cache_dir, out_dir=args.out, quiet=args.quiet
         )

@@ -230,6 +230,42 @@ def test_real_size_keeps_the_objects_own_millimetres_and_refuses_a_file_without_
         load_objects(["cup", str(path)], Settings(size_mm=None))
 
 
+class _RecordingPool:
+    """A pool that maps in this process and remembers what it was given."""
+
+    def __init__(self):
+        self.given = []
+
+    def map(self, fn, items):
+        items = list(items)
+        self.given += items
+        return map(fn, items)
+
+
+def _same_meshes(a, b):
+    assert a.names == b.names
+    for x, y in zip(a.nominal, b.nominal):
+        np.testing.assert_array_equal(x.vertices, y.vertices)
+        np.testing.assert_array_equal(x.faces, y.faces)
+        np.testing.assert_array_equal(x.vertex_colors, y.vertex_colors)
+
+
+def test_a_pool_builds_the_toys_alone_and_spawned_workers_build_the_same_meshes(tmp_path):
+    from classify.experiment.stages import load_objects
+    from classify.runtime.cluster import worker_pool
+
+    path = tmp_path / "box.obj"
+    shapes.write_obj(path, shapes.box(half=20.0, n=4))
+    names = ["cup", "banana", str(path), "plane"]
+    here = load_objects(names, Settings())
+    recording = _RecordingPool()
+    _same_meshes(load_objects(names, Settings(), recording), here)
+    # Files and the YCB scans are read here, where their repair warnings and errors are raised.
+    assert [r.name for r in recording.given] == ["cup", "plane"]
+    with worker_pool(2) as pool:
+        _same_meshes(load_objects(names, Settings(), pool), here)
+
+
 def test_touch_policies_run_paired_with_the_fixed_plans_and_write_their_rows(tmp_path):
     config = QUICK.replace(
         methods=("uniform", "mesh_saliency"),

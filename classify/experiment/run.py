@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import dataclasses
 import time
+from concurrent.futures import ProcessPoolExecutor
 from contextlib import nullcontext
 from pathlib import Path
 
@@ -66,9 +67,9 @@ __all__ = [
     "write_outputs",
 ]
 
-# What a worker process imports as it starts, while the objects load: the stages, scikit-learn, OpenCV, the mesh
-# libraries (2-3 s).
-_WORKER_MODULES = (__name__, "meshsal.points", "meshsal.attention.rig", "meshsal.objects.instances", "tactile")
+#: What a worker process of the experiment imports as it starts, while the objects load (``worker_pool``'s
+#: ``preload``): the stages, scikit-learn, OpenCV, the mesh libraries (2-3 s).
+WORKER_MODULES = (__name__, "meshsal.points", "meshsal.attention.rig", "meshsal.objects.instances", "tactile")
 
 
 def _object_sets(n_all: int) -> tuple:
@@ -209,10 +210,11 @@ def run_experiment(
     # A touch model needs training instances: the paper protocol has none.
     paper_methods = [m for m in config.methods if m not in MODEL_METHODS]
     timings, measurements, stage = {}, [], InstanceStage({})
-    workers = nullcontext(executor) if executor is not None else worker_pool(n_jobs, preload=_WORKER_MODULES)
+    workers = nullcontext(executor) if executor is not None else worker_pool(n_jobs, preload=WORKER_MODULES)
     with threadpool_limits(1), workers as pool:
-        # The workers start while the objects load; a bad file still stops the run before any work.
-        objects = load_objects(objects, settings)
+        # Local workers start while the objects load, and build the toys; a bad file still stops the run before any work.
+        local = executor is None or isinstance(executor, ProcessPoolExecutor)
+        objects = load_objects(objects, settings, pool if local else None)
         # Workers render with one thread each; alone, the stage renders with every core.
         runtime = Runtime(pool, cache_dir, None if isinstance(pool, Inline) else 1, quiet)
         if "paper" in config.protocols and paper_methods:

@@ -173,6 +173,7 @@ def open_executor(
     n_jobs: int = 1,
     security=None,
     dashboard: str | None = None,
+    preload: tuple = (),
 ):
     """An executor on a Dask cluster (``scheduler``), a new LocalCluster (``workers``) or local processes.
 
@@ -197,6 +198,8 @@ def open_executor(
         LocalCluster only: serve the dashboard at this address, e.g.
         ``127.0.0.1:8787`` (``:8787`` would serve every interface); its link
         is printed on stderr.  Off by default.
+    preload : tuple of str
+        Local processes only: modules each imports as it starts (:func:`worker_pool`).
 
     Yields
     ------
@@ -211,7 +214,7 @@ def open_executor(
     if scheduler is None and workers is None:
         if security is not None:
             raise ValueError("certificates are for a Dask cluster: give workers or a scheduler address")
-        with worker_pool(n_jobs) as pool:
+        with worker_pool(n_jobs, preload) as pool:
             yield pool
         return
     from distributed import Client, LocalCluster
