@@ -26,6 +26,10 @@ The store is a folder:
 ``failures.jsonl``
     One JSON line per mesh the last run could not process: its name, file
     and error.
+``repairs.jsonl``
+    One JSON line per mesh the last run repaired as it loaded it: its name,
+    file and what was repaired (the loader's ``MeshRepairWarning``, which a
+    worker on another machine would only have printed in its own log).
 
 :func:`load_entry` reads one entry back as ``meshsal.InterestPoints`` and
 ``tactile.ImprintSet`` per method; :func:`load_store` reads them all.
@@ -52,6 +56,7 @@ import json
 import os
 import time
 import traceback
+import warnings
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -138,7 +143,7 @@ class MeshEntry:
 @dataclass(frozen=True)
 class BatchSummary:
     """What a run did: meshes done now (``redone`` of them because their file changed), skipped as already
-    stored from the same mesh, failed; wall time; stage medians (s)."""
+    stored from the same mesh, failed; wall time; stage medians (s); meshes repaired as they loaded."""
 
     done: int
     skipped: int
@@ -146,6 +151,7 @@ class BatchSummary:
     wall_s: float
     stage_median_s: dict
     redone: int = 0
+    repaired: int = 0
 
     def markdown(self) -> str:
         rate = self.done / self.wall_s if self.wall_s > 0 else 0.0
@@ -218,7 +224,9 @@ def _entry_meta(path: Path) -> dict:
 def process_mesh(path, name: str, store, settings: BatchSettings) -> dict:
     """Write one mesh's entry unless the store holds one computed from the same mesh.
 
-    Returns ``{"name", "status", "error", "timings", "source_sha256", "redone"}``.
+    Returns ``{"name", "status", "error", "timings", "source_sha256", "redone", "repairs"}``;
+    ``repairs`` says what the loader repaired ("" for nothing), which the
+    loader's warning would have said only on the worker's own stderr.
     ``status`` is ``"skipped"`` (the stored entry has this mesh's
     :func:`source_hash` and these settings), ``"done"`` (written now;
     ``redone`` when it replaced the entry of another version of the file) or
@@ -228,16 +236,28 @@ def process_mesh(path, name: str, store, settings: BatchSettings) -> dict:
     """
     from threadpoolctl import threadpool_limits
 
-    from meshsal.mesh.io import load_mesh
+    from meshsal.mesh.io import MeshRepairWarning, load_mesh
 
     timings = {}
     path, store = Path(path), Path(store)
     target = _entry_path(store, name)
-    result = {"name": name, "status": "done", "error": "", "timings": timings, "source_sha256": "", "redone": False}
+    result = {
+        "name": name,
+        "status": "done",
+        "error": "",
+        "timings": timings,
+        "source_sha256": "",
+        "redone": False,
+        "repairs": "",
+    }
     try:
         with threadpool_limits(1):
             t = time.perf_counter()
-            source = load_mesh(path)
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore", MeshRepairWarning)
+                source, found = load_mesh(path, report=True)
+            if found.repaired or found.findings():
+                result["repairs"] = found.message()
             timings["load"] = time.perf_counter() - t
             result["source_sha256"] = digest = source_hash(source)
             try:
@@ -468,14 +488,15 @@ def run_batch(
         ]
         wall = time.perf_counter() - started
         failed = [r for r in results if r["status"] == "failed"]
+        repaired = [r for r in results if r["repairs"]]
         sources = {name: str(path) for name, path in meshes}
-        write_text(
-            store / "failures.jsonl",
-            "".join(
-                json.dumps({"name": r["name"], "source": sources[r["name"]], "error": r["error"]}) + "\n"
-                for r in failed
-            ),
-        )
+        for file, rows, key in (("failures.jsonl", failed, "error"), ("repairs.jsonl", repaired, "repairs")):
+            write_text(
+                store / file,
+                "".join(
+                    json.dumps({"name": r["name"], "source": sources[r["name"]], key: r[key]}) + "\n" for r in rows
+                ),
+            )
         for stale in (store / "meshes").rglob(".*.npz"):
             stale.unlink(missing_ok=True)  # left by a worker killed while writing; its mesh was redone
     done = [r for r in results if r["status"] == "done"]
@@ -485,7 +506,9 @@ def run_batch(
         for k in STAGES
         if done and all(k in r["timings"] for r in done)
     }
-    return BatchSummary(len(done), skipped, len(failed), wall, medians, redone=sum(r["redone"] for r in done))
+    return BatchSummary(
+        len(done), skipped, len(failed), wall, medians, redone=sum(r["redone"] for r in done), repaired=len(repaired)
+    )
 
 
 def load_entry(store, name: str) -> MeshEntry:

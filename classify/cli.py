@@ -145,7 +145,7 @@ def register(subparsers) -> None:
             "(.obj .ply .off .stl) under DIR, one task per mesh on a Dask cluster: a LocalCluster of "
             "--workers processes (default: one per core), or an existing cluster at --scheduler. Each "
             "mesh's entry is written atomically to STORE/meshes/<name>.npz; a rerun skips the meshes "
-            "already there; a broken mesh goes to STORE/failures.jsonl and does not stop the batch. "
+            "already there; a broken mesh goes to STORE/failures.jsonl and does not stop the batch, and what loading repaired goes to STORE/repairs.jsonl. "
             "Load the store with classify.batch.load_store(STORE)."
         ),
     )
@@ -225,6 +225,10 @@ def _batch(args) -> int:
     with open_executor(workers=workers, scheduler=args.scheduler, **_cluster(args)) as executor:
         summary = run_batch(args.directory, args.out, settings, executor, args.quiet)
     print(summary.markdown())
+    if summary.repaired:
+        print(
+            f"{summary.repaired} mesh(es) were repaired as they loaded: see {args.out}/repairs.jsonl", file=sys.stderr
+        )
     if summary.failed:
         print(f"{summary.failed} mesh(es) failed: see {args.out}/failures.jsonl", file=sys.stderr)
     return 0

@@ -342,6 +342,29 @@ def test_a_broken_mesh_is_recorded_and_does_not_stop_the_batch(tmp_path, capsys)
     assert np.abs(source).max() < 10.0  # back in the file's own units
 
 
+def test_what_loading_repaired_reaches_the_store_from_workers_elsewhere(tmp_path, dask_cluster, capsys):
+    corpus = _corpus(tmp_path / "corpus", 2)
+    ball = shapes.icosphere(radius=2.0, subdivisions=2)
+    stray = corpus / "stray.obj"
+    lines = [f"v {x} {y} {z}" for x, y, z in ball.vertices] + ["v 9 9 9"]
+    stray.write_text("\n".join(lines + [f"f {a + 1} {b + 1} {c + 1}" for a, b, c in ball.faces]) + "\n")
+    store = tmp_path / "store"
+    options = ("--methods", "uniform", "--n-points", "4")
+    with open_executor(scheduler=dask_cluster.address) as executor:
+        summary = batch.run_batch(corpus, store, batch.BatchSettings(methods=("uniform",), n_points=4), executor)
+    assert (summary.done, summary.repaired) == (3, 1)
+    (row,) = [json.loads(line) for line in (store / "repairs.jsonl").read_text().splitlines()]
+    assert row["name"] == "stray" and row["source"] == str(stray.resolve())
+    assert row["repairs"] == f"{stray.resolve()}: removed 1 unreferenced vertices", row
+    # A rerun skips every mesh and still says what loading repaired, once, in the client's words.
+    capsys.readouterr()
+    assert main(_batch_argv(corpus, store, *options)) == 0
+    out, err = capsys.readouterr()
+    assert "| 0 | 3 | 0 | 0 |" in out
+    assert err.strip() == f"1 mesh(es) were repaired as they loaded: see {store}/repairs.jsonl", err
+    assert [json.loads(line) for line in (store / "repairs.jsonl").read_text().splitlines()] == [row]
+
+
 def test_a_store_refuses_other_settings(corpus, serial_store):
     with pytest.raises(ValueError, match="other settings"):
         batch.run_batch(corpus, serial_store, batch.BatchSettings(methods=("uniform",)), quiet=True)
