@@ -256,7 +256,7 @@ def process_mesh(path, name: str, store, settings: BatchSettings) -> dict:
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore", MeshRepairWarning)
                 source, found = load_mesh(path, report=True)
-            if found.repaired or found.findings():
+            if found.noteworthy:
                 result["repairs"] = found.message()
             timings["load"] = time.perf_counter() - t
             result["source_sha256"] = digest = source_hash(source)

@@ -285,8 +285,9 @@ def _experiment(args) -> int:
         print(format_tables(result, title="Table 2 layout (real imprints)"))
         return 0
     cache_dir = "default" if args.cache_dir is None else (None if args.cache_dir.lower() == "none" else args.cache_dir)
-    cluster = {**_cluster(args), "preload": WORKER_MODULES}
-    with open_executor(workers=args.workers, scheduler=args.scheduler, n_jobs=args.jobs, **cluster) as executor:
+    with open_executor(
+        workers=args.workers, scheduler=args.scheduler, n_jobs=args.jobs, preload=WORKER_MODULES, **_cluster(args)
+    ) as executor:
         result = run_experiment(
             args.objects, config, executor=executor, cache_dir=cache_dir, out_dir=args.out, quiet=args.quiet
         )

@@ -346,8 +346,7 @@ def test_what_loading_repaired_reaches_the_store_from_workers_elsewhere(tmp_path
     corpus = _corpus(tmp_path / "corpus", 2)
     ball = shapes.icosphere(radius=2.0, subdivisions=2)
     stray = corpus / "stray.obj"
-    lines = [f"v {x} {y} {z}" for x, y, z in ball.vertices] + ["v 9 9 9"]
-    stray.write_text("\n".join(lines + [f"f {a + 1} {b + 1} {c + 1}" for a, b, c in ball.faces]) + "\n")
+    shapes.write_obj(stray, ball.replace(vertices=np.vstack([ball.vertices, [9.0, 9, 9]])))
     store = tmp_path / "store"
     options = ("--methods", "uniform", "--n-points", "4")
     with open_executor(scheduler=dask_cluster.address) as executor:

@@ -3,7 +3,7 @@
 import cv2
 import numpy as np
 import pytest
-from shapes import icosphere
+from shapes import icosphere, write_obj
 
 from classify.cli import main
 from meshsal.mesh.io import save_ply
@@ -98,8 +98,7 @@ def test_a_missing_mesh_that_is_no_toy_fails_naming_it(tmp_path, capsys):
 def test_a_repair_warning_names_the_file_and_not_our_source_line(tmp_path, capsys):
     mesh = icosphere(radius=10.0, subdivisions=2)
     path = tmp_path / "stray.obj"
-    lines = [f"v {x} {y} {z}" for x, y, z in mesh.vertices] + ["v 99 99 99"]
-    path.write_text("\n".join(lines + [f"f {a + 1} {b + 1} {c + 1}" for a, b, c in mesh.faces]) + "\n")
+    write_obj(path, mesh.replace(vertices=np.vstack([mesh.vertices, [99.0, 99, 99]])))
     assert main(["render", str(path), "--out", str(tmp_path / "v"), "--size", "16", "--quiet"]) == 0
     err = capsys.readouterr().err
     warned = [line for line in err.splitlines() if "warning" in line]

@@ -123,7 +123,7 @@ def _repaired(mesh):
     from meshsal.mesh.repair import repair_mesh
 
     fixed, report = repair_mesh(mesh)
-    if report.repairs() or report.findings():
+    if report.noteworthy:
         warnings.warn(report.message(), MeshRepairWarning, stacklevel=3)
     return fixed
 

@@ -191,7 +191,7 @@ def load_mesh(
         zero_area_faces=found.zero_area_faces + declared.n_repeated,
         notes=tuple(notes),
     )
-    if found.repaired or found.findings():
+    if found.noteworthy:
         warnings.warn(found.message(), MeshRepairWarning, stacklevel=2)
     mesh = Mesh(vertices=V, faces=F, vertex_colors=C, uv=UV, texture=texture, name=path.stem)
     return (mesh, found) if report else mesh

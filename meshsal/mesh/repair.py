@@ -146,6 +146,11 @@ class MeshReport:
         """Whether anything was changed or left out."""
         return bool(self.repairs() or self.notes)
 
+    @property
+    def noteworthy(self) -> bool:
+        """Whether :meth:`message` has anything to say: a repair, a note or a defect kept."""
+        return self.repaired or bool(self.findings())
+
     def repairs(self) -> list[str]:
         """What was done, one phrase per kind of repair, in the order they ran."""
         done = [
@@ -198,7 +203,7 @@ class MeshReport:
             f"{self.components} components ({self.closed_components} closed), {self.boundary_edges} boundary "
             f"edges in {self.boundary_loops} loops"
         )
-        return self.message() + ("; " if self.repaired or self.findings() else "") + kept
+        return self.message() + ("; " if self.noteworthy else "") + kept
 
 
 def repair_mesh(mesh: Mesh) -> tuple[Mesh, MeshReport]:
