@@ -2,37 +2,31 @@
 
 Another 2-core machine can be twice as slow, and the machines these run on
 are shared: every benchmark prints :func:`machine` (CPU model, cores, load
-average) with its figures, and times with :func:`timed` (wall and process CPU
-time of all threads).
+average) with its figures, times with :func:`timed` (wall and process CPU
+time of all threads), and writes its tables to ``docs/benchmarks/`` with
+:func:`write_page` (command, commit, machine and date in the header).
 """
 
 from __future__ import annotations
 
-import os
-import platform
 import time
 from pathlib import Path
 
 import numpy as np
 
+from meshsal.util import pages
+
 DEFAULT_MESHES = Path(__file__).resolve().parents[2] / "shared" / "meshes"
-
-
-def cpu_model() -> str:
-    """The CPU's model name from /proc/cpuinfo (the platform's processor string elsewhere)."""
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.lower().startswith("model name"):
-                return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    return platform.processor() or platform.machine() or "unknown CPU"
 
 
 def machine() -> str:
     """One line: CPU model, core count, load average over 1 / 5 / 15 minutes."""
-    load = " / ".join(f"{x:.2f}" for x in os.getloadavg()) if hasattr(os, "getloadavg") else "n/a"
-    return f"machine: {cpu_model()}, {os.cpu_count()} cores, load average {load} (1 / 5 / 15 min)"
+    return f"machine: {pages.machine()}"
+
+
+def write_page(name: str, title: str, body: str) -> None:
+    """The benchmark's tables as ``docs/benchmarks/NAME.md``, with the command, commit, machine and date."""
+    pages.write_page(Path(__file__).resolve().parents[1] / "docs" / "benchmarks" / f"{name}.md", title, body)
 
 
 def timed(fn):
