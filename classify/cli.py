@@ -145,7 +145,10 @@ def register(subparsers) -> None:
             "(.obj .ply .off .stl) under DIR, one task per mesh on a Dask cluster: a LocalCluster of "
             "--workers processes (default: one per core), or an existing cluster at --scheduler. Each "
             "mesh's entry is written atomically to STORE/meshes/<name>.npz; a rerun skips the meshes "
-            "already there; a broken mesh goes to STORE/failures.jsonl and does not stop the batch, and what loading repaired goes to STORE/repairs.jsonl. "
+            "already there. Every mesh is read first: meshes that cannot be read are listed and nothing is computed "
+            "unless --skip-bad; a mesh identical to another (as loaded) is stored once and listed in "
+            "STORE/duplicates.jsonl; a mesh that fails later goes to STORE/failures.jsonl and does not stop the "
+            "batch, and what loading repaired goes to STORE/repairs.jsonl. "
             "Load the store with classify.batch.load_store(STORE)."
         ),
     )
@@ -161,6 +164,11 @@ def register(subparsers) -> None:
     b.add_argument("--size-mm", type=float, default=150.0, help="nominal size: principal-frame box diagonal (mm)")
     b.add_argument("--view-size", type=int, default=128, help="rendered view size for the attention points")
     b.add_argument("--seed", type=int, default=0)
+    b.add_argument(
+        "--skip-bad",
+        action="store_true",
+        help="run on the readable meshes when some cannot be read (they go to STORE/failures.jsonl)",
+    )
     b.add_argument("--quiet", action="store_true", help="no progress bar")
     _add_cluster_options(b, default_workers=0)
     b.set_defaults(func=_batch)
@@ -223,8 +231,14 @@ def _batch(args) -> int:
         workers = args.workers if args.workers is not None else (os.cpu_count() or 1)
         workers = workers if workers > 1 else None  # one worker: this process, no cluster
     with open_executor(workers=workers, scheduler=args.scheduler, **_cluster(args)) as executor:
-        summary = run_batch(args.directory, args.out, settings, executor, args.quiet)
+        summary = run_batch(args.directory, args.out, settings, executor, args.quiet, args.skip_bad)
     print(summary.markdown())
+    if summary.duplicates:
+        print(
+            f"{summary.duplicates} mesh(es) are the same mesh as another and are stored once: "
+            f"see {args.out}/duplicates.jsonl",
+            file=sys.stderr,
+        )
     if summary.repaired:
         print(
             f"{summary.repaired} mesh(es) were repaired as they loaded: see {args.out}/repairs.jsonl", file=sys.stderr

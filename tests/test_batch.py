@@ -286,7 +286,7 @@ def test_an_edited_mesh_is_computed_again_and_an_unchanged_one_is_not(tmp_path):
     _assert_same(_entries(fresh), _entries(store))
     # A file that no longer loads loses its entry: the store never holds one its file would not give.
     (corpus / "m01.obj").write_text("v 0 0 0\nv 1 0 0\nf 1 2 9\n")
-    summary = batch.run_batch(corpus, store, settings, quiet=True)
+    summary = batch.run_batch(corpus, store, settings, quiet=True, skip_bad=True)
     assert (summary.done, summary.skipped, summary.failed) == (0, 2, 1)
     assert sorted(batch.load_store(store)) == ["m00", "m02"]
     (failure,) = [json.loads(line) for line in (store / "failures.jsonl").read_text().splitlines()]
@@ -298,6 +298,9 @@ class _LosingExecutor:
     of their own, or to a broken one, would leave them."""
 
     def map(self, fn, tasks):
+        if fn is not batch.run._task:  # the reading of the meshes, before any entry
+            yield from map(fn, tasks)
+            return
         for task in tasks:
             result = fn(task)
             entry = Path(task[2]) / "meshes" / f"{task[1]}.npz"
@@ -325,21 +328,90 @@ def test_an_entry_the_client_cannot_read_is_a_failure(tmp_path):
     assert (again.done, again.skipped, again.failed) == (2, 2, 0)
 
 
-def test_a_broken_mesh_is_recorded_and_does_not_stop_the_batch(tmp_path, capsys):
-    corpus = _corpus(tmp_path / "corpus", 3)
-    (corpus / "broken.obj").write_text("v 0 0 0\nv 1 0 0\nf 1 2 9\n")
+class _SpyExecutor:
+    """Runs in this process and keeps the name of every function it maps."""
+
+    def __init__(self):
+        self.mapped = []
+
+    def map(self, fn, tasks):
+        self.mapped.append(fn.__name__)
+        return map(fn, tasks)
+
+
+def _tree(folder: Path) -> dict:
+    """Every file under ``folder``: its bytes and modification time."""
+    return {p: (p.read_bytes(), p.stat().st_mtime_ns) for p in sorted(folder.rglob("*")) if p.is_file()}
+
+
+def test_unreadable_meshes_are_listed_before_any_work_and_skipped_only_when_asked(tmp_path, capsys):
+    corpus = _corpus(tmp_path / "corpus", 4)
     store = tmp_path / "store"
-    assert main(_batch_argv(corpus, store, "--methods", "uniform", "--n-points", "4")) == 0
+    options = ("--methods", "uniform", "--n-points", "4")
+    settings = batch.BatchSettings(methods=("uniform",), n_points=4)
+    assert main(_batch_argv(corpus, store, *options)) == 0
+    before = _tree(store)
+    (corpus / "broken.obj").write_text("v 0 0 0\nv 1 0 0\nf 1 2 9\n")  # a face beyond the vertices
+    (corpus / "sub" / "empty.stl").write_bytes(b"")
+    capsys.readouterr()
+    # Refused, naming both files and what is wrong with each; the store as it was, and no mesh computed.
+    assert main(_batch_argv(corpus, store, *options)) == 1
+    err = capsys.readouterr().err
+    assert f"{corpus}: 2 of 6 meshes cannot be read, so nothing was computed" in err and "--skip-bad" in err
+    assert f"{corpus / 'broken.obj'}: line 3: face vertex index 9 out of range" in err
+    assert f"{corpus / 'sub' / 'empty.stl'}" in err
+    assert _tree(store) == before
+    spy = _SpyExecutor()
+    with pytest.raises(batch.BadMeshesError) as caught:
+        batch.run_batch(corpus, tmp_path / "new", settings, spy, quiet=True)
+    assert spy.mapped == ["_read_task"] and not (tmp_path / "new").exists()
+    assert [row["name"] for row in caught.value.bad] == ["broken", "sub/empty"]
+    # Asked to skip them: the others are computed, the two recorded as failures.
+    assert main(_batch_argv(corpus, store, *options, "--skip-bad")) == 0
     out, err = capsys.readouterr()
-    assert "| 3 | 0 | 1 | 0 |" in out and "failures.jsonl" in err
+    assert "| 0 | 4 | 2 | 0 | 0 |" in out and "2 mesh(es) failed" in err
     failures = [json.loads(line) for line in (store / "failures.jsonl").read_text().splitlines()]
-    assert [f["name"] for f in failures] == ["broken"] and "broken.obj" in failures[0]["error"]
+    assert [(f["name"], f["source"]) for f in failures] == [
+        ("broken", str(corpus / "broken.obj")),
+        ("sub/empty", str(corpus / "sub" / "empty.stl")),
+    ]
+    assert "out of range" in failures[0]["error"]
     entries = batch.load_store(store)
-    assert sorted(entries) == ["m00", "m01", "m02"]
+    assert sorted(entries) == ["m00", "m01", "m02", "sub/m03"]
     entry = entries["m01"]
     assert len(entry.points["uniform"]) == 4 and entry.imprints["uniform"].imprints.shape == (4, 16, 16)
     source = entry.transform.to_source(entry.points["uniform"].positions)
     assert np.abs(source).max() < 10.0  # back in the file's own units
+
+
+def test_identical_meshes_are_one_object_stored_under_the_first_name(tmp_path, capsys):
+    settings = batch.BatchSettings(methods=("uniform",), n_points=4)
+    corpus = _corpus(tmp_path / "corpus", 3)
+    store = tmp_path / "store"
+    # A copy stored first, under a name that sorts after the original's.
+    (corpus / "sub").mkdir()
+    (corpus / "sub" / "m01.obj").write_bytes((corpus / "m01.obj").read_bytes())
+    (corpus / "m01.obj").rename(tmp_path / "m01.obj")
+    assert batch.run_batch(corpus, store, settings, quiet=True).done == 3
+    (tmp_path / "m01.obj").rename(corpus / "m01.obj")
+    # The same mesh, byte for byte, twice more; and one whose file differs but loads the same.
+    (corpus / "sub" / "m01-again.obj").write_bytes((corpus / "m01.obj").read_bytes())
+    (corpus / "z.obj").write_text((corpus / "m02.obj").read_text().replace("\n", "\r\n"))
+    summary = batch.run_batch(corpus, store, settings, quiet=True)
+    assert (summary.done, summary.skipped, summary.duplicates, summary.failed) == (1, 2, 3, 0)
+    assert sorted(batch.load_store(store)) == ["m00", "m01", "m02"]
+    rows = [json.loads(line) for line in (store / "duplicates.jsonl").read_text().splitlines()]
+    assert [(r["name"], r["same_as"]) for r in rows] == [("sub/m01", "m01"), ("sub/m01-again", "m01"), ("z", "m02")]
+    assert rows[0]["source"] == str(corpus / "sub" / "m01.obj")
+    assert rows[0]["same_as_source"] == str(corpus / "m01.obj")
+    fresh = tmp_path / "fresh"
+    assert batch.run_batch(corpus, fresh, settings, quiet=True).duplicates == 3
+    _assert_same(_entries(fresh), _entries(store))  # whatever the store held before
+    capsys.readouterr()
+    assert main(_batch_argv(corpus, store, "--methods", "uniform", "--n-points", "4")) == 0
+    out, err = capsys.readouterr()
+    assert "| 0 | 3 | 0 | 0 | 3 |" in out
+    assert f"3 mesh(es) are the same mesh as another and are stored once: see {store}/duplicates.jsonl" in err
 
 
 def test_what_loading_repaired_reaches_the_store_from_workers_elsewhere(tmp_path, dask_cluster, capsys):
@@ -367,3 +439,25 @@ def test_what_loading_repaired_reaches_the_store_from_workers_elsewhere(tmp_path
 def test_a_store_refuses_other_settings(corpus, serial_store):
     with pytest.raises(ValueError, match="other settings"):
         batch.run_batch(corpus, serial_store, batch.BatchSettings(methods=("uniform",)), quiet=True)
+
+
+def test_a_batch_task_computes_on_one_thread_and_gives_the_threads_back(tmp_path, monkeypatch):
+    import cv2
+    from threadpoolctl import threadpool_info
+
+    corpus = _corpus(tmp_path / "corpus", 1)
+    seen, compute = [], batch.run._compute
+
+    def spying(*args):
+        seen.append((cv2.getNumThreads(), max(pool["num_threads"] for pool in threadpool_info())))
+        compute(*args)
+
+    monkeypatch.setattr(batch.run, "_compute", spying)
+    default = cv2.getNumThreads()
+    try:
+        cv2.setNumThreads(3)
+        result = batch.process_mesh(corpus / "m00.obj", "m00", tmp_path / "store", SETTINGS)
+        assert cv2.getNumThreads() == 3
+    finally:
+        cv2.setNumThreads(default)
+    assert result["status"] == "done" and seen == [(1, 1)] and result["cpu_s"] > 0

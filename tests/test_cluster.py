@@ -8,7 +8,7 @@ import pytest
 from conftest import missing
 
 from classify.cli import main
-from classify.runtime.cluster import LOOPBACK, open_executor, tls_security
+from classify.runtime.cluster import LOOPBACK, one_thread, open_executor, tls_security, worker_pool
 
 
 def _listening() -> set:
@@ -54,6 +54,37 @@ def test_a_local_cluster_listens_on_loopback_only_with_no_dashboard(tls, request
     # each worker: all on the loopback interface.
     assert len(opened) >= 5 and {ip for _, ip, _ in opened} == {LOOPBACK}
     assert "dashboard" not in capsys.readouterr().err
+
+
+def _threads(_) -> tuple:
+    """OpenCV's threads and the most threads any BLAS or OpenMP pool of this process may use."""
+    import cv2
+    from threadpoolctl import threadpool_info
+
+    return cv2.getNumThreads(), max(pool["num_threads"] for pool in threadpool_info())
+
+
+def _task_threads(_) -> tuple:
+    with one_thread():
+        return _threads(None)
+
+
+def test_a_task_runs_on_one_thread_wherever_it_runs():
+    import cv2
+
+    default = cv2.getNumThreads()
+    try:
+        cv2.setNumThreads(3)
+        assert _task_threads(None) == (1, 1)
+        assert cv2.getNumThreads() == 3  # the caps end with the block
+    finally:
+        cv2.setNumThreads(default)
+    # Workers of a LocalCluster and of the local process pool start on one thread; a worker started
+    # elsewhere, as a plain 'dask worker', gets the caps from each task (tests/test_batch.py runs on one).
+    with open_executor(workers=2) as executor:
+        assert list(executor.map(_threads, range(2))) == [(1, 1)] * 2
+    with worker_pool(2) as pool:
+        assert list(pool.map(_threads, range(2))) == [(1, 1)] * 2
 
 
 def _as_addresses(opened, scheme):

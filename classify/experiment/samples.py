@@ -44,7 +44,6 @@ __all__ = [
     "mesh_hash",
     "instance_spec",
     "point_options",
-    "method_points",
     "paper_sample",
     "place_sample",
     "instance_samples",
@@ -190,40 +189,6 @@ def _point_seed(settings: Settings, name: str, replicate: int, index: int) -> in
     return int(instance_rng(settings.seed, name, replicate, index, Stream.POINTS).integers(2**31 - 1))
 
 
-def method_points(
-    mesh, methods, options, *, model=None, surveyed: Survey | None = None, vertex_saliency=None, seen=None
-) -> dict:
-    """Every method's points on one mesh, its rendering and mesh saliency computed once.
-
-    The per-mesh stage that the experiment and the corpus batch
-    (:mod:`classify.batch`) share.  "learned" chooses from ``surveyed``'s pool
-    when given (no rendering), else from its own
-    (``meshsal.points.points_by_method``).
-
-    Returns
-    -------
-    dict method -> meshsal.InterestPoints
-    """
-    from meshsal.mesh.curvature import mesh_saliency
-    from meshsal.points import learned_points, points_by_method
-
-    vertex_saliency = mesh_saliency(mesh) if vertex_saliency is None else vertex_saliency
-    by_survey = surveyed is not None and "learned" in methods
-    picked = points_by_method(
-        mesh,
-        [m for m in methods if not (by_survey and m == "learned")],
-        options,
-        model=model,
-        vertex_saliency=vertex_saliency,
-        seen=seen,
-    )
-    if by_survey:
-        picked["learned"] = learned_points(
-            mesh, surveyed.pool, surveyed.features, model, vertex_saliency, n=options.n, pad_width=options.pad_width
-        )
-    return {m: picked[m] for m in methods}
-
-
 def _key(kind, nominal, name, method, settings, *parts):
     code = cache_mod.code_fingerprint("meshsal", "tactile") + cache_mod.file_fingerprint(__file__)
     return cache_mod.cache_key(
@@ -353,7 +318,7 @@ def instance_samples(task: SampleTask) -> InstanceSamples:
     from meshsal.mesh.curvature import mesh_saliency
     from meshsal.mesh.embree import embree_scene
     from meshsal.objects.instances import make_instance
-    from meshsal.points import ATTENTION_METHODS, MODEL_METHODS, view_channels
+    from meshsal.points import ATTENTION_METHODS, MODEL_METHODS, method_points, view_channels
 
     settings = task.settings
     methods = list(dict.fromkeys(task.methods))

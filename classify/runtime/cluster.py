@@ -23,8 +23,11 @@ pickled: whoever reaches a plain ``tcp://`` scheduler can run code on every
 worker and on the client.  Reach a remote cluster over TLS, an SSH tunnel or
 a private network only.
 
-Every task caps BLAS and OpenMP at one thread inside its worker
-(``threadpoolctl``), whatever started the worker, and a LocalCluster's
+A worker is one thread: BLAS, OpenMP and OpenCV's own thread pool (which
+the attention's filters and matching use) run on the task's thread only.
+Two workers on two cores then share them without a third thread fighting
+for either, and the batch's tasks cap the three inside their worker
+(:func:`one_thread`), whatever started the worker.  A LocalCluster's
 workers also start with the thread caps and the pinned kernels of
 ``meshsal.util.reproducible`` in their environment.  Workers of an external
 cluster pick their kernels by CPU unless started pinned, e.g.
@@ -41,7 +44,7 @@ from concurrent.futures import ProcessPoolExecutor
 from contextlib import contextmanager
 from pathlib import Path
 
-__all__ = ["Inline", "worker_pool", "open_executor", "tls_security", "worker_env", "LOOPBACK"]
+__all__ = ["Inline", "one_thread", "worker_pool", "open_executor", "tls_security", "worker_env", "LOOPBACK"]
 
 LOOPBACK = "127.0.0.1"
 
@@ -53,28 +56,57 @@ class Inline:
         return map(fn, *iterables)
 
 
+@contextmanager
+def one_thread():
+    """BLAS, OpenMP and OpenCV on the calling thread only, for the block; the caps before it come back after.
+
+    OpenCV's pool is process-wide, so a block in one thread caps it for the
+    process's other threads too; a worker runs one task at a time.
+
+    Examples
+    --------
+    >>> import cv2
+    >>> with one_thread():
+    ...     cv2.getNumThreads()
+    1
+    """
+    import cv2
+    from threadpoolctl import threadpool_limits
+
+    before = cv2.getNumThreads()
+    cv2.setNumThreads(1)
+    try:
+        with threadpool_limits(1):
+            yield
+    finally:
+        cv2.setNumThreads(before)
+
+
 def _start_worker(preload=()):
-    """Worker initializer: one BLAS/OpenMP thread per worker process, for its whole life; ``preload`` imported."""
+    """Worker initializer: one BLAS, OpenMP and OpenCV thread per worker process, for its whole life; ``preload``
+    imported."""
     import importlib
 
+    import cv2
     from threadpoolctl import threadpool_limits
 
     threadpool_limits(1)
+    cv2.setNumThreads(1)
     for name in preload:
         importlib.import_module(name)
 
 
 def worker_env() -> dict:
-    """Environment of a LocalCluster's workers: one BLAS/OpenMP thread, the pinned kernels."""
+    """Environment of a LocalCluster's workers: one BLAS, OpenMP and OpenCV thread, the pinned kernels."""
     from meshsal.util.reproducible import kernel_environment
 
-    env = {name: "1" for name in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")}
-    return {**env, **kernel_environment()}
+    names = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "OPENCV_FOR_THREADS_NUM")
+    return {**{name: "1" for name in names}, **kernel_environment()}
 
 
 @contextmanager
 def worker_pool(n_jobs: int, preload: tuple = ()):
-    """``n_jobs`` spawned worker processes with capped BLAS/OpenMP threads (:class:`Inline` for one).
+    """``n_jobs`` spawned worker processes with capped BLAS, OpenMP and OpenCV threads (:class:`Inline` for one).
 
     Workers are spawned, not forked: the parent may hold Embree and BLAS threads.
     They start at once and import the modules named in ``preload`` (the

@@ -20,6 +20,7 @@ from meshsal.points.methods import (
     PointMethod,
     attention_combination,
     interest_points,
+    method_points,
     points_by_method,
 )
 from meshsal.points.record import InterestPoints
@@ -49,4 +50,5 @@ __all__ = [
     "attention_maps",
     "learned_points",
     "points_by_method",
+    "method_points",
 ]

@@ -36,6 +36,7 @@ __all__ = [
     "MODEL_METHODS",
     "attention_combination",
     "points_by_method",
+    "method_points",
     "interest_points",
 ]
 
@@ -232,6 +233,60 @@ def points_by_method(
         mesh, vertex_normals(mesh.vertices, mesh.faces), vertex_saliency, rules, options, model, seen, maps
     )
     return {m: method.choose(m, ctx) for m, method in chosen.items()}
+
+
+def method_points(
+    mesh: Mesh, methods, options: PointOptions, *, model=None, surveyed=None, vertex_saliency=None, seen=None
+) -> dict:
+    """:func:`points_by_method`, with "learned" chosen from a survey's pool when one is given (no rendering).
+
+    The per-mesh stage that the experiment and the corpus batch share.
+
+    Parameters
+    ----------
+    mesh : Mesh
+    methods : iterable of str, names in ``POINT_METHODS``
+    options : PointOptions
+    model : meshsal.points.learned.TouchModel, optional
+    surveyed : optional
+        Anything with ``pool`` ((k,) int vertex ids) and ``features`` ((k, len(FEATURES)) float), e.g. a
+        ``classify.experiment.survey.Survey``: "learned" ranks that pool (:func:`learned_points`) instead
+        of its own.
+    vertex_saliency : (n_vertices,) float64, optional
+        Precomputed mesh saliency.
+    seen : ViewChannels, optional
+        The mesh's channels if already computed.
+
+    Returns
+    -------
+    dict method -> InterestPoints, in the order of ``methods``
+
+    Examples
+    --------
+    >>> import meshsal
+    >>> cup = meshsal.objects.toys.make("cup")
+    >>> picked = method_points(cup, ["uniform", "random"], PointOptions(n=5))
+    >>> list(picked), len(picked["uniform"])
+    (['uniform', 'random'], 5)
+    """
+    from meshsal.mesh.curvature import mesh_saliency
+
+    methods = list(methods)
+    vertex_saliency = mesh_saliency(mesh) if vertex_saliency is None else vertex_saliency
+    by_survey = surveyed is not None and "learned" in methods
+    picked = points_by_method(
+        mesh,
+        [m for m in methods if not (by_survey and m == "learned")],
+        options,
+        model=model,
+        vertex_saliency=vertex_saliency,
+        seen=seen,
+    )
+    if by_survey:
+        picked["learned"] = learned_points(
+            mesh, surveyed.pool, surveyed.features, model, vertex_saliency, n=options.n, pad_width=options.pad_width
+        )
+    return {m: picked[m] for m in methods}
 
 
 def interest_points(
