@@ -95,6 +95,8 @@ class DaskCluster:
                 "--port",
                 "0",
                 "--no-dashboard",
+                "--dashboard-address",  # health and metrics: on loopback, never 0.0.0.0:8787
+                "127.0.0.1:0",
                 "--scheduler-file",
                 str(self.file),
                 *self.tls,
@@ -121,6 +123,8 @@ class DaskCluster:
                 "1",
                 "--no-nanny",
                 "--no-dashboard",
+                "--dashboard-address",
+                "127.0.0.1:0",
                 "--host",
                 "127.0.0.1",
                 *self.tls,

@@ -8,7 +8,7 @@ import pytest
 from conftest import missing
 
 from classify.cli import main
-from classify.runtime.cluster import LOOPBACK, one_thread, open_executor, tls_security, worker_pool
+from classify.runtime.cluster import LOOPBACK, QUIET, one_thread, open_executor, tls_security, worker_pool
 
 
 def _listening() -> set:
@@ -64,6 +64,12 @@ def _threads(_) -> tuple:
     return cv2.getNumThreads(), max(pool["num_threads"] for pool in threadpool_info())
 
 
+def _housekeeping(_) -> tuple:
+    import dask
+
+    return tuple(dask.config.get(key) for key in QUIET)
+
+
 def _task_threads(_) -> tuple:
     with one_thread():
         return _threads(None)
@@ -83,6 +89,8 @@ def test_a_task_runs_on_one_thread_wherever_it_runs():
     # elsewhere, as a plain 'dask worker', gets the caps from each task (tests/test_batch.py runs on one).
     with open_executor(workers=2) as executor:
         assert list(executor.map(_threads, range(2))) == [(1, 1)] * 2
+        # Without a dashboard, no profiler samples the task's thread and the loops tick slowly.
+        assert list(executor.map(_housekeeping, range(2))) == [tuple(QUIET.values())] * 2
     with worker_pool(2) as pool:
         assert list(pool.map(_threads, range(2))) == [(1, 1)] * 2
 
