@@ -168,8 +168,8 @@ def read_meshes(meshes, executor=None, quiet: bool = True) -> list[dict]:
     executor = Inline() if executor is None else executor
     items = [(name, str(path)) for name, path in meshes]
     chunks = [items[i : i + READ_CHUNK] for i in range(0, len(items), READ_CHUNK)]
-    done = progress(executor.map(_read_task, chunks), total=len(chunks), desc="reading", quiet=quiet, unit="tasks")
-    return [row for rows in done for row in rows]
+    rows = (row for rows in executor.map(_read_task, chunks) for row in rows)
+    return list(progress(rows, total=len(items), desc="reading", quiet=quiet, unit="meshes"))
 
 
 def process_mesh(path, name: str, store, settings: BatchSettings) -> dict:
