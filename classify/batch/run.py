@@ -79,8 +79,9 @@ class BadMeshesError(ValueError):
 
     def __init__(self, root: Path, bad: list, total: int):
         self.bad = bad
+        # The loader's errors name their file; others get it in front.
         lines = "".join(
-            f"\n  {row['error'] if row['source'] in row['error'] else row['source'] + ': ' + row['error']}"
+            f"\n  {row['error']}" if row["source"] in row["error"] else f"\n  {row['source']}: {row['error']}"
             for row in bad
         )
         super().__init__(
@@ -371,12 +372,10 @@ def run_batch(
         raise BadMeshesError(root, bad, len(meshes))
     same = _same_meshes(read)
     sources = {name: str(path) for name, path in meshes}
-    unreadable = {row["name"] for row in bad}
+    left_out = {row["name"] for row in bad} | same.keys()
     with lock_store(store):
         open_store(store, settings)
-        tasks = [
-            (str(path), name, str(store), settings) for name, path in meshes if name not in unreadable | same.keys()
-        ]
+        tasks = [(str(path), name, str(store), settings) for name, path in meshes if name not in left_out]
         results = [
             _check_entry(store, r)
             for r in progress(executor.map(_task, tasks), total=len(tasks), desc="batch", quiet=quiet, unit="meshes")
