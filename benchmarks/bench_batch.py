@@ -48,15 +48,17 @@ def _peak_rss_mb() -> float:
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
 
 
-def _cpu(processes) -> float:
-    total = 0.0
-    for p in processes:
-        try:
-            t = p.cpu_times()
-            total += t.user + t.system
-        except psutil.NoSuchProcess:
-            pass
-    return total
+def _cpu() -> tuple:
+    """This process's id and CPU time (all threads, user and system)."""
+    t = psutil.Process().cpu_times()
+    return os.getpid(), t.user + t.system
+
+
+def _workers_cpu(before: dict, after: dict) -> float:
+    """CPU time the workers spent between two ``client.run(_cpu)``; a worker restarted meanwhile is an error."""
+    if {a: pid for a, (pid, _) in before.items()} != {a: pid for a, (pid, _) in after.items()}:
+        raise RuntimeError(f"a worker restarted during the run ({before} -> {after}): its CPU time is lost")
+    return sum(after[a][1] - before[a][1] for a in before)
 
 
 def _subset(corpus: Path, count: int, into: Path) -> Path:
@@ -67,16 +69,15 @@ def _subset(corpus: Path, count: int, into: Path) -> Path:
 
 
 def _run(folder: Path, workers: int, store: Path) -> dict:
-    me = psutil.Process()
     with open_executor(workers=workers) as executor:
         client = executor._client
         client.run(__import__, "classify.batch.run")  # the workers' imports stay out of the figures
-        processes = [me, *me.children(recursive=True)]
-        cpu, load = _cpu(processes), os.getloadavg()[0]
+        # This process holds the scheduler, the nannies and the client.
+        (_, here), there, load = _cpu(), client.run(_cpu), os.getloadavg()[0]
         started = time.perf_counter()
         summary = run_batch(folder, store, SETTINGS, executor, quiet=True)
         wall = time.perf_counter() - started
-        cpu = _cpu(processes) - cpu
+        cpu = _cpu()[1] - here + _workers_cpu(there, client.run(_cpu))
         peak = max(client.run(_peak_rss_mb).values())
     return {
         "workers": workers,
