@@ -15,6 +15,8 @@ from meshsal.util.lazy import attach
 
 _EXPORTS = {
     "NAMES": "recognizers.classifiers",
+    "PAPER_NAMES": "recognizers.classifiers",
+    "PlaceAware": "recognizers.place",
     "CLASSIFIERS": "recognizers.classifiers",
     "make": "recognizers.classifiers",
     "as_matrix": "recognizers.classifiers",

@@ -15,6 +15,7 @@ import warnings
 def register(subparsers) -> None:
     """Add the recognition subcommands (``experiment``, ``batch``)."""
     from classify.experiment import DEFAULT_REPLICATES, FULL_REPLICATES
+    from classify.experiment.config import CONTROLS, MISMATCHES
     from classify.experiment.protocols import PROTOCOL_REGISTRY, PROTOCOLS
     from classify.policies import POLICIES
     from classify.recognizers.classifiers import CLASSIFIERS
@@ -127,6 +128,25 @@ def register(subparsers) -> None:
         type=int,
         default=2,
         help="local worker processes without --workers or --scheduler (default 2; results do not depend on it)",
+    )
+    p.add_argument(
+        "--codebook-draws",
+        type=int,
+        default=8,
+        help="place-aware recognizer: simulated touches per place and training instance in its codebooks",
+    )
+    p.add_argument(
+        "--mismatch",
+        type=_csv_list,
+        default=(),
+        help="a mismatch arm: the test instances depart from what training simulates (several apply "
+        f"together): {'; '.join(f'{k}: {v}' for k, v in MISMATCHES.items())}",
+    )
+    p.add_argument(
+        "--control",
+        choices=tuple(CONTROLS),
+        default=None,
+        help=f"a control run that must give chance: {'; '.join(f'{k}: {v}' for k, v in CONTROLS.items())}",
     )
     p.add_argument("--quiet", action="store_true", help="no progress bars")
     p.add_argument(
@@ -267,6 +287,8 @@ def _experiment(args) -> int:
         train_instances=args.train_instances,
         train_sessions=args.train_sessions,
         seed=args.seed,
+        codebook_draws=args.codebook_draws,
+        mismatch=args.mismatch,
     )
     config = ExperimentConfig(
         methods=args.methods,
@@ -279,6 +301,7 @@ def _experiment(args) -> int:
         baseline=args.baseline,
         policies=args.policies,
         replicates=FULL_REPLICATES if args.full else (args.replicates or DEFAULT_REPLICATES),
+        control=args.control,
     )
     if args.real:
         result = run_real(args.real, config, out_dir=args.out, quiet=args.quiet, n_jobs=args.jobs)

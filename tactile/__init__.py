@@ -23,6 +23,7 @@ _EXPORTS = {
     "imprints_exact": "section",
     "Perturbation": "perturbation",
     "acquire": "perturbation",
+    "touch_codebook": "perturbation",
     "select_by_similarity": "selection",
     "ImprintSet": "imprint_set",
 }

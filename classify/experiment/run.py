@@ -23,7 +23,9 @@ import numpy as np
 from threadpoolctl import threadpool_limits
 
 from classify.experiment.config import DEFAULT_REPLICATES, FULL_REPLICATES, ExperimentConfig, Settings
+from classify.experiment.place import place_recognition
 from classify.experiment.protocols import PROTOCOLS
+from classify.experiment.sequential import policy_recognition
 from classify.experiment.stages import (
     InstanceStage,
     ObjectSet,
@@ -33,7 +35,6 @@ from classify.experiment.stages import (
     load_objects,
     paper_recognition,
     paper_stage,
-    policy_recognition,
 )
 from classify.reporting import stats
 from classify.reporting.results import (
@@ -70,6 +71,22 @@ __all__ = [
 #: What a worker process of the experiment imports as it starts, while the objects load (``worker_pool``'s
 #: ``preload``): the stages, scikit-learn, OpenCV, the mesh libraries (2-3 s).
 WORKER_MODULES = (__name__, "meshsal.points", "meshsal.attention.rig", "meshsal.objects.instances", "tactile")
+
+
+def _provenance() -> dict:
+    """Where and when this run measured: its command line, the commit, the machine, the date (UTC)."""
+    import datetime
+    import shlex
+    import sys
+
+    from meshsal.util import pages
+
+    return {
+        "command": shlex.join(sys.argv),
+        "commit": pages.commit(),
+        "machine": pages.machine(),
+        "date": datetime.datetime.now(datetime.UTC).strftime("%Y-%m-%d %H:%M UTC"),
+    }
 
 
 def _object_sets(n_all: int) -> tuple:
@@ -223,8 +240,15 @@ def run_experiment(
             timings["paper"] = time.perf_counter() - t0
         if "instance" in config.protocols:
             t0 = time.perf_counter()
+            place = "place" in config.classifiers
             stage = instance_stage(
-                objects, config.methods, settings, config.replicates, runtime, places=bool(config.policies)
+                objects,
+                config.methods,
+                settings,
+                config.replicates,
+                runtime,
+                places=bool(config.policies) or place,
+                codebook=place,
             )
             timings["instance_points_and_imprints"] = time.perf_counter() - t0
             t0 = time.perf_counter()
@@ -237,6 +261,11 @@ def run_experiment(
                 for n in _object_sets(len(objects)):
                     measurements += policy_recognition(n, stage, objects, config, runtime)
                 timings["sequential"] = time.perf_counter() - t0
+            if place:
+                t0 = time.perf_counter()
+                for n in _object_sets(len(objects)):
+                    measurements += place_recognition(n, stage, objects, config, runtime)
+                timings["place"] = time.perf_counter() - t0
 
     summary = _summarize(measurements, config, objects.names)
     timings["total"] = time.perf_counter() - started
@@ -246,6 +275,7 @@ def run_experiment(
         "libraries": cache_mod.library_versions(),
         "cache_dir": None if cache_dir is None else str(cache_dir),
         "learned_channel_weights": [m.channel_weights for m in stage.models],
+        "provenance": _provenance(),
     }
     result = ExperimentResult(
         object_names=objects.names,

@@ -19,6 +19,7 @@ import numpy as np
 from threadpoolctl import threadpool_limits
 
 from classify.experiment.config import ExperimentConfig, Settings
+from classify.experiment.controls import shuffled_imprints
 from classify.experiment.protocols import (
     InstanceData,
     InstanceJob,
@@ -57,6 +58,8 @@ __all__ = [
     "Measurement",
     "paper_recognition",
     "instance_recognition",
+    "run_jobs",
+    "recognition_key",
 ]
 
 
@@ -192,15 +195,23 @@ def paper_stage(objects: ObjectSet, methods, settings: Settings, runtime: Runtim
 
 
 def instance_stage(
-    objects: ObjectSet, methods, settings: Settings, replicates: int, runtime: Runtime, places: bool = False
+    objects: ObjectSet,
+    methods,
+    settings: Settings,
+    replicates: int,
+    runtime: Runtime,
+    places: bool = False,
+    codebook: bool = False,
 ) -> InstanceStage:
     """Every instance's points and imprints for every method, and each replicate's touch model.
 
     One task per instance computes all methods that need no model, sharing
-    its rendering, plus its touch survey when a model method is asked for
-    and its places when ``places`` (touch policies); then each replicate's
-    model is fitted on its training instances' surveys; then the model
-    methods run on every instance.
+    its rendering, plus its touch survey when a model method is asked for,
+    its places when ``places`` (touch policies, the place-aware recognizer)
+    and, on a training instance, its touch codebooks when ``codebook`` (the
+    place-aware recognizer); then each replicate's model is fitted on its
+    training instances' surveys; then the model methods run on every
+    instance (with their codebooks).
     """
     plain = tuple(m for m in methods if m not in MODEL_METHODS)
     learned = tuple(m for m in methods if m in MODEL_METHODS)
@@ -223,7 +234,7 @@ def instance_stage(
 
     done = runtime.map(
         _instance_samples,
-        [task(r, i, j, plain, survey=bool(learned), places=places) for r, i, j in where],
+        [task(r, i, j, plain, survey=bool(learned), places=places, codebook=codebook) for r, i, j in where],
         "instances: points+imprints",
     )
     samples = {SampleKey(r, m, i, j): out.by_method[m] for (r, i, j), out in zip(where, done) for m in plain}
@@ -238,7 +249,7 @@ def instance_stage(
     )
     done = runtime.map(
         _instance_samples,
-        [task(r, i, j, learned, model=models[r], surveyed=surveys[r, i, j]) for r, i, j in where],
+        [task(r, i, j, learned, model=models[r], surveyed=surveys[r, i, j], codebook=codebook) for r, i, j in where],
         "instances: learned points+imprints",
     )
     samples.update({SampleKey(r, m, i, j): out.by_method[m] for (r, i, j), out in zip(where, done) for m in learned})
@@ -285,7 +296,7 @@ def _outcomes_from(arrays, cls, count):
     ]
 
 
-def _run_jobs(runtime: Runtime, key: str, cls, run, jobs: list, desc: str, outcomes=None) -> list:
+def run_jobs(runtime: Runtime, key: str, cls, run, jobs: list, desc: str, outcomes=None) -> list:
     """``run(job)`` for every job, in order, through the cache (one entry for all of them).
 
     ``outcomes`` (given a job per several outcomes) turns the jobs' results into the list of outcomes.
@@ -296,14 +307,15 @@ def _run_jobs(runtime: Runtime, key: str, cls, run, jobs: list, desc: str, outco
     return _outcomes_from(found, cls, len(found) // len(dataclasses.fields(cls)))
 
 
-def _recognition_key(kind, arrays, parts):
+def recognition_key(kind, arrays, parts):
     code = cache_mod.code_fingerprint("classify", "tactile")
     return cache_mod.cache_key(kind, cache_mod.hash_arrays(*arrays), parts, code, cache_mod.library_versions())
 
 
 def _recognizers(config: ExperimentConfig):
-    """Every (classifier, selection) of the config, in the order the tables list them."""
-    return [(c, s) for c in config.classifiers for s in (False, True)]
+    """Every (classifier, selection) of the place-free classifiers, in the order the tables list them (the
+    place-aware recognizer has its own job: ``classify.experiment.place``)."""
+    return [(c, s) for c in config.classifiers if c != "place" for s in (False, True)]
 
 
 def paper_recognition(
@@ -322,7 +334,7 @@ def paper_recognition(
     splits = paper_splits(y, groups, config.folds, config.repeats, seed)
     jobs = [(c, s, r) for c, s in _recognizers(config) for r in range(config.repeats)]
     # One job per classifier and repeat, with and without selection: a fold selection leaves whole is fitted once.
-    shared = [(c, r) for c in config.classifiers for r in range(config.repeats)]
+    shared = [(c, r) for c in config.classifiers if c != "place" for r in range(config.repeats)]
     work = [
         PaperJob(
             X,
@@ -334,7 +346,7 @@ def paper_recognition(
         )
         for c, r in shared
     ]
-    key = _recognition_key(
+    key = recognition_key(
         "paper",
         (X, y, groups),
         [config.folds, config.repeats, seed, config.threshold, config.params, jobs, config.features],
@@ -344,7 +356,7 @@ def paper_recognition(
         by_job = {(c, s, r): o for (c, r), pair in zip(shared, done) for s, o in zip((False, True), pair)}
         return [by_job[j] for j in jobs]
 
-    outcomes = _run_jobs(runtime, key, PaperOutcome, paper_job, work, f"paper: {method}, {n} objects", in_job_order)
+    outcomes = run_jobs(runtime, key, PaperOutcome, paper_job, work, f"paper: {method}, {n} objects", in_job_order)
     out = []
     for c, s in _recognizers(config):
         mine = [o for (cj, sj, _), o in zip(jobs, outcomes) if (cj, sj) == (c, s)]
@@ -368,9 +380,10 @@ def paper_recognition(
 
 
 def instance_data(
-    stage: InstanceStage, replicate: int, method: str, objects: ObjectSet, order, settings: Settings
+    stage: InstanceStage, replicate: int, method: str, objects: ObjectSet, order, settings: Settings, control=None
 ) -> InstanceData:
-    """Replicate ``replicate``'s imprints of the objects ``order`` (label c is object ``order[c]``)."""
+    """Replicate ``replicate``'s imprints of the objects ``order`` (label c is object ``order[c]``); with
+    ``control`` "shuffled", each test instance's imprints are another object's (``classify.experiment.controls``)."""
     X, y, inst, point = [], [], [], []
     for c, i in enumerate(order):
         for j in range(1, settings.train_instances + 1):
@@ -381,13 +394,16 @@ def instance_data(
             inst.append(np.full(sessions * k, j))
             point.append(np.tile(np.arange(k), sessions))
     test = tuple(stage.samples[SampleKey(replicate, method, i, 0)].imprints[0] for i in order)
+    names = tuple(objects.names[i] for i in order)
+    if control == "shuffled":
+        test = shuffled_imprints(test, names, settings.seed, replicate)
     return InstanceData(
         np.concatenate(X),
         np.concatenate(y).astype(np.int64),
         np.concatenate(inst).astype(np.int64),
         np.concatenate(point).astype(np.int64),
         test,
-        tuple(objects.names[i] for i in order),
+        names,
     )
 
 
@@ -400,7 +416,7 @@ def instance_recognition(
     names = objects.names[:n]
     order = objects.by_name(n)
     back = np.argsort(order)
-    data = [instance_data(stage, r, method, objects, order, settings) for r in range(config.replicates)]
+    data = [instance_data(stage, r, method, objects, order, settings, config.control) for r in range(config.replicates)]
     jobs = [(r, c, s) for r in range(config.replicates) for c, s in _recognizers(config)]
     work = [
         InstanceJob(
@@ -415,7 +431,7 @@ def instance_recognition(
         for r, c, s in jobs
     ]
     arrays = [a for d in data for a in (d.train_X, d.train_y, d.train_instance, d.train_point, *d.test)]
-    key = _recognition_key(
+    key = recognition_key(
         "instance",
         arrays,
         [
@@ -429,7 +445,7 @@ def instance_recognition(
             config.stop_levels,
         ],
     )
-    outcomes = _run_jobs(runtime, key, InstanceOutcome, instance_job, work, f"instances: {method}, {n} objects")
+    outcomes = run_jobs(runtime, key, InstanceOutcome, instance_job, work, f"instances: {method}, {n} objects")
     out = []
     for c, s in _recognizers(config):
         mine = [o for (_, cj, sj), o in zip(jobs, outcomes) if (cj, sj) == (c, s)]
@@ -457,59 +473,4 @@ def instance_recognition(
                 stopping,
             )
         )
-    return out
-
-
-def policy_recognition(
-    n: int, stage: InstanceStage, objects: ObjectSet, config: ExperimentConfig, runtime: Runtime
-) -> list[Measurement]:
-    """The sequential protocol on the first ``n`` objects: one :class:`Measurement` per policy and classifier."""
-    from classify.experiment.sequential import PolicyOutcome, policy_job, policy_jobs
-
-    jobs = policy_jobs(stage, objects, n, config)
-    back = np.argsort(objects.by_name(n))
-    arrays = [
-        a
-        for job in jobs[:: len(config.classifiers)]
-        for sample in (*job.training.values(), *job.tests)
-        for a in sample.to_arrays().values()
-    ]
-    key = _recognition_key(
-        "sequential",
-        arrays,
-        [
-            config.settings.key(),
-            config.params,
-            config.features,
-            list(config.policies),
-            list(config.classifiers),
-            config.stop_levels,
-            config.replicates,
-        ],
-    )
-    outcomes = _run_jobs(runtime, key, PolicyOutcome, policy_job, jobs, f"policies, {n} objects")
-    out = []
-    for q, policy in enumerate(config.policies):
-        for c in config.classifiers:
-            mine = [o for job, o in zip(jobs, outcomes) if job.recognizer.classifier == c]
-            stack = np.stack([o.rates[q] for o in mine])[:, :, back]  # (replicates, k, objects)
-            K = stack.shape[1]
-            stopping = (
-                np.stack([o.stop_correct[q] for o in mine])[:, :, back],
-                np.stack([o.stop_touches[q] for o in mine])[:, :, back],
-            )
-            out.append(
-                Measurement(
-                    policy,
-                    "sequential",
-                    c,
-                    n,
-                    False,
-                    {k: stack[:, k - 1, :] for k in range(1, K + 1)},
-                    dict.fromkeys(range(1, K + 1), 1),
-                    None,
-                    None,
-                    stopping,
-                )
-            )
     return out

@@ -10,10 +10,14 @@ from classify.policies.episodes import Episode, available_places, decisions, run
 from classify.policies.knowledge import (
     LANDMARKS,
     Forecast,
+    PlaceKnowledge,
     Places,
     PlaceSample,
     TouchKnowledge,
     fit_knowledge,
+    fit_place_knowledge,
+    place_keys,
+    place_touches,
     signatures,
 )
 from classify.policies.policy import (
@@ -33,7 +37,11 @@ __all__ = [
     "PlaceSample",
     "Forecast",
     "TouchKnowledge",
+    "PlaceKnowledge",
     "fit_knowledge",
+    "fit_place_knowledge",
+    "place_keys",
+    "place_touches",
     "TouchState",
     "TouchPolicy",
     "RandomPolicy",

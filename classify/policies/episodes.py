@@ -3,8 +3,10 @@
 The runner (:func:`run_episode`) holds the test instance's imprints at every
 place and the label; the policy sees only a
 :class:`~classify.policies.policy.TouchState`.  After each touch the belief
-is the product of the calibrated posteriors of the touches so far, as the
-fusion multiplies them (``classify.recognizers.fusion``); the decision after
+is the product of the single-touch posteriors of the touches so far: the
+calibrated posteriors of a place-free classifier, as the fusion multiplies
+them (``classify.recognizers.fusion``), or the tempered place-aware
+likelihoods of ``PlaceKnowledge``; the decision after
 k touches is its most probable class, ties broken by the episode's tie
 stream.  :func:`stopping_curve` applies a stopping rule afterwards: stop when
 the top class's belief reaches p, or after the last touch.
@@ -76,7 +78,7 @@ def run_episode(
     policy : TouchPolicy
     sample : PlaceSample
         The test instance: its places and the imprints of ``session`` at each.
-    knowledge : TouchKnowledge
+    knowledge : TouchKnowledge or PlaceKnowledge
         Fitted on training instances only.
     touches : int
         At most this many touches (fewer when no place is left).
@@ -99,7 +101,9 @@ def run_episode(
     places = sample.places
     forecast = knowledge.forecast(places)
     if felt is None:
-        felt = knowledge.posterior(sample.imprints[session])  # what each place would feel; the policy never sees it
+        felt = knowledge.posterior(
+            sample.imprints[session], places
+        )  # what each place would feel; never seen by the policy
     belief = np.full(knowledge.n_classes, 1.0 / knowledge.n_classes)
     touched, beliefs, seconds = [], [], []
     for _ in range(touches):

@@ -130,9 +130,11 @@ def table_markdown(cells, method: str, protocol: str, classifiers, object_sets, 
 def touches_markdown(
     cells, method: str, protocol: str, classifiers, n_objects: int, selection: bool, touches=(1, 2, 3, 5, 10, 15)
 ) -> str:
-    """Recognition after k touches: rows classifiers, columns k (mean [95 % interval], percent)."""
+    """Recognition after k touches: rows classifiers (those measured in this setting), columns k (mean [95 %
+    interval], percent)."""
     index = _index(cells)
     ks = [k for k in touches if any((method, protocol, c, n_objects, selection, k) in index for c in classifiers)]
+    classifiers = [c for c in classifiers if any((method, protocol, c, n_objects, selection, k) in index for k in ks)]
     lines = [
         "| classifier | " + " | ".join(f"{k} touch{'es' if k > 1 else ''}" for k in ks) + " |",
         "|---|" + "|".join([":---:"] * len(ks)) + "|",

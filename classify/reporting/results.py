@@ -242,24 +242,27 @@ def format_tables(result: ExperimentResult, title="Table 1 layout") -> str:
                         f"{'with' if selection else 'no'} selection: recognition (%) after k touches\n\n"
                         + report.touches_markdown(result.cells, method, protocol, result.classifiers, n, selection)
                     )
-    clf = "knn" if "knn" in result.classifiers else result.classifiers[0]
+    # The place-free classifier the README's tables use, and the place-aware recognizer beside it.
+    shown = [c for c in ("knn", "place") if c in result.classifiers] or [result.classifiers[0]]
     if result.comparisons:
         baseline = result.comparisons[0].baseline
-        for protocol in [p for p in protocols if p != "sequential"]:
-            table = report.comparison_markdown(result.cells, result.comparisons, protocol, clf, n, False)
-            if table:
-                policies = " and touch policies" if protocol == "instance" and "sequential" in protocols else ""
-                blocks.append(
-                    f"### Point methods{policies} against {baseline}, {_title(protocol)}, {clf}, {n} "
-                    f"objects, no selection: rate (%) and paired difference (points) [95 % interval], "
-                    f"Wilcoxon p\n\n" + table
-                )
-    if result.stopping:
-        blocks.append(
-            f"### Stopping rule: stop when the top object's calibrated posterior reaches p; {clf}, {n} "
-            f"objects, no selection: accuracy (%) / mean touches used [95 % intervals in "
-            f"stopping.csv]\n\n" + report.stopping_markdown(result.stopping, clf, n)
-        )
+        for clf in shown:
+            for protocol in [p for p in protocols if p != "sequential"]:
+                table = report.comparison_markdown(result.cells, result.comparisons, protocol, clf, n, False)
+                if table:
+                    policies = " and touch policies" if protocol == "instance" and "sequential" in protocols else ""
+                    blocks.append(
+                        f"### Point methods{policies} against {baseline}, {_title(protocol)}, {clf}, {n} "
+                        f"objects, no selection: rate (%) and paired difference (points) [95 % interval], "
+                        f"Wilcoxon p\n\n" + table
+                    )
+    for clf in shown if result.stopping else ():
+        if any((s.classifier, s.n_objects) == (clf, n) for s in result.stopping):
+            blocks.append(
+                f"### Stopping rule: stop when the top object's posterior reaches p; {clf}, {n} "
+                f"objects, no selection: accuracy (%) / mean touches used [95 % intervals in "
+                f"stopping.csv]\n\n" + report.stopping_markdown(result.stopping, clf, n)
+            )
     notes = [
         c
         for c in result.cells
