@@ -88,9 +88,10 @@ def test_obj_vertex_colors(tmp_path):
 
 
 def test_obj_negative_indices_and_slashes(tmp_path):
-    text = "v 0 0 0\nv 1 0 0\nv 0 1 0\nvn 0 0 1\nf -3//1 -2//1 -1//1\nv 0 0 1\nf 2 1 -1\n"
+    # Two triangles at a right angle, facing out of the angle between them.
+    text = "v 0 0 0\nv 1 0 0\nv 0 1 0\nvn 0 0 1\nf -3//1 -1//1 -2//1\nv 0 0 1\nf 1 2 -1\n"
     m = load_clean(write(tmp_path / "neg.obj", text))
-    np.testing.assert_array_equal(m.faces, [[0, 1, 2], [1, 0, 3]])
+    np.testing.assert_array_equal(m.faces, [[0, 2, 1], [0, 1, 3]])
 
 
 def textured_obj(tmp_path, image=True, extra_faces=""):
