@@ -221,6 +221,17 @@ def test_an_open_part_inside_a_closed_one_sees_no_sky_and_is_left_as_it_is():
     np.testing.assert_array_equal(fixed.faces, F)
 
 
+def test_a_face_on_an_edge_of_three_is_cut_off_even_when_every_vertex_keeps_one_fan():
+    # A tetrahedron and a fin on one of its edges, with the fin paired with a tetrahedron face there: around
+    # both ends of the edge the faces still form one fan each, yet the edge holds three (the corpus's 523.obj).
+    V = np.array([[0, 3, 2], [1, 0, 2], [2, 0, 2], [0, 3, 0], [2, 3, 1]], float)
+    F = np.array([[3, 2, 4], [3, 4, 0], [0, 2, 3], [4, 2, 0], [1, 3, 2]])
+    V2, F2, _, _, report = repair_arrays(V, F, source="fin")
+    assert Edges(F2, len(V2)).counts.max() == 2 and igl.is_vertex_manifold(F2).all()
+    assert (report.nonmanifold_edges, report.nonmanifold_vertices, report.added_vertices) == (1, 2, 2)
+    assert report.closed_components == 1
+
+
 def test_uv_and_colours_follow_their_faces_and_vertices():
     V, F = messy.box()
     colours = (V / 32.0).astype(np.float32)

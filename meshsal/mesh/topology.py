@@ -331,10 +331,13 @@ def split_fans(V: np.ndarray, F: np.ndarray, C, edges: Edges):
     pairs = np.concatenate([edges.pairs[edges.consistent()], radial_pairs(V, F, edges)])
     n_fans, fan = _fans(pairs, F.size)
     if n_fans == n:
-        return None
-    fan_vertex = np.empty(n_fans, dtype=np.int64)
-    fan_vertex[fan] = F.reshape(-1)
-    F, source = _keep_order(fan.reshape(-1, 3), fan_vertex, n)
+        if not np.any(edges.counts > 2):
+            return None
+        source = np.arange(n)  # every vertex one fan, yet a face cut off at an edge reaches round both its ends
+    else:
+        fan_vertex = np.empty(n_fans, dtype=np.int64)
+        fan_vertex[fan] = F.reshape(-1)
+        F, source = _keep_order(fan.reshape(-1, 3), fan_vertex, n)
     if np.any(Edges(F, len(source)).counts > 2):
         # A face cut off at an edge but joined to the faces kept there around both its ends: libigl
         # stitches the mesh again from separate faces, merging only what stays manifold.
