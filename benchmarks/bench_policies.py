@@ -19,11 +19,10 @@ from __future__ import annotations
 
 import argparse
 import statistics
-import sys
 from functools import partial
 
 import numpy as np
-from benchlib import machine, timed
+from benchlib import page, timed
 from threadpoolctl import threadpool_limits
 
 
@@ -63,7 +62,6 @@ def main(argv=None) -> int:
     parser.add_argument("--touches", type=int, default=3, help="training touches per place and object")
     parser.add_argument("--repeats", type=int, default=30, help="states each policy chooses from")
     args = parser.parse_args(argv)
-    print(f"{machine()}\n")
     knowledge, places = synthetic(args.objects, args.places, args.touches)
     rng = np.random.default_rng(1)
     with threadpool_limits(1):
@@ -107,4 +105,6 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    with page("bench_policies", "Choosing the next touch"):
+        status = main()
+    raise SystemExit(status)
