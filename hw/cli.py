@@ -8,7 +8,7 @@ import sys
 def register(subparsers) -> None:
     """Add this package's subcommands to the ``visuotactile`` parser."""
     from hw import capture
-    from meshsal.cli import QUIET_HELP, mesh_help
+    from meshsal.cli import QUIET_HELP, add_model, mesh_help
     from meshsal.points import POINT_METHODS
     from meshsal.util.arguments import HelpFormatter, add_renamed
 
@@ -66,11 +66,7 @@ def register(subparsers) -> None:
         choices=POINT_METHODS.names(),
         help=f"interest point method: {POINT_METHODS.help_text()}",
     )
-    p.add_argument(
-        "--model",
-        default=None,
-        help="touch model JSON (written by 'visuotactile experiment' to touch_models/) for the learned methods",
-    )
+    add_model(p)
     p.add_argument("--seed", type=int, default=0, help="seed of the random methods")
     p.add_argument("--quiet", action="store_true", help=QUIET_HELP)
     p.set_defaults(func=_cmd_plan)
@@ -91,16 +87,10 @@ def _cmd_export(args) -> int:
 
 def _cmd_plan(args) -> int:
     from hw.plan import make_plan, save_plan
+    from meshsal.cli import touch_model
     from meshsal.objects import load_object
-    from meshsal.points import MODEL_METHODS
-    from meshsal.points.learned import TouchModel
 
-    if args.method in MODEL_METHODS and args.model is None:
-        raise ValueError(
-            f"--method {args.method} needs --model FILE, a touch model written by 'visuotactile experiment' "
-            "(its touch_models/ folder)"
-        )
-    model = None if args.model is None else TouchModel.load(args.model)
+    model = touch_model(args.method, args.model)
     mesh = load_object(args.mesh)
     plan = make_plan(
         mesh,

@@ -23,6 +23,29 @@ def mesh_help() -> str:
     )
 
 
+def add_model(p) -> None:
+    """``--model``, the touch model file the learned methods read."""
+    p.add_argument(
+        "--model",
+        type=Path,
+        default=None,
+        help="touch model JSON (written by 'visuotactile experiment' to touch_models/) for the learned methods",
+    )
+
+
+def touch_model(method: str, path):
+    """The touch model ``--method`` reads, from ``--model``; None for a method that reads none."""
+    from meshsal.points import MODEL_METHODS
+    from meshsal.points.learned import TouchModel
+
+    if method in MODEL_METHODS and path is None:
+        raise ValueError(
+            f"--method {method} needs --model FILE, a touch model written by 'visuotactile experiment' "
+            "(its touch_models/ folder)"
+        )
+    return None if path is None else TouchModel.load(path)
+
+
 def add_view_size(p) -> None:
     """``--view-size`` (``--size`` before 0.2)."""
     add_renamed(
@@ -170,12 +193,7 @@ def _add_points(subparsers) -> None:
         default="equal",
         help="deprecated, goes in 0.3: --method attention_itti or attention_learned choose the combination",
     )
-    p.add_argument(
-        "--model",
-        type=Path,
-        default=None,
-        help="touch model JSON (written by 'visuotactile experiment' to touch_models/) for the learned methods",
-    )
+    add_model(p)
     p.add_argument(
         "--no-touch-check",
         dest="touch",
@@ -207,14 +225,12 @@ def _cmd_points(args) -> int:
     from meshsal.objects import load_object
     from meshsal.points import (
         ATTENTION_METHODS,
-        MODEL_METHODS,
         attention_combination,
         attention_maps,
         best_view_set,
         points_by_method,
         view_channels,
     )
-    from meshsal.points.learned import TouchModel
     from meshsal.util.atomic import write_png
     from meshsal.util.errors import naming
     from meshsal.views import overlay
@@ -231,12 +247,7 @@ def _cmd_points(args) -> int:
         if args.method == "attention":
             args.method = method
     combination = attention_combination(args.method)
-    if args.method in MODEL_METHODS and args.model is None:
-        raise ValueError(
-            f"--method {args.method} needs --model FILE, a touch model written by 'visuotactile experiment' "
-            "(its touch_models/ folder)"
-        )
-    model = None if args.model is None else TouchModel.load(args.model)
+    model = touch_model(args.method, args.model)
     with naming(args.mesh):
         mesh = scale_to_principal(load_object(args.mesh), args.size_mm)
         vertex_saliency = mesh_saliency(mesh)
