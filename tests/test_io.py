@@ -407,18 +407,32 @@ def test_a_binary_stl_declaring_more_facets_than_it_holds_is_refused(tmp_path):
 # --------------------------------------------------------------------------- variants of valid files
 
 
-def test_meshlab_ply_with_per_face_texture_coordinates(tmp_path):
-    # MeshLab writes wedge texture coordinates as a list of floats on each face.
+@pytest.mark.parametrize("binary", [False, True], ids=["ascii", "binary"])
+def test_meshlab_ply_with_per_face_texture_coordinates(tmp_path, binary):
+    # MeshLab writes wedge texture coordinates as a list of floats on each face, after its vertex indices.
     header = (
-        "ply\nformat ascii 1.0\ncomment TextureFile tex.png\nelement vertex 4\nproperty float x\n"
-        "property float y\nproperty float z\nelement face 4\nproperty list uchar int vertex_indices\n"
-        "property list uchar float texcoord\nend_header\n"
+        f"ply\nformat {'binary_little_endian' if binary else 'ascii'} 1.0\ncomment TextureFile tex.png\n"
+        "element vertex 4\nproperty float x\nproperty float y\nproperty float z\nelement face 4\n"
+        "property list uchar int vertex_indices\nproperty list uchar float texcoord\nend_header\n"
     )
-    rows = [" ".join(map(str, v)) for v in TETRA_V]
-    rows += [f"3 {a} {b} {c} 6 0 0 1 0 0 1" for a, b, c in TETRA_F]
-    m = load_clean(write(tmp_path / "meshlab.ply", header + "\n".join(rows) + "\n"))
+    uv = [0, 0, 1, 0, 0, 1]
+    if binary:
+        faces = np.zeros(4, dtype=[("n", "u1"), ("i", "<i4", (3,)), ("m", "u1"), ("uv", "<f4", (6,))])
+        faces["n"], faces["i"], faces["m"], faces["uv"] = 3, TETRA_F, 6, uv
+        body = TETRA_V.astype("<f4").tobytes() + faces.tobytes()
+    else:
+        rows = [" ".join(map(str, v)) for v in TETRA_V]
+        rows += [f"3 {a} {b} {c} 6 " + " ".join(map(str, uv)) for a, b, c in TETRA_F]
+        body = ("\n".join(rows) + "\n").encode()
+    (tmp_path / "meshlab.ply").write_bytes(header.encode() + body)
+    m = load_clean(tmp_path / "meshlab.ply")
     np.testing.assert_array_equal(m.faces, TETRA_F)
     np.testing.assert_array_equal(m.vertices, TETRA_V)
+    # A damaged index among them is still caught before pymeshlab reads it.
+    if binary:
+        faces["i"][2, 1] = 400_000_000
+        (tmp_path / "bad.ply").write_bytes(header.encode() + TETRA_V.astype("<f4").tobytes() + faces.tobytes())
+        expect_error(tmp_path / "bad.ply", "face 2 has a vertex index out of range")
 
 
 def test_ascii_stl_with_several_solids(tmp_path):
