@@ -20,6 +20,7 @@ from __future__ import annotations
 import contextlib
 import dataclasses
 import os
+import shutil
 import tempfile
 import warnings
 from pathlib import Path
@@ -84,7 +85,10 @@ def _without_materials(path: Path, declared: Declared):
         return
     with tempfile.TemporaryDirectory(prefix="visuotactile-obj-") as folder:
         alone = Path(folder) / path.name
-        os.symlink(path.resolve(), alone)
+        try:
+            os.symlink(path.resolve(), alone)
+        except OSError:  # no symbolic links here (Windows without the privilege): a copy
+            shutil.copyfile(path, alone)
         yield alone
 
 
