@@ -31,7 +31,7 @@ from pathlib import Path
 
 import cv2
 import numpy as np
-from benchlib import DEFAULT_MESHES, hand_124k, hand_150mm, machine
+from benchlib import DEFAULT_MESHES, hand_124k, hand_150mm, page
 
 import meshsal
 from meshsal import attention
@@ -182,16 +182,16 @@ def main(argv=None) -> int:
     if not spot.exists():
         print(f"bench_attention: error: {spot} not found (use --meshes-dir)", file=sys.stderr)
         return 1
-    print(machine())
     bench_channels(meshsal.load_mesh(spot), "the textured cow (spot)", args.size, args.repeats, args.threads)
     bench_channels(
         hand_150mm(), "the hand toy at 150 mm (concave, painted per vertex)", args.size, args.repeats, args.threads
     )
     if not args.skip_mesh_saliency:
         bench_mesh_saliency(args.meshes_dir, args.repeats)
-    print(f"\n{machine()}")
     return 0
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    with page("bench_attention", "Attention: eight channels on 72 views, and mesh saliency"):
+        status = main()
+    raise SystemExit(status)

@@ -28,6 +28,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+from benchlib import page
 
 
 def interleaved_medians(cases: dict, repeats: int, warm: bool = False) -> dict:
@@ -155,4 +156,6 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    with page("bench_imprints", "Tactile imprints: fast against exact, and batch throughput"):
+        status = main()
+    raise SystemExit(status)

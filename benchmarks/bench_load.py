@@ -1,4 +1,4 @@
-"""Benchmark: ``meshsal.load_mesh`` (scan, pymeshlab, repairs), CPU time per mesh.
+"""Benchmark: ``meshsal.load_mesh`` (checks, pymeshlab, repairs), CPU time per mesh.
 
 The loader is on the path of every mesh of a batch, so its cost is measured
 on the benchmark mesh (nefertiti, 100k faces, OBJ), a YCB scan as shipped
@@ -18,6 +18,8 @@ import statistics
 import time
 import warnings
 from pathlib import Path
+
+from benchlib import page
 
 from meshsal import load_mesh
 from meshsal.objects import ycb
@@ -62,4 +64,6 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    raise SystemExit(main())
+    with page("bench_load", "Loading meshes: checks, pymeshlab, repairs"):
+        status = main()
+    raise SystemExit(status)

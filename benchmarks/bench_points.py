@@ -24,7 +24,7 @@ import dataclasses
 import statistics
 from pathlib import Path
 
-from benchlib import DEFAULT_MESHES, hand_124k, hand_150mm, machine, timed
+from benchlib import DEFAULT_MESHES, hand_124k, hand_150mm, page, timed
 
 from meshsal import load_mesh, scale_to
 from meshsal.attention import saliency_views
@@ -82,7 +82,6 @@ def main(argv=None) -> int:
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--size", type=int, default=128, help="view size in pixels (default 128)")
     args = parser.parse_args(argv)
-    print(machine())
     rows = []
     for label, mesh in meshes(args.meshes_dir):
         stages(mesh, args.size)  # warm-up: imports, thread pools, page faults
@@ -108,9 +107,10 @@ def main(argv=None) -> int:
             f"{label}: end to end {wall:.2f} s wall, {med['interest_points'][1]:.2f} s CPU "
             f"(target <= {TARGET_S:.0f} s on 2 cores): {verdict}"
         )
-    print(machine())
     return 0
 
 
 if __name__ == "__main__":
-    raise SystemExit(main())
+    with page("bench_points", "Interest points end to end, by stage"):
+        status = main()
+    raise SystemExit(status)

@@ -32,7 +32,7 @@ import sys
 from functools import partial
 
 import numpy as np
-from benchlib import machine, timed, write_page
+from benchlib import page, timed
 from threadpoolctl import threadpool_limits
 
 
@@ -117,15 +117,20 @@ def _median_ms(times) -> str:
 
 
 def main(argv=None) -> int:
-    from classify.policies import POLICIES
-
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--objects", type=int, default=16)
     parser.add_argument("--places", type=int, default=330)
     parser.add_argument("--touches", type=int, default=3, help="place-free: training touches per place and object")
     parser.add_argument("--repeats", type=int, default=30, help="states each policy chooses from")
     args = parser.parse_args(argv)
-    print(f"{machine()}\n")
+    with page("bench_policies", "Choosing the next touch"):
+        _measure(args)
+    return 0
+
+
+def _measure(args) -> None:
+    from classify.policies import POLICIES
+
     rng = np.random.default_rng(1)
     rows = []
     with threadpool_limits(1):
@@ -163,10 +168,7 @@ def main(argv=None) -> int:
     for what, t in rows:
         target = "<= 20 ms" if what.endswith("choose, info_gain") else ""
         lines.append(f"| {what} | {_median_ms(t)} | {target} |")
-    table = "\n".join(lines)
-    print(table)
-    write_page("policies", "Choosing the next touch", f"{machine()}\n\n{table}")
-    return 0
+    print("\n".join(lines))
 
 
 if __name__ == "__main__":

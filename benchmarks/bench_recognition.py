@@ -33,7 +33,7 @@ import numpy as np
 from threadpoolctl import threadpool_limits
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from benchlib import machine, timed  # noqa: E402
+from benchlib import page, timed  # noqa: E402
 
 
 def grouped(objects: int, groups_per_object: int, per_group: int, features: int, seed: int = 0):
@@ -71,7 +71,6 @@ def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--repeats", type=int, default=5)
     args = parser.parse_args(argv)
-    print(f"{machine()}\n")
     print("| task | ours | scikit-learn peer | peer / ours | |")
     print("|---|---|---|---|---|")
     with threadpool_limits(1):
@@ -125,4 +124,6 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    raise SystemExit(main())
+    with page("bench_recognition", "Recognition: folds, kNN fit, evolutionary SVM beside scikit-learn"):
+        status = main()
+    raise SystemExit(status)

@@ -28,6 +28,7 @@ from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 import numpy as np
+from benchlib import page
 
 from meshsal import load_mesh
 from meshsal.mesh import bounding_sphere
@@ -162,4 +163,6 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    raise SystemExit(main())
+    with page("bench_render", "Rendering 72 views against Open3D"):
+        status = main()
+    raise SystemExit(status)

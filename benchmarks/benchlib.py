@@ -1,14 +1,18 @@
 """What the benchmarks share: the machine they ran on, timing, and the concave test meshes.
 
 Another 2-core machine can be twice as slow, and the machines these run on
-are shared: every benchmark prints :func:`machine` (CPU model, cores, load
-average) with its figures, times with :func:`timed` (wall and process CPU
-time of all threads), and writes its tables to ``docs/benchmarks/`` with
-:func:`write_page` (command, commit, machine and date in the header).
+are shared: every benchmark runs in :func:`page`, which prints :func:`machine`
+(CPU model, cores, load average) before and after its figures and writes
+what it printed to ``docs/benchmarks/`` with :func:`write_page` (command,
+commit, machine and date in the header); it times with :func:`timed` (wall
+and process CPU time of all threads).
 """
 
 from __future__ import annotations
 
+import contextlib
+import io
+import sys
 import time
 from pathlib import Path
 
@@ -27,6 +31,35 @@ def machine() -> str:
 def write_page(name: str, title: str, body: str) -> None:
     """The benchmark's tables as ``docs/benchmarks/NAME.md``, with the command, commit, machine and date."""
     pages.write_page(Path(__file__).resolve().parents[1] / "docs" / "benchmarks" / f"{name}.md", title, body)
+
+
+class _Tee(io.TextIOBase):
+    """Writes to the terminal and keeps a copy."""
+
+    def __init__(self, terminal):
+        self.terminal, self.copy = terminal, io.StringIO()
+
+    def write(self, text: str) -> int:
+        self.copy.write(text)
+        return self.terminal.write(text)
+
+    def flush(self) -> None:
+        self.terminal.flush()
+
+
+@contextlib.contextmanager
+def page(name: str, title: str):
+    """Run a benchmark: its machine line before and after, and everything it prints as ``docs/benchmarks/NAME.md``.
+
+    The page is written only when the benchmark finishes (not on an error or ``--help``).
+    """
+    tee = _Tee(sys.stdout)
+    with contextlib.redirect_stdout(tee):
+        print(f"{machine()}\n", flush=True)
+        yield
+        print(f"\n{machine()}", flush=True)
+    write_page(name, title, tee.copy.getvalue())
+    print(f"wrote docs/benchmarks/{name}.md", file=sys.stderr)
 
 
 def timed(fn):

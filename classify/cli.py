@@ -31,7 +31,7 @@ def register(subparsers) -> None:
             "point, repeated, similarity selection on training folds only: the paper's Table 1 like with "
             "like) and the 'instance' protocol (train on several fresh instances of each object: turned, "
             "resized, repainted, each touched in its own sessions; test on another instance after "
-            "k = 1..n touches, calibrated posteriors multiplied). Rates come with 95 %% bootstrap "
+            "k = 1..n touches, calibrated posteriors multiplied). Rates come with 95 % bootstrap "
             "intervals over replicates and objects; with several --methods, paired differences against "
             "--baseline. Prints Markdown tables and writes results.json, results.csv, "
             "confusion_<classifier>.png and touches.png under --out (with a learned method, each "
@@ -102,7 +102,9 @@ def register(subparsers) -> None:
     p.add_argument("--train-sessions", type=int, default=2, help="acquisition sessions per training instance")
     p.add_argument("--folds", type=int, default=5, help="paper protocol: cross-validation folds")
     p.add_argument("--repeats", type=int, default=10, help="paper protocol: repeats with reshuffled folds")
-    p.add_argument("--view-size", type=int, default=None, help="rendered view size for the interest points")
+    p.add_argument(
+        "--view-size", type=int, default=None, help="rendered view size for the interest points (default: 128)"
+    )
     p.add_argument(
         "--mode",
         choices=("contour", "pressure"),
@@ -116,7 +118,9 @@ def register(subparsers) -> None:
         help="cache of points, imprints and rates (default $XDG_CACHE_HOME/visuotactile or "
         "./.cache/visuotactile); 'none' disables it",
     )
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument(
+        "--seed", type=int, default=0, help="seed of every random choice: instances, sessions, folds, random baselines"
+    )
     p.add_argument(
         "--features",
         choices=("raw", "polar"),
@@ -180,7 +184,7 @@ def register(subparsers) -> None:
     b.add_argument("--n-points", type=int, default=15, help="points (and imprints) per mesh and method")
     b.add_argument("--size-mm", type=float, default=150.0, help="nominal size: principal-frame box diagonal (mm)")
     b.add_argument("--view-size", type=int, default=128, help="rendered view size for the attention points")
-    b.add_argument("--seed", type=int, default=0)
+    b.add_argument("--seed", type=int, default=0, help="seed of the random point methods")
     b.add_argument("--quiet", action="store_true", help="no progress bar")
     _add_cluster_options(b, default_workers=0)
     b.set_defaults(func=_batch)
@@ -323,6 +327,7 @@ def _experiment(args) -> int:
 def build_parser() -> argparse.ArgumentParser:
     from hw import cli as hw_cli
     from meshsal import cli as meshsal_cli
+    from meshsal.util.arguments import HelpFormatter
     from tactile import cli as tactile_cli
 
     parser = argparse.ArgumentParser(
@@ -334,6 +339,8 @@ def build_parser() -> argparse.ArgumentParser:
     tactile_cli.register(sub)
     register(sub)
     hw_cli.register(sub)
+    for command in sub.choices.values():  # every subcommand's --help shows its defaults
+        command.formatter_class = HelpFormatter
     return parser
 
 

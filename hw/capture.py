@@ -19,6 +19,7 @@ from dataclasses import dataclass
 from hw.press import PressDetector
 from hw.protocol import PROTOCOLS, FrameParser
 from hw.session import Session
+from meshsal.util.arguments import HelpFormatter, add_renamed
 
 __all__ = [
     "PortError",
@@ -294,12 +295,16 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         help="give up after this long with bytes but no valid frame (default 5)",
     )
     p.add_argument("--baseline-frames", type=int, default=20, help="quiet frames for the baseline (default 20)")
-    p.add_argument(
+    add_renamed(
+        p,
         "--threshold",
-        type=float,
-        help="summed counts above the baseline that start a press (default: from the rest noise)",
+        p.add_argument(
+            "--press-threshold",
+            type=float,
+            help="summed counts above the baseline that start a press (default: from the rest noise)",
+        ),
     )
-    p.add_argument("--quiet", action="store_true", help="no status lines")
+    p.add_argument("--quiet", action="store_true", help="no status lines on stderr (errors are still printed)")
 
 
 def run(args) -> int:
@@ -307,7 +312,7 @@ def run(args) -> int:
     from hw.plan import load_plan
 
     plan = load_plan(args.points) if args.points else None
-    detector = PressDetector(baseline_frames=args.baseline_frames, threshold=args.threshold)
+    detector = PressDetector(baseline_frames=args.baseline_frames, threshold=args.press_threshold)
     with Session(args.session) as session:
         result = capture(
             args.port,
@@ -333,7 +338,9 @@ def run(args) -> int:
 
 def main(argv: list[str] | None = None) -> int:
     """``python -m hw.capture``: the same as ``visuotactile capture``."""
-    parser = argparse.ArgumentParser(prog="python -m hw.capture", description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(
+        prog="python -m hw.capture", description=__doc__.splitlines()[0], formatter_class=HelpFormatter
+    )
     add_arguments(parser)
     args = parser.parse_args(argv)
     try:

@@ -284,15 +284,18 @@ def press_targets(mesh, plan=None, n: int = 15, method: str = "random", seed: in
 
 def _parser() -> argparse.ArgumentParser:
     from meshsal.points import POINT_METHODS
+    from meshsal.util.arguments import HelpFormatter, add_renamed
     from tactile.sensor import SENSOR_MODES
 
-    p = argparse.ArgumentParser(prog="python -m hw.simdevice", description=__doc__.split("\n\n")[0])
+    p = argparse.ArgumentParser(
+        prog="python -m hw.simdevice", description=__doc__.split("\n\n")[0], formatter_class=HelpFormatter
+    )
     p.add_argument("--object", required=True, help="a toy name (meshsal.objects.toys.NAMES) or a mesh file")
     p.add_argument(
         "--size-mm", type=float, default=150.0, help="principal-frame box diagonal of the object in mm (default 150)"
     )
     p.add_argument("--points", metavar="PLAN_JSON", help="press the points of this probe plan")
-    p.add_argument("--n", type=int, default=15, help="interest points without a plan (default 15)")
+    add_renamed(p, "--n", p.add_argument("--n-points", type=int, default=15, help="interest points without a plan"))
     p.add_argument(
         "--method",
         default="random",
@@ -340,7 +343,7 @@ def main(argv: list[str] | None = None) -> int:
 
         plan = load_plan(args.points) if args.points else None
         mesh = scale_to_principal(load_object(args.object), plan.size_mm if plan is not None else args.size_mm)
-        ids, positions, normals = press_targets(mesh, plan, n=args.n, method=args.method, seed=args.seed)
+        ids, positions, normals = press_targets(mesh, plan, n=args.n_points, method=args.method, seed=args.seed)
         sensor = tactile.Sensor(rows=args.rows, cols=args.cols, mode=args.mode)
         imprints = tactile.imprints(mesh, positions, normals, sensor)
         empty = np.flatnonzero(imprints.reshape(len(imprints), -1).max(axis=1) <= 0)

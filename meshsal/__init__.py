@@ -31,6 +31,7 @@ _EXPORTS = {
     "scale_to": "mesh.transform",
     "normalize": "mesh.transform",
     "scale_to_principal": "mesh.transform",
+    "UnitsWarning": "mesh.transform",
     "mean_curvature": "mesh.curvature",
     "mesh_saliency": "mesh.curvature",
     "Camera": "views.cameras",

@@ -29,6 +29,7 @@ __all__ = [
     "ConfusionMatrix",
     "StoppingCell",
     "ExperimentResult",
+    "MissingCell",
     "format_tables",
     "write_outputs",
 ]
@@ -153,12 +154,18 @@ class ExperimentResult:
     stopping_rates: dict = field(default_factory=dict)
 
     def cell(self, method, protocol, classifier, n_objects, selection, touches=1) -> Cell:
-        """The cell of these coordinates (KeyError when it was not measured)."""
-        return _find(self.cells, (method, protocol, classifier, n_objects, selection, touches))
+        """The cell of these coordinates (:class:`MissingCell`, a KeyError listing what was measured, if none)."""
+        return _find(self.cells, (method, protocol, classifier, n_objects, selection, touches), "cell")
 
     def comparison(self, method, protocol, classifier, n_objects, selection, touches=1) -> Comparison:
-        """The paired comparison of ``method`` with the baseline at these coordinates (KeyError if none)."""
-        return _find(self.comparisons, (method, protocol, classifier, n_objects, selection, touches))
+        """The paired comparison of ``method`` with the baseline at these coordinates.
+
+        Raises
+        ------
+        MissingCell
+            A KeyError naming the coordinates asked for and listing, for each, the values measured.
+        """
+        return _find(self.comparisons, (method, protocol, classifier, n_objects, selection, touches), "comparison")
 
     def table(self, method, protocol, touches=1) -> str:
         """The Table 1 layout as Markdown."""
@@ -205,11 +212,30 @@ class ExperimentResult:
         }
 
 
-def _find(records, key):
+_COORDINATES = ("method", "protocol", "classifier", "n_objects", "selection", "touches")
+
+
+class MissingCell(KeyError):
+    """No cell or comparison was measured at the coordinates asked for; the message lists what was."""
+
+    def __str__(self) -> str:
+        return str(self.args[0])
+
+
+def _find(records, key, kind: str):
     for r in records:
-        if (r.method, r.protocol, r.classifier, r.n_objects, r.selection, r.touches) == key:
+        if tuple(getattr(r, c) for c in _COORDINATES) == key:
             return r
-    raise KeyError(key)
+    asked = ", ".join(f"{c}={v!r}" for c, v in zip(_COORDINATES, key))
+    if not records:
+        why = " (comparisons need several methods: each is compared with the baseline)" if kind == "comparison" else ""
+        raise MissingCell(f"no {kind} at {asked}: this result has none{why}")
+    measured = []
+    for i, c in enumerate(_COORDINATES):
+        values = sorted({getattr(r, c) for r in records}, key=repr)
+        missing = "" if key[i] in values else f" (not {key[i]!r})"
+        measured.append(f"{c} {', '.join(map(repr, values))}{missing}")
+    raise MissingCell(f"no {kind} at {asked}; measured: {'; '.join(measured)}")
 
 
 def _title(protocol):
