@@ -161,7 +161,9 @@ class TouchEnv(gymnasium.Env):
         from classify.recognizers.classifiers import CLASSIFIERS
         from classify.runtime import cache as cache_mod
         from meshsal.points.learned import FEATURES
+        from meshsal.util.reproducible import warn_if_unpinned
 
+        warn_if_unpinned("TouchEnv")
         self.settings = Settings() if settings is None else settings
         if not (math.isfinite(touch_cost) and touch_cost >= 0):
             raise ValueError(f"touch_cost must be finite and >= 0, got {touch_cost!r}")

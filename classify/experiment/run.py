@@ -219,8 +219,11 @@ def run_experiment(
     >>> r = run_experiment(["cow", "cup"], replicates=2, quiet=True)     # doctest: +SKIP
     >>> print(format_tables(r))                                          # doctest: +SKIP
     """
+    from meshsal.util.reproducible import warn_if_unpinned
+
     started = time.perf_counter()
     config = (config or ExperimentConfig()).replace(**changes).checked()
+    warn_if_unpinned("run_experiment")
     settings = config.settings
     if cache_dir == "default":
         cache_dir = cache_mod.default_dir()

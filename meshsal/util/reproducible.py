@@ -49,6 +49,8 @@ __all__ = [
     "kernel_environment",
     "pin_kernels",
     "kernels",
+    "is_pinned",
+    "warn_if_unpinned",
     "main",
 ]
 
@@ -275,6 +277,27 @@ def pin_kernels() -> dict[str, str]:
             stacklevel=2,
         )
     return {name: os.environ[name] for name in _READ_BY if name in os.environ}
+
+
+def is_pinned(environ=None) -> bool:
+    """True when this process's environment holds every pinning variable :func:`kernel_environment` asks for
+    (as under ``python -m meshsal.util.reproducible`` or the ``visuotactile`` command)."""
+    environ = os.environ if environ is None else environ
+    return all(environ.get(name) == value for name, value in kernel_environment(environ).items())
+
+
+def warn_if_unpinned(what: str) -> None:
+    """A :class:`KernelPinWarning` when ``what`` (e.g. "run_experiment") runs with the CPU's own kernels: its
+    numbers may then differ in their last digits from the pinned tables of the ``visuotactile`` command."""
+    if not is_pinned():
+        warnings.warn(
+            f"{what} runs with this CPU's own kernels, so its numbers may differ from the pinned tables of the "
+            f"visuotactile command and the documentation; run the script under `python -m meshsal.util.reproducible "
+            f"python SCRIPT`, or call meshsal.util.reproducible.pin_kernels() before importing numpy, scipy or cv2 "
+            f"({KERNELS_VARIABLE}=native silences this)",
+            KernelPinWarning,
+            stacklevel=3,
+        )
 
 
 def _simd_signature() -> str:
