@@ -43,8 +43,8 @@ def register(subparsers) -> None:
         "--objects",
         nargs="+",
         metavar="OBJECTS",
-        help="object sets (toys, ycb), object names or mesh files (OBJ/PLY/OFF/STL), separated by "
-        "spaces or commas, e.g. 'toys,ycb'; default: toys",
+        help="object sets (toys, ycb), object names, mesh files (OBJ/PLY/OFF/STL), folders of mesh files "
+        "or list files (.txt, one item per line), separated by spaces or commas, e.g. 'toys,ycb'; default: toys",
     )
     size = p.add_mutually_exclusive_group()
     size.add_argument(
@@ -151,6 +151,12 @@ def register(subparsers) -> None:
         choices=tuple(CONTROLS),
         default=None,
         help=f"a control run that must give chance: {'; '.join(f'{k}: {v}' for k, v in CONTROLS.items())}",
+    )
+    p.add_argument(
+        "--skip-bad",
+        action="store_true",
+        help="run on the objects that load when some files do not (they are listed first); "
+        "by default they stop the run before any work",
     )
     p.add_argument("--quiet", action="store_true", help="no progress bars")
     p.add_argument(
@@ -316,7 +322,13 @@ def _experiment(args) -> int:
         workers=args.workers, scheduler=args.scheduler, n_jobs=args.jobs, preload=WORKER_MODULES, **_cluster(args)
     ) as executor:
         result = run_experiment(
-            args.objects, config, executor=executor, cache_dir=cache_dir, out_dir=args.out, quiet=args.quiet
+            args.objects,
+            config,
+            executor=executor,
+            cache_dir=cache_dir,
+            out_dir=args.out,
+            quiet=args.quiet,
+            skip_bad=args.skip_bad,
         )
     print(format_tables(result))
     if not args.quiet:

@@ -377,3 +377,24 @@ def test_a_mismatch_arm_changes_the_test_instances_only():
         Settings(mismatch=("warped",))
     with pytest.raises(ValueError, match="contradict"):
         Settings(mismatch=("decimated", "subdivided"))
+
+
+def test_objects_from_a_folder_or_a_list_with_twins_and_bad_files(tmp_path):
+    from classify.experiment.stages import load_objects
+
+    folder = tmp_path / "shelf"
+    (folder / "deep").mkdir(parents=True)
+    for mesh, where in zip(_objects(), ("box.obj", "deep/ball.obj", "rod.obj")):
+        shapes.write_obj(folder / where, mesh)
+    (folder / "copy_of_box.obj").write_bytes((folder / "box.obj").read_bytes())
+    with pytest.warns(UserWarning, match=r"same bytes are one object: copy_of_box \(= box\)"):
+        found = load_objects([str(folder)], SMALL)
+    assert found.names == ("box", "ball", "rod")  # by path: box.obj, (copy_of_box.obj,) deep/ball.obj, rod.obj
+    listing = tmp_path / "objects.txt"
+    listing.write_text("# my shelf\nshelf/rod.obj\n\nshelf/box.obj  # the box\n")
+    assert load_objects([str(listing)], SMALL).names == ("rod", "box")
+    (folder / "broken.obj").write_text("v 0 0 0\nv 1 0 0\nf 1 2 9\n")
+    with pytest.raises(ValueError, match=r"1 of 4 objects do not load \(--skip-bad runs on the rest\).*broken.obj"):
+        load_objects([str(folder)], SMALL)
+    with pytest.warns(UserWarning, match="left out 1 of 4 objects"):
+        assert load_objects([str(folder)], SMALL, skip_bad=True).names == ("box", "ball", "rod")

@@ -185,6 +185,7 @@ def run_experiment(
     cache_dir="default",
     out_dir=None,
     quiet: bool = False,
+    skip_bad: bool = False,
     **changes,
 ) -> ExperimentResult:
     """Interest points -> imprints -> recognition, under the paper and instance protocols.
@@ -209,6 +210,9 @@ def run_experiment(
         model (``touch_models/replicate_<r>.json``) go (nothing written when None).
     quiet : bool
         No progress bars on stderr.
+    skip_bad : bool
+        Run on the objects that load when some do not (they are listed in a
+        warning); by default they are listed in an error before any work.
 
     Returns
     -------
@@ -234,7 +238,7 @@ def run_experiment(
     with threadpool_limits(1), workers as pool:
         # Local workers start while the objects load, and build the toys; a bad file still stops the run before any work.
         local = executor is None or isinstance(executor, ProcessPoolExecutor)
-        objects = load_objects(objects, settings, pool if local else None)
+        objects = load_objects(objects, settings, pool if local else None, skip_bad=skip_bad)
         # Workers render with one thread each; alone, the stage renders with every core.
         runtime = Runtime(pool, cache_dir, None if isinstance(pool, Inline) else 1, quiet)
         if "paper" in config.protocols and paper_methods:

@@ -12,6 +12,7 @@ cluster); every stage reads and writes the content-keyed cache.
 from __future__ import annotations
 
 import dataclasses
+import warnings
 from dataclasses import dataclass
 from typing import NamedTuple
 
@@ -79,18 +80,23 @@ class ObjectSet:
         return np.array(sorted(range(len(names)), key=lambda i: names[i]), dtype=np.int64)
 
 
-def load_objects(objects, settings: Settings, pool=None) -> ObjectSet:
+def load_objects(objects, settings: Settings, pool=None, skip_bad: bool = False) -> ObjectSet:
     """The objects' names and nominal meshes, all loaded before any work (a bad file stops here).
 
     ``objects``: None (the toys), strings for ``meshsal.objects.resolve_objects``
-    (set names, object names, mesh files, comma-separated or not) or
-    ``meshsal.Mesh`` objects with distinct names (repaired as the loader
-    repairs files: ``meshsal.repair_mesh``).  With ``settings.size_mm``
+    (set names, object names, mesh files, folders, list files, comma-separated
+    or not) or ``meshsal.Mesh`` objects with distinct names (repaired as the
+    loader repairs files: ``meshsal.repair_mesh``).  With ``settings.size_mm``
     None the objects keep their real sizes (named objects only: the units of
     a file or an in-memory mesh are not known).  ``pool`` (local worker
     processes with this process's kernel pin, anything with an ordered
     ``map``) builds the toys, a second of CPU each, while this process loads
     the rest: the same meshes.
+
+    Files with the same bytes are one object (a warning names both).  Files
+    that do not load are all listed in one error before any work; with
+    ``skip_bad`` they are listed in a warning instead and the run goes on
+    without them.
     """
     import meshsal
     from meshsal import objects as objects_mod
@@ -104,11 +110,31 @@ def load_objects(objects, settings: Settings, pool=None) -> ObjectSet:
         # Meshes built in memory did not pass the loader's repairs: they get them here.
         meshes = [_repaired(m) for m in meshes]
     else:
-        refs = objects_mod.resolve_objects(items)
+        refs, same = objects_mod.distinct_files(objects_mod.resolve_objects(items))
+        if same:
+            warnings.warn(
+                "files with the same bytes are one object: "
+                + ", ".join(f"{name} (= {first})" for name, first in same.items()),
+                stacklevel=2,
+            )
         built_elsewhere = [ref for ref in refs if ref.kind == "toy"] if pool is not None else []
         pending = pool.map(objects_mod.load_ref, built_elsewhere) if built_elsewhere else ()
-        loaded = {ref.name: objects_mod.load_ref(ref) for ref in refs if ref not in built_elsewhere}
+        loaded, bad = {}, {}
+        for ref in refs:
+            if ref not in built_elsewhere:
+                try:
+                    loaded[ref.name] = objects_mod.load_ref(ref)
+                except (ValueError, OSError) as exc:
+                    bad[ref.name] = f"{exc}"
         loaded.update(zip((ref.name for ref in built_elsewhere), pending))
+        if bad:
+            listed = "; ".join(bad.values())
+            if not skip_bad:
+                raise ValueError(
+                    f"{len(bad)} of {len(refs)} objects do not load (--skip-bad runs on the rest): {listed}"
+                )
+            warnings.warn(f"left out {len(bad)} of {len(refs)} objects that do not load: {listed}", stacklevel=2)
+            refs = tuple(ref for ref in refs if ref.name not in bad)
         meshes = [loaded[ref.name] for ref in refs]
         units = [ref.units_mm for ref in refs]
     names = tuple(m.name for m in meshes)
@@ -120,8 +146,6 @@ def load_objects(objects, settings: Settings, pool=None) -> ObjectSet:
 
 
 def _repaired(mesh):
-    import warnings
-
     from meshsal.mesh.io import MeshRepairWarning
     from meshsal.mesh.repair import repair_mesh
 
