@@ -44,6 +44,7 @@ _EXPORTS = {
     "TouchModel": "points.learned",
     "fit_touch_model": "points.learned",
     "project_pixel_paper": "views.paper_projection",
+    "write_png": "util.atomic",
 }
 _SUBMODULES = {"util", "mesh", "objects", "views", "attention", "points", "cli"}
 #: Where each module of the flat layout went.

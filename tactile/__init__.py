@@ -26,6 +26,7 @@ _EXPORTS = {
     "touch_codebook": "perturbation",
     "select_by_similarity": "selection",
     "ImprintSet": "imprint_set",
+    "imprint_grid": "picture",
 }
 
 __getattr__, __dir__, __all__ = attach(__name__, _EXPORTS)
