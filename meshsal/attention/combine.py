@@ -11,9 +11,10 @@ import cv2
 import numpy as np
 
 from meshsal.attention.dkl import dkl, dkl_stack
+from meshsal.attention.images import ImageStack
 from meshsal.attention.itti import color, color_stack, intensity, intensity_stack, orientation, orientation_stack
-from meshsal.attention.local import contrast, entropy
-from meshsal.attention.pyramid import _stack_to_max, normalize_maps, scale_to_max
+from meshsal.attention.local import contrast, contrast_stack, entropy, entropy_stack
+from meshsal.attention.pyramid import _stack_to_max, normalize_maps
 from meshsal.attention.symmetry import symmetry, symmetry_stack
 from meshsal.util.registry import Registry
 
@@ -48,14 +49,17 @@ CHANNEL_REGISTRY.register("contrast", contrast, "local contrast")
 CHANNELS = CHANNEL_REGISTRY.names()
 IMAGE_CHANNELS = tuple(e.name for e in CHANNEL_REGISTRY if e.value is not None)
 
-# Channel functions that also run on a stack of images (n, H, W, 3) -> (n, H, W), bit for bit image by image:
-# their center-surround pyramids are normalized for the whole stack at once.
+# Channel functions that also run on an ImageStack -> (n, H, W), bit for bit image by image: the stack is
+# checked once, its grey levels and intensity pyramid computed once for all of them, and their
+# center-surround pyramids normalized for the whole stack at once.
 _STACKED = {
     intensity: intensity_stack,
     color: color_stack,
     orientation: orientation_stack,
     dkl: dkl_stack,
     symmetry: symmetry_stack,
+    entropy: entropy_stack,
+    contrast: contrast_stack,
 }
 # Views a thread takes at once in saliency_views: enough to share the pyramids' per-call costs, few enough
 # that two threads share 72 views evenly.  Tried on 72 views (1, 4, 6, 9, 12, 18 and 36; one thread at
@@ -105,9 +109,9 @@ def image_channels(img: np.ndarray, names: Sequence[str] = IMAGE_CHANNELS) -> di
 def image_channels_stack(imgs, names: Sequence[str] = IMAGE_CHANNELS) -> dict[str, np.ndarray]:
     """:func:`image_channels` of a stack of images, bit for bit image by image.
 
-    The center-surround channels (intensity, color, orientation, DKL,
-    symmetry) run on the whole stack at once; the others, and channels
-    registered from outside, image by image.
+    The images are checked once, and each grey level and pyramid that
+    several channels read is computed once; the seven channels run on the
+    whole stack at once, channels registered from outside image by image.
 
     Parameters
     ----------
@@ -127,11 +131,12 @@ def image_channels_stack(imgs, names: Sequence[str] = IMAGE_CHANNELS) -> dict[st
     """
     if not len(imgs):
         raise ValueError("image_channels_stack needs at least one image")
+    functions = {name: channel_function(name) for name in names}
+    stack = ImageStack.of(imgs, ", ".join(names))
     out = {}
-    for name in names:
-        fn = channel_function(name)
+    for name, fn in functions.items():
         stacked = _STACKED.get(fn)
-        out[name] = stacked(imgs) if stacked is not None else np.stack([fn(img) for img in imgs])
+        out[name] = stacked(stack) if stacked is not None else np.stack([fn(img) for img in stack.rgb])
     return out
 
 
@@ -327,27 +332,32 @@ def combine_maps(
         if shape != inside.shape:
             raise ValueError(f"channel {name!r} has shape {shape}, the mask {inside.shape}")
     gains = [w[name] for name in names]
-    # The channels cut to the silhouette, each scaled to its maximum, all in one array.
-    cuts = np.zeros((len(names), h, wd), np.float32)
+    # Every cut map is zero off the silhouette: work on its pixels only, each channel scaled to its maximum.
+    cuts = np.empty((len(names), pixels.size), np.float32)
     for k, name in enumerate(names):
-        np.copyto(cuts[k], channels[name], where=inside, casting="unsafe")
+        cuts[k] = np.asarray(channels[name]).reshape(-1)[pixels]
     _stack_to_max(cuts)
-    flat = cuts.reshape(len(names), -1)
     if floor is not None and pixels.size:
         # Not rescaled (see ``floor``).
-        cuts -= _percentiles(flat[:, pixels], floor)[:, None, None]
+        cuts -= _percentiles(cuts, floor)[:, None]
         np.maximum(cuts, np.float32(0.0), out=cuts)
     if normalize:
         # N(.) of every channel that responds, in one pass.
-        live = np.flatnonzero(flat.any(axis=1))
+        live = np.flatnonzero(cuts.any(axis=1))
         if live.size:
-            shrunk = np.stack([cv2.resize(cuts[k], small, interpolation=cv2.INTER_AREA) for k in live])
-            for k, amplitude in zip(live, normalize_maps(shrunk).reshape(len(live), -1).max(axis=1)):
+            image = np.zeros(h * wd, np.float32)
+            shrunk = []
+            for k in live:
+                image[pixels] = cuts[k]
+                shrunk.append(cv2.resize(image.reshape(h, wd), small, interpolation=cv2.INTER_AREA))
+            for k, amplitude in zip(live, normalize_maps(np.stack(shrunk)).reshape(len(live), -1).max(axis=1)):
                 gains[k] *= float(amplitude)
-    total = np.zeros(inside.shape, np.float32)
+    total = np.zeros(pixels.size, np.float32)
     for cut, gain in zip(cuts, gains):
         total += np.float32(gain) * cut
-    return scale_to_max(total)
+    out = np.zeros(h * wd, np.float32)
+    out[pixels] = _stack_to_max(total[None])[0]
+    return out.reshape(h, wd)
 
 
 def plateau_fraction(saliency_map: np.ndarray, mask: np.ndarray, erode: int | None = None) -> float:
