@@ -152,7 +152,8 @@ def curvature(view, vertex_saliency: np.ndarray) -> np.ndarray:
     Parameters
     ----------
     view : View
-        Uses ``view.vertex_ids`` (H, W, 3) int (-1 on background) and ``view.bary`` (H, W, 3).
+        Uses ``view.face_id`` (H, W) int (-1 on background) and ``view.faces``, or else
+        ``view.vertex_ids`` (H, W, 3) int (-1 on background), and ``view.bary`` (H, W, 3).
     vertex_saliency : (n,) float
         E.g. ``meshsal.mesh_saliency(mesh)``.
 
@@ -169,17 +170,25 @@ def curvature(view, vertex_saliency: np.ndarray) -> np.ndarray:
     [[0.25, 0.0]]
     """
     values = np.asarray(vertex_saliency, dtype=np.float64)
-    vertex_ids = np.asarray(view.vertex_ids)
     if values.ndim != 1:
         raise ValueError(f"vertex_saliency must be a 1-D array with one value per vertex, got shape {values.shape}")
     if not np.isfinite(values).all():
         raise ValueError("vertex_saliency contains NaN or infinite values")
-    # Pixels by flat index: indexing the (H, W, 3) arrays by a mask took most of the channel's time.
-    pixels = np.flatnonzero(vertex_ids[..., 0] >= 0)
-    corners = vertex_ids.reshape(-1, 3)[pixels]
+    # Pixels by flat index: indexing the (H, W, 3) arrays by a mask took most of the channel's time.  A
+    # View's seen faces give the corners of its object's pixels alone, without the whole image's.
+    face_id = getattr(view, "face_id", None)
+    if face_id is not None and getattr(view, "faces", None) is not None:
+        shape = face_id.shape
+        pixels = np.flatnonzero(face_id.reshape(-1) >= 0)
+        corners = np.take(view.faces, face_id.reshape(-1)[pixels], axis=0)
+    else:
+        vertex_ids = np.asarray(view.vertex_ids)
+        shape = vertex_ids.shape[:2]
+        pixels = np.flatnonzero(vertex_ids[..., 0] >= 0)
+        corners = vertex_ids.reshape(-1, 3)[pixels]
     if pixels.size and int(corners.max()) >= values.size:
         raise ValueError(f"vertex_saliency has {values.size} values but the view shows vertex {int(corners.max())}")
-    out = np.zeros(vertex_ids.shape[:2], np.float32)
+    out = np.zeros(shape, np.float32)
     if values.size == 0:
         return out
     lo, span = float(values.min()), float(np.ptp(values))
