@@ -541,3 +541,50 @@ def test_single_image_channels_are_stacks_of_one():
             np.testing.assert_array_equal(
                 together[k].view(np.int32), single(img).view(np.int32), err_msg=single.__name__
             )
+
+
+def _orientation_energy_by_definition(img):
+    """orientation_energy without crops: each orientation's Gabor energy at levels 0-2 of the whole image,
+    brought up map by map, summed over levels, weighted by its share of the four."""
+    import cv2
+
+    from meshsal.attention.itti import ORIENTATIONS_DEG, gabor_energy
+
+    gray = cv2.transform(img, np.full((1, 3), 1.0 / 3.0, np.float32))
+    base = gaussian_pyramid(gray, 3)
+    energy = np.zeros((4, *gray.shape), np.float32)
+    for k, theta in enumerate(ORIENTATIONS_DEG):
+        for level, g in enumerate(base):
+            e = gabor_energy(g, theta)
+            energy[k] += _warp_upsample(e, 2**level, gray.shape) if level else e
+    total = energy.sum(axis=0)
+    floor = np.float32(1e-6 * max(float(total.max()), 1e-30))
+    return energy * (energy / np.maximum(total, floor))
+
+
+@pytest.mark.parametrize(
+    "box",
+    [
+        (slice(20, 50), slice(30, 90)),
+        (slice(0, 12), slice(0, 7)),
+        (slice(60, 64), slice(70, 80)),
+        (slice(33, 34), slice(5, 6)),
+    ],
+    ids=["inside", "corner", "bottom-right edge", "one pixel"],
+)
+def test_orientation_energy_on_a_black_background_filters_only_near_the_object(box):
+    """A view's black background: the Gabor filters and the coarse levels' upsampling run near the object
+    only, with the bits of the whole image's."""
+    from meshsal.attention.itti import orientation_energy
+    from meshsal.util.reproducible import kernels
+
+    rng = np.random.default_rng(box[0].start)
+    img = np.zeros((64, 80, 3), np.float32)
+    img[box] = rng.random(img[box].shape)
+    got, want = orientation_energy(img), _orientation_energy_by_definition(img)
+    if kernels()["opencv"].startswith("baseline"):
+        np.testing.assert_array_equal(got.view(np.int32), want.view(np.int32))
+    else:  # the separable upsampling and OpenCV's own warp differ by a rounding
+        np.testing.assert_allclose(got, want, rtol=1e-5, atol=1e-6 * float(want.max()))
+    assert got[:, 58:, :].any() == (box[0].stop > 48)  # nothing far below the object
+    assert not orientation_energy(np.zeros((64, 80, 3), np.float32)).any()

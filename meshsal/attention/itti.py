@@ -170,6 +170,55 @@ def gabor_energy(level: np.ndarray, theta_deg: float) -> np.ndarray:
     return np.sqrt(e, out=e)
 
 
+def _gabor_energies(level: np.ndarray) -> np.ndarray:
+    """:func:`gabor_energy` of one level (h, w) at the four orientations, (4, h, w) float32, the same bits.
+
+    A view's background is black, and a filter that reads only zeros gives
+    +0 there.  So the filters run on a crop: the non-zero pixels' bounding
+    box grown by the kernel's reach (the pixels they change), grown by the
+    reach again (the pixels those read); borders of the crop that are the
+    image's are reflected as the image's are.
+    """
+    h, w = level.shape
+    energy = np.zeros((len(ORIENTATIONS_DEG), h, w), np.float32)
+    rows, cols = np.flatnonzero(level.any(axis=1)), np.flatnonzero(level.any(axis=0))
+    if not rows.size:
+        return energy
+    reach = _GABOR_SIZE // 2
+    changed = [
+        (max(lo - reach, 0), min(hi + reach + 1, extent))
+        for lo, hi, extent in ((rows[0], rows[-1], h), (cols[0], cols[-1], w))
+    ]
+    read = [(max(lo - reach, 0), min(hi + reach, extent)) for (lo, hi), extent in zip(changed, (h, w))]
+    crop = np.ascontiguousarray(level[read[0][0] : read[0][1], read[1][0] : read[1][1]])
+    (r0, r1), (c0, c1) = changed
+    inner = (slice(r0 - read[0][0], r1 - read[0][0]), slice(c0 - read[1][0], c1 - read[1][0]))
+    for k, theta in enumerate(ORIENTATIONS_DEG):
+        energy[k, r0:r1, c0:c1] = gabor_energy(crop, theta)[inner]
+    return energy
+
+
+def _upsample_box(maps: np.ndarray, factor: int, shape: tuple[int, int]) -> np.ndarray:
+    """:func:`~meshsal.attention.pyramid.upsample_stack` of maps (n, h, w) that are zero off a box, the same bits.
+
+    Bilinear interpolation of zeros gives +0: only the box and a row and a
+    column of zeros around it (the neighbours its edges are interpolated
+    with) are interpolated, and placed where they go.
+    """
+    n, h, w = maps.shape
+    out = np.zeros((n, *shape), np.float32)
+    rows, cols = np.flatnonzero(maps.any(axis=(0, 2))), np.flatnonzero(maps.any(axis=(0, 1)))
+    if not rows.size:
+        return out
+    (r0, r1), (c0, c1) = [
+        (max(lo - 1, 0), min(hi + 2, extent)) for lo, hi, extent in ((rows[0], rows[-1], h), (cols[0], cols[-1], w))
+    ]
+    box = (slice(r0 * factor, min(r1 * factor, shape[0])), slice(c0 * factor, min(c1 * factor, shape[1])))
+    size = (box[0].stop - box[0].start, box[1].stop - box[1].start)
+    out[:, box[0], box[1]] = upsample_stack(np.ascontiguousarray(maps[:, r0:r1, c0:c1]), factor, size)
+    return out
+
+
 # Orientation energy is measured at the three finest levels, where the filters match
 # bars 2-8 px wide, and compared across space by the usual center-surround pyramid.
 _ENERGY_LEVELS = (0, 1, 2)
@@ -207,8 +256,8 @@ def _orientation_energies(stack: ImageStack) -> np.ndarray:
     for k, energy in enumerate(out):
         energy[:] = 0.0
         for level, maps in enumerate(levels):
-            e = np.stack([gabor_energy(maps[k], theta) for theta in ORIENTATIONS_DEG])
-            energy += upsample_stack(e, 2**level, (h, w)) if level else e
+            e = _gabor_energies(maps[k])
+            energy += _upsample_box(e, 2**level, (h, w)) if level else e
         total = energy.sum(axis=0)
         floor = np.float32(1e-6 * max(float(total.max()), 1e-30))
         energy *= energy / np.maximum(total, floor)
