@@ -15,6 +15,8 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
+from meshsal.attention.pyramid import gaussian_pyramid_stack
+
 __all__ = ["ImageStack", "check_image", "check_images", "grey"]
 
 #: ``(r + g + b) / 3`` and Rec. 709 luma, one row each for ``cv2.transform``.
@@ -139,6 +141,4 @@ class ImageStack:
     @functools.cached_property
     def intensity_pyramid(self) -> list[np.ndarray]:
         """The full Gaussian pyramid of :attr:`intensity`, a list of (n, h_k, w_k) float32."""
-        from meshsal.attention.pyramid import gaussian_pyramid_stack
-
         return gaussian_pyramid_stack(self.intensity)
