@@ -588,3 +588,21 @@ def test_orientation_energy_on_a_black_background_filters_only_near_the_object(b
         np.testing.assert_allclose(got, want, rtol=1e-5, atol=1e-6 * float(want.max()))
     assert got[:, 58:, :].any() == (box[0].stop > 48)  # nothing far below the object
     assert not orientation_energy(np.zeros((64, 80, 3), np.float32)).any()
+
+
+@pytest.mark.parametrize("size", [9, 17])  # counts in 8 bits, and in float32 (17 x 17 > 255)
+@pytest.mark.parametrize(
+    "box", [(slice(20, 40), slice(10, 30)), (slice(0, 5), slice(50, 60)), (slice(58, 60), slice(0, 60)), None]
+)
+def test_local_entropy_counts_only_near_the_other_bins_with_the_bits_of_the_whole_image(size, box):
+    """Windows of bin 0 alone (a black background) share one entropy; the rest is counted on a crop."""
+    from meshsal.attention.local import _window_entropy
+
+    rng = np.random.default_rng(size)
+    gray = rng.uniform(0, 1 / 16, (60, 60)).astype(np.float32)  # all bin 0, not all zero
+    if box is not None:
+        gray[box] = rng.random(gray[box].shape)
+    got = local_entropy(gray, size)
+    want = _window_entropy(np.minimum((gray * 16).astype(np.int32), 15), size, 16)
+    np.testing.assert_array_equal(got.view(np.int32), want.view(np.int32))
+    assert (got > 0).any() == (box is not None)
