@@ -51,7 +51,7 @@ import numpy as np
 from numpy.lib.stride_tricks import as_strided
 
 from meshsal.attention.images import ImageStack
-from meshsal.attention.pyramid import conspicuity_maps, gaussian_pyramid_stack, upsample_stack
+from meshsal.attention.pyramid import conspicuity_maps, gaussian_pyramid_stack, upsample
 
 __all__ = ["symmetry", "symmetry_stack"]
 
@@ -203,7 +203,9 @@ def _mirror_features(grays: np.ndarray) -> np.ndarray:
             vertical = _axis_evidence(b)
             horizontal = _axis_evidence(np.ascontiguousarray(b.T)).T
             out[:] = np.maximum(vertical, horizontal) ** _POWER
-        np.maximum(feature, upsample_stack(evidence, 2**level, (h, w)), out=feature)
+        # Image by image: the full-size maximum stays in cache.
+        for up, out in zip(evidence, feature):
+            np.maximum(out, upsample(up, 2**level, (h, w)), out=out)
     return feature
 
 
