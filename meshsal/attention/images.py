@@ -17,7 +17,7 @@ import numpy as np
 
 from meshsal.attention.pyramid import gaussian_pyramid_stack
 
-__all__ = ["ImageStack", "check_image", "check_images", "grey"]
+__all__ = ["ImageStack", "check_image", "check_images", "grey", "window_crop"]
 
 #: ``(r + g + b) / 3`` and Rec. 709 luma, one row each for ``cv2.transform``.
 MEAN = np.full((1, 3), 1.0 / 3.0, np.float32)
@@ -33,6 +33,45 @@ def grey(imgs: np.ndarray, row: np.ndarray) -> np.ndarray:
     """
     imgs = np.ascontiguousarray(imgs, np.float32)
     return cv2.transform(imgs.reshape(-1, imgs.shape[-2], 3), row).reshape(imgs.shape[:-1])
+
+
+def window_crop(active: np.ndarray, reach: int):
+    """The crop on which a window filter gives the pixels near the ``active`` ones their bits.
+
+    A view's background is black, and a filter whose window reads no active
+    (non-zero) pixel gives every such pixel one value: the filter need only
+    run near the active pixels.
+
+    Parameters
+    ----------
+    active : (h, w) array, non-zero where a pixel is active
+    reach : int, how far the window reaches from its centre (4 for a 9 x 9 window)
+
+    Returns
+    -------
+    ``(read, changed, inner)``, each a pair of slices, or None if no pixel is
+    active: ``changed`` the box of the pixels whose window meets the active
+    pixels' bounding box, ``read`` the crop to filter (``changed`` grown by
+    the reach: what its windows read), ``inner`` where ``changed`` lies in
+    the crop.  Where the crop's border is the image's, a reflected or
+    replicated border is the image's own.
+
+    Examples
+    --------
+    >>> active = np.zeros((20, 20)); active[10, 3] = 1
+    >>> window_crop(active, 2)
+    ((slice(6, 15, None), slice(0, 8, None)), (slice(8, 13, None), slice(1, 6, None)), (slice(2, 7, None), slice(1, 6, None)))
+    """
+    rows, cols = (np.flatnonzero(active.any(axis=axis)).tolist() for axis in (1, 0))
+    if not rows:
+        return None
+    changed = [(max(i[0] - reach, 0), min(i[-1] + reach + 1, n)) for i, n in zip((rows, cols), active.shape)]
+    read = [(max(lo - reach, 0), min(hi + reach, n)) for (lo, hi), n in zip(changed, active.shape)]
+    return (
+        tuple(slice(lo, hi) for lo, hi in read),
+        tuple(slice(lo, hi) for lo, hi in changed),
+        tuple(slice(lo - r, hi - r) for (lo, hi), (r, _) in zip(changed, read)),
+    )
 
 
 def check_image(img, name: str = "img") -> np.ndarray:

@@ -10,7 +10,7 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-from meshsal.attention.images import ImageStack
+from meshsal.attention.images import ImageStack, window_crop
 from meshsal.attention.pyramid import conspicuity_maps, conspicuity_of_pyramid, upsample_stack
 
 __all__ = [
@@ -173,28 +173,16 @@ def gabor_energy(level: np.ndarray, theta_deg: float) -> np.ndarray:
 def _gabor_energies(level: np.ndarray) -> np.ndarray:
     """:func:`gabor_energy` of one level (h, w) at the four orientations, (4, h, w) float32, the same bits.
 
-    A view's background is black, and a filter that reads only zeros gives
-    +0 there.  So the filters run on a crop: the non-zero pixels' bounding
-    box grown by the kernel's reach (the pixels they change), grown by the
-    reach again (the pixels those read); borders of the crop that are the
-    image's are reflected as the image's are.
+    A filter that reads only zeros gives +0: the filters run on the
+    :func:`~meshsal.attention.images.window_crop` of the non-zero pixels.
     """
-    h, w = level.shape
-    energy = np.zeros((len(ORIENTATIONS_DEG), h, w), np.float32)
-    rows, cols = np.flatnonzero(level.any(axis=1)), np.flatnonzero(level.any(axis=0))
-    if not rows.size:
-        return energy
-    reach = _GABOR_SIZE // 2
-    changed = [
-        (max(lo - reach, 0), min(hi + reach + 1, extent))
-        for lo, hi, extent in ((rows[0], rows[-1], h), (cols[0], cols[-1], w))
-    ]
-    read = [(max(lo - reach, 0), min(hi + reach, extent)) for (lo, hi), extent in zip(changed, (h, w))]
-    crop = np.ascontiguousarray(level[read[0][0] : read[0][1], read[1][0] : read[1][1]])
-    (r0, r1), (c0, c1) = changed
-    inner = (slice(r0 - read[0][0], r1 - read[0][0]), slice(c0 - read[1][0], c1 - read[1][0]))
-    for k, theta in enumerate(ORIENTATIONS_DEG):
-        energy[k, r0:r1, c0:c1] = gabor_energy(crop, theta)[inner]
+    energy = np.zeros((len(ORIENTATIONS_DEG), *level.shape), np.float32)
+    box = window_crop(level, _GABOR_SIZE // 2)
+    if box is not None:
+        read, changed, inner = box
+        crop = np.ascontiguousarray(level[read])
+        for k, theta in enumerate(ORIENTATIONS_DEG):
+            energy[(k, *changed)] = gabor_energy(crop, theta)[inner]
     return energy
 
 

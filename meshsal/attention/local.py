@@ -11,7 +11,7 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-from meshsal.attention.images import LUMA, ImageStack, grey
+from meshsal.attention.images import LUMA, ImageStack, grey, window_crop
 from meshsal.attention.pyramid import _stack_to_max
 
 __all__ = [
@@ -58,20 +58,13 @@ def local_entropy(gray: np.ndarray, size: int = 9, bins: int = 16) -> np.ndarray
     if bins < 2:
         raise ValueError(f"entropy needs at least 2 histogram bins, got {bins}")
     q = np.minimum((np.asarray(gray, np.float32) * bins).astype(np.int32), bins - 1)
-    # A window of bin 0 alone (a view's black background and its surroundings) has one entropy: the
-    # windows are counted on the box around the other bins only, grown by the window's reach (the pixels
-    # whose window meets them), grown again (the pixels those windows read).
-    rows, cols = np.flatnonzero(q.any(axis=1)), np.flatnonzero(q.any(axis=0))
+    # Every window of bin 0 alone (a view's black background, its darkest pixels) has one entropy: the
+    # windows are counted on the window_crop of the other bins only.
     out = np.full(q.shape, _window_entropy(np.zeros((size, size), np.int32), size, bins)[0, 0], np.float32)
-    if rows.size:
-        reach = size // 2
-        shape = q.shape
-        changed = [(max(r[0] - reach, 0), min(r[-1] + reach + 1, extent)) for r, extent in zip((rows, cols), shape)]
-        read = [(max(lo - reach, 0), min(hi + reach, extent)) for (lo, hi), extent in zip(changed, shape)]
-        crop = np.ascontiguousarray(q[read[0][0] : read[0][1], read[1][0] : read[1][1]])
-        (r0, r1), (c0, c1) = changed
-        inner = (slice(r0 - read[0][0], r1 - read[0][0]), slice(c0 - read[1][0], c1 - read[1][0]))
-        out[r0:r1, c0:c1] = _window_entropy(crop, size, bins)[inner]
+    box = window_crop(q, size // 2)
+    if box is not None:
+        read, changed, inner = box
+        out[changed] = _window_entropy(np.ascontiguousarray(q[read]), size, bins)[inner]
     return out
 
 
