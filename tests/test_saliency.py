@@ -41,7 +41,8 @@ def planted_field(mesh, view):
 
 def test_curvature_interpolates_vertex_values_exactly():
     v = SimpleNamespace(
-        vertex_ids=np.array([[[0, 1, 2], [1, 2, 3]], [[-1, -1, -1], [0, 1, 2]]]),
+        face_id=np.array([[0, 1], [-1, 0]]),
+        faces=np.array([[0, 1, 2], [1, 2, 3]]),
         bary=np.array([[[1, 0, 0], [0.2, 0.3, 0.5]], [[0, 0, 0], [0.25, 0.25, 0.5]]], np.float32),
     )
     values = np.array([10.0, 12.0, 14.0, 20.0])  # min-max over the mesh: (v - 10) / 10

@@ -49,9 +49,8 @@ CHANNEL_REGISTRY.register("contrast", contrast, "local contrast")
 CHANNELS = CHANNEL_REGISTRY.names()
 IMAGE_CHANNELS = tuple(e.name for e in CHANNEL_REGISTRY if e.value is not None)
 
-# Channel functions that also run on an ImageStack -> (n, H, W), bit for bit image by image: the stack is
-# checked once, its grey levels and intensity pyramid computed once for all of them, and their
-# center-surround pyramids normalized for the whole stack at once.
+# Channel functions that also run on an ImageStack -> (n, H, W), bit for bit image by image (see
+# image_channels_stack).
 _STACKED = {
     intensity: intensity_stack,
     color: color_stack,
@@ -109,9 +108,10 @@ def image_channels(img: np.ndarray, names: Sequence[str] = IMAGE_CHANNELS) -> di
 def image_channels_stack(imgs, names: Sequence[str] = IMAGE_CHANNELS) -> dict[str, np.ndarray]:
     """:func:`image_channels` of a stack of images, bit for bit image by image.
 
-    The images are checked once, and each grey level and pyramid that
-    several channels read is computed once; the seven channels run on the
-    whole stack at once, channels registered from outside image by image.
+    The images are checked once, each grey level and pyramid several
+    channels read is computed once, and the center-surround pyramids are
+    normalized for the whole stack at once; channels registered from
+    outside run image by image.
 
     Parameters
     ----------
@@ -152,10 +152,8 @@ def curvature(view, vertex_saliency: np.ndarray) -> np.ndarray:
     Parameters
     ----------
     view : View
-        Uses ``view.face_id`` (H, W) int (-1 on background) and ``view.faces``, or else
-        ``view.vertex_ids`` (H, W, 3) int (-1 on background), and ``view.bary`` (H, W, 3).
-    vertex_saliency : (n,) float
-        E.g. ``meshsal.mesh_saliency(mesh)``.
+        Uses ``view.face_id`` (H, W) int (-1 on background), ``view.faces`` and ``view.bary`` (H, W, 3).
+    vertex_saliency : (n,) float, e.g. ``meshsal.mesh_saliency(mesh)``
 
     Returns
     -------
@@ -163,8 +161,8 @@ def curvature(view, vertex_saliency: np.ndarray) -> np.ndarray:
 
     Examples
     --------
-    >>> from types import SimpleNamespace
-    >>> v = SimpleNamespace(vertex_ids=np.array([[[0, 1, 2], [-1, -1, -1]]]),
+    >>> from types import SimpleNamespace  # what curvature reads of a View
+    >>> v = SimpleNamespace(face_id=np.array([[0, -1]]), faces=np.array([[0, 1, 2]]),
     ...                     bary=np.array([[[0.5, 0.5, 0.0], [0, 0, 0]]]))
     >>> curvature(v, np.array([0.0, 1.0, 2.0])).tolist()
     [[0.25, 0.0]]
@@ -174,21 +172,14 @@ def curvature(view, vertex_saliency: np.ndarray) -> np.ndarray:
         raise ValueError(f"vertex_saliency must be a 1-D array with one value per vertex, got shape {values.shape}")
     if not np.isfinite(values).all():
         raise ValueError("vertex_saliency contains NaN or infinite values")
-    # Pixels by flat index: indexing the (H, W, 3) arrays by a mask took most of the channel's time.  A
-    # View's seen faces give the corners of its object's pixels alone, without the whole image's.
-    face_id = getattr(view, "face_id", None)
-    if face_id is not None and getattr(view, "faces", None) is not None:
-        shape = face_id.shape
-        pixels = np.flatnonzero(face_id.reshape(-1) >= 0)
-        corners = np.take(view.faces, face_id.reshape(-1)[pixels], axis=0)
-    else:
-        vertex_ids = np.asarray(view.vertex_ids)
-        shape = vertex_ids.shape[:2]
-        pixels = np.flatnonzero(vertex_ids[..., 0] >= 0)
-        corners = vertex_ids.reshape(-1, 3)[pixels]
+    # Pixels by flat index (indexing by a mask took most of the channel's time), and the corners of the
+    # faces the object's pixels see, not the whole image's.
+    face_id = np.asarray(view.face_id).reshape(-1)
+    pixels = np.flatnonzero(face_id >= 0)
+    corners = np.take(view.faces, face_id[pixels], axis=0)
     if pixels.size and int(corners.max()) >= values.size:
         raise ValueError(f"vertex_saliency has {values.size} values but the view shows vertex {int(corners.max())}")
-    out = np.zeros(shape, np.float32)
+    out = np.zeros(np.shape(view.face_id), np.float32)
     if values.size == 0:
         return out
     lo, span = float(values.min()), float(np.ptp(values))
@@ -465,10 +456,8 @@ def saliency_views(
     views : sequence of View
     mesh : Mesh
     weights, vertex_saliency, normalize : as in :func:`saliency`
-    threads : int, optional
-        Worker threads (default: the CPU count).
-    quiet : bool
-        No progress bar on stderr.
+    threads : int, optional, worker threads (default: the CPU count)
+    quiet : bool, no progress bar on stderr
 
     Returns
     -------
