@@ -77,8 +77,8 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
+from meshsal.attention.images import check_image
 from meshsal.attention.local import luma
-from meshsal.attention.pyramid import check_image
 
 __all__ = ["symmetries", "ConstellationOptions", "Symmetries", "Keypoints", "sift_keypoints", "mirror_descriptors"]
 
