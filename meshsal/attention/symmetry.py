@@ -39,9 +39,7 @@ for random texture, 0 for a flat image.
 
 Only vertical and horizontal axes are measured: they are the ones human
 observers detect best (Wenderoth 1994, Perception 23), and oblique
-orientations would double the cost of a view.  Oblique axes and rotation
-centres are found by Loy & Eklundh's feature constellations
-(:mod:`meshsal.attention.constellations`), the channel before this one.
+orientations would double the cost of a view.
 """
 
 from __future__ import annotations
