@@ -31,7 +31,7 @@ from classify.experiment.config import ExperimentConfig
 from classify.experiment.controls import shuffled_imprints, shuffled_places
 from classify.experiment.protocols import plan_outcome
 from classify.experiment.samples import TouchSample
-from classify.experiment.sequential import run_policies
+from classify.experiment.sequential import policy_measurement, run_policies
 from classify.experiment.stages import (
     InstanceStage,
     Measurement,
@@ -252,24 +252,15 @@ def place_recognition(
             )
         )
     for q, policy in enumerate(config.policies):
-        stack = np.stack([o.policy_rates[q] for o in outcomes])[:, :, back]
-        K = stack.shape[1]
-        stopping = (
-            np.stack([o.policy_stop_correct[q] for o in outcomes])[:, :, back],
-            np.stack([o.policy_stop_touches[q] for o in outcomes])[:, :, back],
-        )
         out.append(
-            Measurement(
+            policy_measurement(
                 policy,
-                "sequential",
                 "place",
                 n,
-                False,
-                {k: stack[:, k - 1, :] for k in range(1, K + 1)},
-                dict.fromkeys(range(1, K + 1), 1),
-                None,
-                None,
-                stopping,
+                [o.policy_rates[q] for o in outcomes],
+                [o.policy_stop_correct[q] for o in outcomes],
+                [o.policy_stop_touches[q] for o in outcomes],
+                back,
             )
         )
     return out

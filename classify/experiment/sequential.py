@@ -28,7 +28,7 @@ from classify.experiment.streams import Stream, name_seed, recognition_rng
 from classify.policies import POLICIES, decisions, fit_knowledge, run_episode, stopping_curve
 from classify.recognizers.touches import Recognizer
 
-__all__ = ["PolicyJob", "PolicyOutcome", "policy_job", "run_policies", "policy_jobs", "policy_recognition"]
+__all__ = ["PolicyJob", "PolicyOutcome", "policy_job", "run_policies", "policy_recognition", "policy_measurement"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -203,24 +203,35 @@ def policy_recognition(
     for q, policy in enumerate(config.policies):
         for c in free:
             mine = [o for job, o in zip(jobs, outcomes) if job.recognizer.classifier == c]
-            stack = np.stack([o.rates[q] for o in mine])[:, :, back]  # (replicates, k, objects)
-            K = stack.shape[1]
-            stopping = (
-                np.stack([o.stop_correct[q] for o in mine])[:, :, back],
-                np.stack([o.stop_touches[q] for o in mine])[:, :, back],
-            )
             out.append(
-                Measurement(
+                policy_measurement(
                     policy,
-                    "sequential",
                     c,
                     n,
-                    False,
-                    {k: stack[:, k - 1, :] for k in range(1, K + 1)},
-                    dict.fromkeys(range(1, K + 1), 1),
-                    None,
-                    None,
-                    stopping,
+                    [o.rates[q] for o in mine],
+                    [o.stop_correct[q] for o in mine],
+                    [o.stop_touches[q] for o in mine],
+                    back,
                 )
             )
     return out
+
+
+def policy_measurement(policy: str, classifier: str, n: int, rates, stop_correct, stop_touches, back) -> Measurement:
+    """One policy's :class:`Measurement` from its replicates' (k, objects) rates and (levels, objects) stops,
+    objects by name (``back`` puts them back in the order given)."""
+    stack = np.stack(rates)[:, :, back]  # (replicates, k, objects)
+    K = stack.shape[1]
+    stopping = (np.stack(stop_correct)[:, :, back], np.stack(stop_touches)[:, :, back])
+    return Measurement(
+        policy,
+        "sequential",
+        classifier,
+        n,
+        False,
+        {k: stack[:, k - 1, :] for k in range(1, K + 1)},
+        dict.fromkeys(range(1, K + 1), 1),
+        None,
+        None,
+        stopping,
+    )
