@@ -89,7 +89,15 @@ from gymnasium import spaces
 from classify.experiment.config import FULL_REPLICATES, Settings
 from classify.experiment.samples import SampleTask, instance_samples
 from classify.experiment.stages import load_objects
-from classify.policies import POLICIES, TouchPolicy, TouchState, available_places, decisions, fit_knowledge
+from classify.policies import (
+    POLICIES,
+    TouchPolicy,
+    TouchState,
+    available_places,
+    decisions,
+    fit_knowledge,
+    touched_belief,
+)
 from classify.recognizers.touches import Recognizer
 from meshsal.points.places import PEAK_FACTOR, POOL_FACTOR
 
@@ -296,8 +304,7 @@ class TouchEnv(gymnasium.Env):
             felt = action < len(places) and bool(available_places(places, e.touched, self.min_spacing)[action])
             e.steps.append(action if felt else -1)
             if felt:
-                belief = e.belief * np.maximum(e.felt[action], 1e-300)  # as classify.policies.run_episode
-                e.belief = belief / belief.sum()
+                e.belief = touched_belief(e.belief, e.felt[action])
             e.over = len(e.steps) == self.max_touches or not available_places(places, e.touched, self.min_spacing).any()
         else:
             e.over = True

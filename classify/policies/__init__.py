@@ -6,7 +6,14 @@ API, the built-in policies and their registry) and ``episodes`` (a policy
 touching a test instance, and the stopping rule).
 """
 
-from classify.policies.episodes import Episode, available_places, decisions, run_episode, stopping_curve
+from classify.policies.episodes import (
+    Episode,
+    available_places,
+    decisions,
+    run_episode,
+    stopping_curve,
+    touched_belief,
+)
 from classify.policies.knowledge import (
     LANDMARKS,
     Forecast,
@@ -52,6 +59,7 @@ __all__ = [
     "Episode",
     "available_places",
     "run_episode",
+    "touched_belief",
     "decisions",
     "stopping_curve",
 ]

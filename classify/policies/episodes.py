@@ -21,7 +21,7 @@ import numpy as np
 from classify.policies.knowledge import Places, PlaceSample, TouchKnowledge
 from classify.policies.policy import TouchPolicy, TouchState
 
-__all__ = ["Episode", "available_places", "run_episode", "decisions", "stopping_curve"]
+__all__ = ["Episode", "available_places", "touched_belief", "run_episode", "decisions", "stopping_curve"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -59,6 +59,18 @@ def available_places(places: Places, touched, min_spacing: float) -> np.ndarray:
         ok &= near >= min_spacing
         ok[touched] = False
     return ok
+
+
+def touched_belief(belief: np.ndarray, felt: np.ndarray) -> np.ndarray:
+    """The belief after one more touch: ``belief`` times that touch's single-touch posterior ``felt``, normalized.
+
+    Examples
+    --------
+    >>> touched_belief(np.array([0.5, 0.5]), np.array([0.9, 0.1])).round(2).tolist()
+    [0.9, 0.1]
+    """
+    belief = belief * np.maximum(felt, 1e-300)
+    return belief / belief.sum()
 
 
 def run_episode(
@@ -119,8 +131,7 @@ def run_episode(
         if not (0 <= p < len(places) and available[p]):
             raise ValueError(f"policy {type(policy).__name__} chose place {p}, which is not available")
         touched.append(p)
-        belief = belief * np.maximum(felt[p], 1e-300)
-        belief = belief / belief.sum()
+        belief = touched_belief(belief, felt[p])
         beliefs.append(belief)
     C = knowledge.n_classes
     return Episode(
