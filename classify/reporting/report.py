@@ -102,6 +102,8 @@ def _index(cells):
 def table_markdown(cells, method: str, protocol: str, classifiers, object_sets, touches: int = 1) -> str:
     """The Table 1 layout: rows classifiers, columns (objects x no selection / selection).
 
+    Missing cells print as ``-``.
+
     Parameters
     ----------
     cells : iterable of records with the ``CSV_COLUMNS`` attributes
@@ -109,8 +111,6 @@ def table_markdown(cells, method: str, protocol: str, classifiers, object_sets, 
     classifiers : row order
     object_sets : sequence of object counts (e.g. ``(4, 6)``)
     touches : which touch count to show (1: single touch)
-
-    Missing cells print as ``-``.
     """
     index = _index(cells)
     header = ["classifier"]
