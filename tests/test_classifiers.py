@@ -24,7 +24,7 @@ def _separable_imprints(n_per_class=30, n_classes=4, seed=0):
     return np.concatenate(X).astype(np.float32), np.concatenate(y)
 
 
-@pytest.mark.parametrize("name", classify.NAMES)
+@pytest.mark.parametrize("name", classify.PAPER_NAMES)
 def test_each_classifier_separates_planted_classes(name):
     X, y = _separable_imprints(seed=1)
     Xt, yt = _separable_imprints(n_per_class=20, seed=2)
@@ -36,7 +36,7 @@ def test_each_classifier_separates_planted_classes(name):
     np.testing.assert_array_equal(model.classes_[np.argmax(proba, axis=1)], model.predict(Xt))
 
 
-@pytest.mark.parametrize("name", classify.NAMES)
+@pytest.mark.parametrize("name", classify.PAPER_NAMES)
 def test_estimator_contract_clone_and_params(name):
     model = classify.make(name)
     params = model.get_params()
