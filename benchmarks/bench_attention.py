@@ -4,7 +4,7 @@ Prints Markdown tables: time per channel for all 72 views at 256 x 256 of
 the textured cow and of the hand toy at 150 mm (concave, painted per
 vertex), stacks of views in a thread pool as ``saliency_views`` takes them;
 the full ``saliency_views`` (all channels + combination), beside it with one
-view per stack (the per-view calls on small maps it replaces), with
+view per stack (the per-view calls on small maps that stacks avoid), with
 OpenCV's own threads off (``cv2.setNumThreads(1)``: does OpenCV's pool
 fight the views' pool?) and on one thread; and mesh
 saliency on nefertiti (a relief), on a subdivided nefertiti of about 200k

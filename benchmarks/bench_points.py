@@ -4,9 +4,8 @@ Four meshes, each at a 150 mm diagonal: the textured cow (spot), nefertiti
 (100k faces, a relief: a pad reaches nearly everywhere), the hand toy (40k
 faces, concave: hundreds of candidates between the fingers are refused by
 the touch check, and its selection runs on into the fill from every
-vertex) and the hand refined to 124k faces (the size of issue 19's
-creature, which took 11 s once the touch check asked about one candidate at
-a time).  Stages of the attention method, each timed alone: mesh saliency,
+vertex) and the hand refined to 124k faces (a large scan's size, where a
+touch check that asks about candidates one at a time costs seconds).  Stages of the attention method, each timed alone: mesh saliency,
 rendering the 72 views, their eight channel maps, combining them, the fusion
 on the mesh (best set, peaks, votes, selection) without the touch check, and
 what the touch check adds to it; then the whole ``interest_points`` call.

@@ -72,7 +72,7 @@ def timed(fn):
 def hand_150mm():
     """The hand toy at a 150 mm diagonal (40k faces): deep creases between the fingers, where a pad
     cannot reach, so the attention method refuses hundreds of candidates and reaches the fill from
-    every vertex (the touch check of issue 19 asked about those one at a time)."""
+    every vertex, where a touch check that asks about candidates one at a time is slowest."""
     from meshsal import scale_to
     from meshsal.objects import toys
 
@@ -80,8 +80,8 @@ def hand_150mm():
 
 
 def hand_124k():
-    """The hand toy refined to the size of issue 19's 124k-face creature: Loop-subdivided once (its
-    colours with it), decimated to 124,000 faces (pymeshlab's quadric edge collapse), 150 mm."""
+    """The hand toy refined to the size of a large scan: Loop-subdivided once (its colours with it),
+    decimated to 124,000 faces (pymeshlab's quadric edge collapse), 150 mm."""
     import igl
     import pymeshlab
 
