@@ -19,7 +19,7 @@ from dataclasses import asdict, dataclass
 import numpy as np
 
 from meshsal.mesh import Mesh
-from meshsal.mesh.geometry import tangent_frames
+from meshsal.mesh.geometry import tangent_frames, vertex_area_vectors
 from meshsal.util.registry import Registry
 
 __all__ = [
@@ -201,22 +201,9 @@ def check_points(positions, normals, angles_deg=None) -> tuple[np.ndarray, np.nd
 # than on (n, 3) rows of three.
 
 
-def _vertex_area_vectors(Vt: np.ndarray, F: np.ndarray) -> np.ndarray:
-    """Per vertex, a third of the area-weighted normals of its faces, (3, n) from (3, n) vertices."""
-    Ft = F.T.astype(np.intp)
-    x, y, z = np.take(Vt, Ft, axis=1)
-    ax, ay, az = x[1] - x[0], y[1] - y[0], z[1] - z[0]
-    bx, by, bz = x[2] - x[0], y[2] - y[0], z[2] - z[0]
-    corners, n = Ft.reshape(-1), Vt.shape[1]
-    return (
-        np.stack(
-            [
-                np.bincount(corners, weights=np.tile(c, 3), minlength=n)
-                for c in (ay * bz - az * by, az * bx - ax * bz, ax * by - ay * bx)
-            ]
-        )
-        / 6.0
-    )
+def _vertex_area_vectors(V: np.ndarray, F: np.ndarray) -> np.ndarray:
+    """Per vertex, a third of the area-weighted normals of its faces, (3, n) from (n, 3) vertices."""
+    return np.ascontiguousarray(vertex_area_vectors(V, F).T) / 6.0
 
 
 def _cells_near(cell: np.ndarray, P: np.ndarray, origin: np.ndarray, size: float, radius: float):
@@ -281,10 +268,10 @@ def _fit_pca(V, F, P, N, radius: float) -> np.ndarray:
     # vertices near them, and get the result of the whole mesh.
     keep = _cells_near(cell, P, origin, size, radius)
     if keep is None:
-        centroids, vectors = _surface_cells(Vt, _vertex_area_vectors(Vt, F), cell)
+        centroids, vectors = _surface_cells(Vt, _vertex_area_vectors(V, F), cell)
     elif keep.any():
         touching = keep[F[:, 0]] | keep[F[:, 1]] | keep[F[:, 2]]
-        area = _vertex_area_vectors(Vt, F[touching])[:, keep]
+        area = _vertex_area_vectors(V, F[touching])[:, keep]
         centroids, vectors = _surface_cells(Vt[:, keep], area, cell[:, keep])
     else:
         return N
