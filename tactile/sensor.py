@@ -23,9 +23,8 @@ from meshsal.mesh.geometry import tangent_frames, vertex_area_vectors
 from meshsal.util.registry import Registry
 
 __all__ = [
-    "MODES",
     "SENSOR_MODES",
-    "PLANES",
+    "SENSOR_PLANES",
     "Sensor",
     "Poses",
     "tangent_frames",
@@ -44,8 +43,14 @@ SENSOR_MODES = Registry(
         ("pressure", None, "indentation depth, as a force-resistive array reads it"),
     ],
 )
-MODES = SENSOR_MODES.names()
-PLANES = ("pca", "paper")
+#: How the pad's plane is fitted at a point (:func:`fit_normals`).
+SENSOR_PLANES = Registry(
+    "sensor plane",
+    [
+        ("pca", None, "the area-weighted mean normal of the surface under the pad"),
+        ("paper", None, "the plane through the three nearest vertices, as in the paper"),
+    ],
+)
 
 # The in-plane frame follows world +y (meshes are y-up) unless the normal is
 # within this angle of +-y, where the projection of y degenerates.
@@ -113,10 +118,9 @@ class Sensor:
             if not (np.isfinite(value) and value > 0):
                 raise ValueError(f"Sensor.{name} must be finite and positive, got {value}")
             object.__setattr__(self, name, value)
-        if self.mode not in SENSOR_MODES:
-            raise ValueError(f"Sensor.mode must be one of {SENSOR_MODES.names()}, got {self.mode!r}")
-        if self.plane not in PLANES:
-            raise ValueError(f"Sensor.plane must be one of {PLANES}, got {self.plane!r}")
+        for name, registry in (("mode", SENSOR_MODES), ("plane", SENSOR_PLANES)):
+            if getattr(self, name) not in registry:
+                raise ValueError(f"Sensor.{name} must be one of {registry.names()}, got {getattr(self, name)!r}")
 
     @property
     def width_mm(self) -> float:
