@@ -25,7 +25,6 @@ Prints the machine line and the kernels, and writes its tables to
 
 from __future__ import annotations
 
-import argparse
 import os
 import statistics
 import sys
@@ -35,7 +34,7 @@ from pathlib import Path
 
 import cv2
 import numpy as np
-from benchlib import DEFAULT_MESHES, hand_124k, hand_150mm, page
+from benchlib import arguments, hand_124k, hand_150mm, run
 
 import meshsal
 from meshsal import attention
@@ -168,15 +167,8 @@ def bench_mesh_saliency(meshes_dir: Path, repeats: int) -> None:
 
 
 def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument(
-        "--meshes-dir",
-        type=Path,
-        default=DEFAULT_MESHES,
-        help=f"folder of the public test meshes (default {DEFAULT_MESHES})",
-    )
+    parser = arguments(__doc__, repeats=3)
     parser.add_argument("--size", type=int, default=256, help="view size in pixels (default 256)")
-    parser.add_argument("--repeats", type=int, default=3, help="timed repeats, median reported (default 3)")
     parser.add_argument(
         "--threads", type=int, default=os.cpu_count() or 1, help="worker threads over views (default: CPU count)"
     )
@@ -199,6 +191,4 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    with page("bench_attention", "Attention: eight channels on 72 views, and mesh saliency"):
-        status = main()
-    raise SystemExit(status)
+    run("bench_attention", "Attention: eight channels on 72 views, and mesh saliency", main)

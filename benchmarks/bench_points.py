@@ -18,12 +18,11 @@ to 124k faces <= 2 s end to end on 2 cores.
 
 from __future__ import annotations
 
-import argparse
 import dataclasses
 import statistics
 from pathlib import Path
 
-from benchlib import DEFAULT_MESHES, hand_124k, hand_150mm, page, timed
+from benchlib import arguments, hand_124k, hand_150mm, run, timed
 
 from meshsal import load_mesh, scale_to
 from meshsal.attention import saliency_views
@@ -76,9 +75,7 @@ def stages(mesh, size: int) -> dict:
 
 
 def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--meshes-dir", type=Path, default=DEFAULT_MESHES)
-    parser.add_argument("--repeats", type=int, default=3)
+    parser = arguments(__doc__, repeats=3)
     parser.add_argument("--size", type=int, default=128, help="view size in pixels (default 128)")
     args = parser.parse_args(argv)
     rows = []
@@ -110,6 +107,4 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    with page("bench_points", "Interest points end to end, by stage"):
-        status = main()
-    raise SystemExit(status)
+    run("bench_points", "Interest points end to end, by stage", main)

@@ -10,6 +10,7 @@ and process CPU time of all threads).
 
 from __future__ import annotations
 
+import argparse
 import contextlib
 import io
 import sys
@@ -60,6 +61,28 @@ def page(name: str, title: str):
         print(f"\n{machine()}", flush=True)
     write_page(name, title, tee.copy.getvalue())
     print(f"wrote docs/benchmarks/{name}.md", file=sys.stderr)
+
+
+def run(name: str, title: str, main) -> None:
+    """``python benchmarks/NAME.py``: ``main()`` inside :func:`page`, its return value the exit status."""
+    with page(name, title):
+        status = main()
+    raise SystemExit(status)
+
+
+def arguments(doc: str, repeats: int, meshes_dir: bool = True, repeats_help: str = "") -> argparse.ArgumentParser:
+    """The options every benchmark takes: ``--repeats`` and, with ``meshes_dir``, ``--meshes-dir``.
+
+    The description is the first line of ``doc`` (the benchmark's docstring).
+    """
+    parser = argparse.ArgumentParser(description=doc.splitlines()[0])
+    if meshes_dir:
+        parser.add_argument(
+            "--meshes-dir", type=Path, default=DEFAULT_MESHES, help=f"the public test meshes (default {DEFAULT_MESHES})"
+        )
+    help = repeats_help or "timed runs; the figures are their medians"
+    parser.add_argument("--repeats", type=int, default=repeats, help=f"{help} (default {repeats})")
+    return parser
 
 
 def timed(fn):
