@@ -4,7 +4,7 @@ Prints Markdown tables: time per channel for all 72 views at 256 x 256 of
 the textured cow and of the hand toy at 150 mm (concave, painted per
 vertex), stacks of views in a thread pool as ``saliency_views`` takes them;
 the full ``saliency_views`` (all channels + combination), beside it with one
-view per stack (the per-view calls on small maps it replaces), with
+view per stack (the per-view calls on small maps that stacks avoid), with
 OpenCV's own threads off (``cv2.setNumThreads(1)``: does OpenCV's pool
 fight the views' pool?) and on one thread; and mesh
 saliency on nefertiti (a relief), on a subdivided nefertiti of about 200k
@@ -25,7 +25,6 @@ Prints the machine line and the kernels, and writes its tables to
 
 from __future__ import annotations
 
-import argparse
 import os
 import statistics
 import sys
@@ -35,7 +34,7 @@ from pathlib import Path
 
 import cv2
 import numpy as np
-from benchlib import DEFAULT_MESHES, hand_124k, hand_150mm, page
+from benchlib import arguments, hand_124k, hand_150mm, run
 
 import meshsal
 from meshsal import attention
@@ -168,15 +167,8 @@ def bench_mesh_saliency(meshes_dir: Path, repeats: int) -> None:
 
 
 def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument(
-        "--meshes-dir",
-        type=Path,
-        default=DEFAULT_MESHES,
-        help=f"folder of the public test meshes (default {DEFAULT_MESHES})",
-    )
+    parser = arguments(__doc__, repeats=3)
     parser.add_argument("--size", type=int, default=256, help="view size in pixels (default 256)")
-    parser.add_argument("--repeats", type=int, default=3, help="timed repeats, median reported (default 3)")
     parser.add_argument(
         "--threads", type=int, default=os.cpu_count() or 1, help="worker threads over views (default: CPU count)"
     )
@@ -199,6 +191,4 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    with page("bench_attention", "Attention: eight channels on 72 views, and mesh saliency"):
-        status = main()
-    raise SystemExit(status)
+    run("bench_attention", "Attention: eight channels on 72 views, and mesh saliency", main)

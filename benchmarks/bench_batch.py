@@ -24,7 +24,7 @@ import time
 from pathlib import Path
 
 import numpy as np
-from benchlib import page
+from benchlib import run
 
 from classify.batch import STAGES, BatchSettings, find_meshes, process_mesh, run_batch
 from classify.runtime.cluster import open_executor
@@ -120,6 +120,4 @@ def main() -> int:
 
 
 if __name__ == "__main__":
-    with page("bench_batch", "Corpus batch on Dask workers"):
-        status = main()
-    raise SystemExit(status)
+    run("bench_batch", "Corpus batch on Dask workers", main)

@@ -19,7 +19,6 @@ or barycentrics differ from the single rays'.
 
 from __future__ import annotations
 
-import argparse
 import shutil
 import statistics
 import subprocess
@@ -29,7 +28,7 @@ from pathlib import Path
 
 import numpy as np
 from bench_render import candidate_rays
-from benchlib import DEFAULT_MESHES, page
+from benchlib import arguments, run
 
 from meshsal import load_mesh
 from meshsal.views.cameras import view_rig
@@ -126,10 +125,8 @@ def embree_library() -> Path:
 
 
 def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--meshes-dir", type=Path, default=DEFAULT_MESHES)
+    parser = arguments(__doc__, repeats=5, repeats_help="rounds of single rays then packets (median)")
     parser.add_argument("--size", type=int, default=256)
-    parser.add_argument("--repeats", type=int, default=5, help="rounds of single rays then packets (median)")
     args = parser.parse_args(argv)
     compiler = shutil.which("cc") or shutil.which("gcc")
     if compiler is None:
@@ -185,6 +182,4 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    with page("bench_embree_packets", "Embree's ray packets against single rays on the renderer's rays"):
-        status = main()
-    raise SystemExit(status)
+    run("bench_embree_packets", "Embree's ray packets against single rays on the renderer's rays", main)

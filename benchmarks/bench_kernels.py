@@ -127,7 +127,6 @@ if __name__ == "__main__":
     if "--serve" in sys.argv:  # a child: stdout is its replies, and it pins its kernels before NumPy loads
         main()
     else:
-        from benchlib import page
+        from benchlib import run
 
-        with page("bench_kernels", "What the kernel pin costs"):
-            main()
+        run("bench_kernels", "What the kernel pin costs", main)

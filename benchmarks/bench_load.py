@@ -13,13 +13,12 @@ machine).
 
 from __future__ import annotations
 
-import argparse
 import statistics
 import time
 import warnings
 from pathlib import Path
 
-from benchlib import page
+from benchlib import arguments, run
 
 from meshsal import load_mesh
 from meshsal.objects import ycb
@@ -41,10 +40,8 @@ def cpu_times(path: Path, repeats: int) -> list[float]:
 
 
 def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--meshes-dir", type=Path, default=SHARED / "meshes")
+    parser = arguments(__doc__, repeats=15)
     parser.add_argument("--corpus", type=Path, default=SHARED / "corpus" / "random-objects")
-    parser.add_argument("--repeats", type=int, default=15)
     args = parser.parse_args(argv)
     meshes = [
         ("nefertiti (OBJ, 99,938 faces)", args.meshes_dir / "nefertiti.obj"),
@@ -64,6 +61,4 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    with page("bench_load", "Loading meshes: checks, pymeshlab, repairs"):
-        status = main()
-    raise SystemExit(status)
+    run("bench_load", "Loading meshes: checks, pymeshlab, repairs", main)

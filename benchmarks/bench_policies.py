@@ -26,13 +26,11 @@ place-aware model's fit, once per replicate.
 
 from __future__ import annotations
 
-import argparse
 import statistics
-import sys
 from functools import partial
 
 import numpy as np
-from benchlib import page, timed
+from benchlib import arguments, run, timed
 from threadpoolctl import threadpool_limits
 
 
@@ -117,14 +115,11 @@ def _median_ms(times) -> str:
 
 
 def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = arguments(__doc__, repeats=30, meshes_dir=False, repeats_help="states each policy chooses from")
     parser.add_argument("--objects", type=int, default=16)
     parser.add_argument("--places", type=int, default=330)
     parser.add_argument("--touches", type=int, default=3, help="place-free: training touches per place and object")
-    parser.add_argument("--repeats", type=int, default=30, help="states each policy chooses from")
-    args = parser.parse_args(argv)
-    with page("bench_policies", "Choosing the next touch"):
-        _measure(args)
+    _measure(parser.parse_args(argv))
     return 0
 
 
@@ -172,4 +167,4 @@ def _measure(args) -> None:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    run("bench_policies", "Choosing the next touch", main)

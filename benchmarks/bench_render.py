@@ -24,7 +24,6 @@ tables to ``docs/benchmarks/bench_render.md``.
 
 from __future__ import annotations
 
-import argparse
 import cProfile
 import os
 import pstats
@@ -33,7 +32,7 @@ from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 import numpy as np
-from benchlib import page
+from benchlib import arguments, run
 
 from meshsal import load_mesh
 from meshsal.mesh import bounding_sphere
@@ -123,10 +122,8 @@ def stage_profile(mesh, cameras, size: int, scene) -> list[tuple[str, float]]:
 
 
 def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--meshes-dir", type=Path, default=DEFAULT_MESHES)
+    parser = arguments(__doc__, repeats=11)
     parser.add_argument("--size", type=int, default=256)
-    parser.add_argument("--repeats", type=int, default=11)
     args = parser.parse_args(argv)
 
     mesh = load_mesh(args.meshes_dir / "nefertiti.obj")
@@ -200,6 +197,4 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    with page("bench_render", "Rendering 72 views of nefertiti against Open3D's ray casting"):
-        status = main()
-    raise SystemExit(status)
+    run("bench_render", "Rendering 72 views of nefertiti against Open3D's ray casting", main)

@@ -10,6 +10,7 @@ and process CPU time of all threads).
 
 from __future__ import annotations
 
+import argparse
 import contextlib
 import io
 import sys
@@ -62,6 +63,28 @@ def page(name: str, title: str):
     print(f"wrote docs/benchmarks/{name}.md", file=sys.stderr)
 
 
+def run(name: str, title: str, main) -> None:
+    """``python benchmarks/NAME.py``: ``main()`` inside :func:`page`, its return value the exit status."""
+    with page(name, title):
+        status = main()
+    raise SystemExit(status)
+
+
+def arguments(doc: str, repeats: int, meshes_dir: bool = True, repeats_help: str = "") -> argparse.ArgumentParser:
+    """The options every benchmark takes: ``--repeats`` and, with ``meshes_dir``, ``--meshes-dir``.
+
+    The description is the first line of ``doc`` (the benchmark's docstring).
+    """
+    parser = argparse.ArgumentParser(description=doc.splitlines()[0])
+    if meshes_dir:
+        parser.add_argument(
+            "--meshes-dir", type=Path, default=DEFAULT_MESHES, help=f"the public test meshes (default {DEFAULT_MESHES})"
+        )
+    help = repeats_help or "timed runs; the figures are their medians"
+    parser.add_argument("--repeats", type=int, default=repeats, help=f"{help} (default {repeats})")
+    return parser
+
+
 def timed(fn):
     """``(result, wall seconds, CPU seconds of the process)`` of ``fn()``."""
     wall, cpu = time.perf_counter(), time.process_time()
@@ -72,7 +95,7 @@ def timed(fn):
 def hand_150mm():
     """The hand toy at a 150 mm diagonal (40k faces): deep creases between the fingers, where a pad
     cannot reach, so the attention method refuses hundreds of candidates and reaches the fill from
-    every vertex (the touch check of issue 19 asked about those one at a time)."""
+    every vertex, where a touch check that asks about candidates one at a time is slowest."""
     from meshsal import scale_to
     from meshsal.objects import toys
 
@@ -80,8 +103,8 @@ def hand_150mm():
 
 
 def hand_124k():
-    """The hand toy refined to the size of issue 19's 124k-face creature: Loop-subdivided once (its
-    colours with it), decimated to 124,000 faces (pymeshlab's quadric edge collapse), 150 mm."""
+    """The hand toy refined to the size of a large scan: Loop-subdivided once (its colours with it),
+    decimated to 124,000 faces (pymeshlab's quadric edge collapse), 150 mm."""
     import igl
     import pymeshlab
 

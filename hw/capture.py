@@ -17,7 +17,7 @@ import time
 from dataclasses import dataclass
 
 from hw.press import PressDetector
-from hw.protocol import PROTOCOLS, FrameParser
+from hw.protocol import FRAME_PROTOCOLS, FrameParser
 from hw.session import Session
 from meshsal.util.arguments import HelpFormatter, add_renamed
 
@@ -160,8 +160,7 @@ def capture(
         before the error stay in the session.
     """
     o = dataclasses.replace(options or CaptureOptions(), **changes)
-    if o.protocol not in PROTOCOLS:
-        raise ValueError(f"unknown protocol {o.protocol!r}; expected one of {PROTOCOLS}")
+    FRAME_PROTOCOLS.get(o.protocol)  # ValueError naming the protocols
     if o.presses is not None and o.presses < 1:
         raise ValueError(f"presses must be at least 1, got {o.presses}")
     stream = sys.stderr if o.stream is None else o.stream
@@ -274,7 +273,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     """The capture options, shared by ``visuotactile capture`` and ``python -m hw.capture``."""
     p.add_argument("--port", required=True, help="device path (/dev/ttyACM0, COM3) or pyserial URL")
     p.add_argument("--baud", type=int, default=115200, help="baud rate (default 115200)")
-    p.add_argument("--protocol", choices=PROTOCOLS, default="binary", help="frame protocol (default binary)")
+    p.add_argument("--protocol", choices=FRAME_PROTOCOLS.names(), default="binary", help=FRAME_PROTOCOLS.help_text())
     p.add_argument("--session", required=True, help="session file (.sqlite); created or resumed")
     p.add_argument("--object", required=True, help="name of the object being pressed")
     ids = p.add_mutually_exclusive_group()

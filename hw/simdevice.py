@@ -25,7 +25,7 @@ import tty
 
 import numpy as np
 
-from hw.protocol import HEADER_SIZE, PROTOCOLS, SYNC, VERSION, encode
+from hw.protocol import FRAME_PROTOCOLS, HEADER_SIZE, SYNC, VERSION, encode
 
 __all__ = ["SimulatedSensor", "open_pty", "serve", "press_targets", "main"]
 
@@ -95,8 +95,7 @@ class SimulatedSensor:
         imprints = np.asarray(imprints, dtype=np.float64)
         if imprints.ndim != 3 or imprints.shape[0] == 0:
             raise ValueError(f"imprints must have shape (k, rows, cols) with k >= 1, got {imprints.shape}")
-        if protocol not in PROTOCOLS:
-            raise ValueError(f"unknown protocol {protocol!r}; expected one of {PROTOCOLS}")
+        FRAME_PROTOCOLS.get(protocol)  # ValueError naming the protocols
         for name, p in (("garbage", garbage), ("bitflips", bitflips), ("drop", drop)):
             if not 0.0 <= p <= 1.0:
                 raise ValueError(f"{name} must be a probability in [0, 1], got {p}")
@@ -317,7 +316,7 @@ def _parser() -> argparse.ArgumentParser:
         default="contour",
         help="imprint mode of the simulated pad (default contour, the paper's image)",
     )
-    p.add_argument("--protocol", choices=PROTOCOLS, default="binary")
+    p.add_argument("--protocol", choices=FRAME_PROTOCOLS.names(), default="binary", help=FRAME_PROTOCOLS.help_text())
     p.add_argument("--garbage", type=float, default=0.0, help="probability of a garbage burst per frame")
     p.add_argument("--bitflips", type=float, default=0.0, help="probability of a flipped bit per frame")
     p.add_argument("--drop", type=float, default=0.0, help="probability of dropping a frame")

@@ -47,7 +47,7 @@ def touch_model(method: str, path):
 
 
 def add_view_size(p) -> None:
-    """``--view-size`` (``--size`` before 0.2)."""
+    """``--view-size``, and ``--size``, its deprecated spelling until 0.3."""
     add_renamed(
         p, "--size", p.add_argument("--view-size", type=int, default=VIEW_SIZE, help="rendered view size in pixels")
     )

@@ -24,11 +24,11 @@ if [ ! -f "$marker" ] || [ pyproject.toml -nt "$marker" ]; then
     .venv/bin/python -m pip install --quiet --upgrade pip
   fi
   # Bytecode is compiled as modules are first imported: compiling every installed file up front
-  # took 11 of the 26 s of the install, for files the toolkit never imports.
+  # costs 11 of the 26 s of the install, for files the toolkit never imports.
   .venv/bin/python -m pip install --quiet --no-compile -e ".${VENV_EXTRAS:+[$VENV_EXTRAS]}"
-  # Where PYTHONDONTWRITEBYTECODE is set, as on our CI machines, no process writes bytecode, so each one (the
-  # CLI, every worker, every test's subprocess) compiled what it imports again: 2.5 of its 4.4 s of imports.
-  # Written once here, for what the toolkit imports.
+  # Where PYTHONDONTWRITEBYTECODE is set, as on CI machines, no process writes bytecode, and each one (the
+  # CLI, every worker, every test's subprocess) would compile what it imports again: 2.5 of its 4.4 s of
+  # imports.  So the bytecode of what the toolkit imports is written once, here.
   modules="classify.cli, classify.experiment.run, meshsal.points, meshsal.attention.rig, meshsal.objects.instances"
   if [[ ",${VENV_EXTRAS:-}," == *,test,* ]]; then modules="$modules, classify.experiment.env, distributed, pytest, xdist"; fi
   env -u PYTHONDONTWRITEBYTECODE .venv/bin/python -c "import $modules"

@@ -9,7 +9,7 @@ def register(subparsers) -> None:
     """Add this package's subcommands to the ``visuotactile`` parser."""
     from meshsal.cli import QUIET_HELP, mesh_help
     from meshsal.util.arguments import HelpFormatter
-    from tactile.sensor import PLANES, SENSOR_MODES, Sensor
+    from tactile.sensor import SENSOR_MODES, SENSOR_PLANES, Sensor
 
     default = Sensor()
     p = subparsers.add_parser(
@@ -33,10 +33,8 @@ def register(subparsers) -> None:
         help="principal-frame box diagonal the mesh is scaled to, in mm, as 'visuotactile points' and the "
         "experiment do",
     )
-    p.add_argument(
-        "--mode", choices=SENSOR_MODES.names(), default=default.mode, help="contour (the paper's image) or pressure"
-    )
-    p.add_argument("--plane", choices=PLANES, default=default.plane, help="how the pad plane is fitted")
+    p.add_argument("--mode", choices=SENSOR_MODES.names(), default=default.mode, help=SENSOR_MODES.help_text())
+    p.add_argument("--plane", choices=SENSOR_PLANES.names(), default=default.plane, help=SENSOR_PLANES.help_text())
     p.add_argument("--pitch-mm", type=float, default=default.pitch_mm, help="taxel spacing in mm")
     p.add_argument("--depth-mm", type=float, default=default.depth_mm, help="pressing depth beyond first contact in mm")
     p.add_argument("--supersample", type=int, default=default.supersample, help="rays per taxel side")

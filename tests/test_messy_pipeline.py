@@ -77,9 +77,9 @@ def test_point_methods_never_choose_a_vertex_without_a_normal(files, name, metho
     check(mesh, meshsal.interest_points(mesh, n=6, method=method, size=32))
 
 
-def test_the_issue_composite_no_longer_stops_the_points_command(files, tmp_path, capsys):
-    # A composite with a double-sided triangle: the farthest-point baseline proposed a corner whose only faces
-    # were the triangle and its twin, and the touch check raised "normals must be non-zero", naming no file.
+def test_a_composite_with_a_double_sided_triangle_gets_its_points(files, tmp_path, capsys):
+    # The farthest-point baseline may propose a corner whose only faces are the triangle and its twin; that
+    # corner has no normal to press along, so it must not reach the touch check ("normals must be non-zero").
     assert (
         main(
             [

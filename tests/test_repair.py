@@ -100,7 +100,7 @@ def test_only_the_planted_fold_leaves_vertices_without_a_normal(corpus, name, fm
 
 @pytest.mark.parametrize("name", ["double_sided_fin", "composite_double_sided", "everything_apart"])
 def test_double_sided_triangles_leave_no_zero_normal(corpus, name):
-    # Before the repair, the tip of the fin (and the decal's corners) had only a face and its twin.
+    # As written, the tip of the fin (and the decal's corners) has only a face and its twin.
     case = CASES[name]
     before = normal_defined(case.vertices, case.faces)
     assert not before[np.unique(case.faces)].all()

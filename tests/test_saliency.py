@@ -136,7 +136,7 @@ def test_combine_maps_shows_a_hot_spot_not_a_plateau():
     far = erode_mask(mask) & (np.hypot(rows - 40, cols - 90) > 10)
     for normalize in (False, True):
         m = combine_maps(channels, mask, normalize=normalize)
-        # Before the median was removed, half the maximum covered all the object with
+        # Without the median removed, half the maximum would cover all the object with
         # equal weights and 19% of it with N(.).
         assert attention.plateau_fraction(m, mask) < 0.01, normalize
         assert np.hypot(*np.subtract(np.unravel_index(np.argmax(m), m.shape), (40, 90))) <= 1.0

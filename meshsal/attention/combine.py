@@ -61,8 +61,8 @@ _STACKED = {
     contrast: contrast_stack,
 }
 # Views a thread takes at once in saliency_views: enough to share the pyramids' per-call costs, few enough
-# that two threads share 72 views evenly.  Tried on 72 views (1, 4, 6, 9, 12, 18 and 36; one thread at
-# 128 px, two at 256 px, two runs): 18 and 36 were the fastest, within the machine's noise of each other.
+# that two threads share 72 views evenly.  Of 1, 4, 6, 9, 12, 18 and 36 on 72 views (one thread at 128 px,
+# two at 256 px), 18 and 36 are the fastest, within the machine's noise of each other.
 _VIEWS_PER_STACK = 18
 
 
@@ -172,7 +172,7 @@ def curvature(view, vertex_saliency: np.ndarray) -> np.ndarray:
         raise ValueError(f"vertex_saliency must be a 1-D array with one value per vertex, got shape {values.shape}")
     if not np.isfinite(values).all():
         raise ValueError("vertex_saliency contains NaN or infinite values")
-    # Pixels by flat index (indexing by a mask took most of the channel's time), and the corners of the
+    # Pixels by flat index (indexing by a mask would take most of the channel's time), and the corners of the
     # faces the object's pixels see, not the whole image's.
     face_id = np.asarray(view.face_id).reshape(-1)
     pixels = np.flatnonzero(face_id >= 0)
@@ -448,7 +448,7 @@ def saliency_views(
     The mesh saliency is computed once.  Each thread takes up to 18 views
     of one size at once (:func:`image_channels_stack`): per view, the
     center-surround pyramids' hundreds of calls on small maps, each of which
-    held Python's lock and handed it over between threads, become a share of
+    holds Python's lock and hands it over between threads, become a share of
     a few calls on the stack.
 
     Parameters

@@ -253,7 +253,7 @@ def normalize_map(m: np.ndarray, method: str = "maxima", iterations: int = 3) ->
         ``M <- |M + M * DoG - C_inh|_{>=0}``, DoG the difference of an
         excitatory Gaussian (sigma 2% of the map width, gain 0.5**2) and an
         inhibitory one (sigma 25%, gain 1.5**2), C_inh = 0.02.  On our 16 x 16
-        scale-4 maps it kept the bar ends of orientation search displays
+        scale-4 maps it keeps the bar ends of orientation search displays
         alive, so it is not the default.
     iterations : int
         Rounds of the iterative variant.

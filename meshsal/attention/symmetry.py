@@ -100,7 +100,7 @@ def _sum_in_numpy_order(terms) -> np.ndarray:
 
     The same bits as stacking them on a last axis and calling ``.sum(-1)``
     (eight running sums combined as a tree, the rest added one by one),
-    without summing over a short last axis, which made the channel slow.
+    without summing over a short last axis, which makes the channel slow.
     """
     if len(terms) < 8:
         total = terms[0]

@@ -13,8 +13,8 @@ above the rim.  An open sheet seen equally from both sides (a flat disc)
 is left as it is.
 
 libigl's Python bindings do not expose ``reorient_facets_raycast``, and
-pymeshlab's ``meshing_re_orient_faces_by_geometry`` took 4.8 s on the
-Stanford bunny (69k faces; its default 64 rays a face) and failed to turn
+pymeshlab's ``meshing_re_orient_faces_by_geometry`` takes 4.8 s on the
+Stanford bunny (69k faces; its default 64 rays a face) and fails to turn
 an inward bowl with 4 rays a face; here every open component gets
 ``SAMPLES`` points and ``RAYS`` rays a side from each, 4096 rays.
 """
