@@ -332,7 +332,8 @@ def _experiment(args) -> int:
         )
     print(format_tables(result))
     if not args.quiet:
-        print(f"results written to {args.out}/ ({result.timings['total']:.0f} s)", file=sys.stderr)
+        t = result.timings
+        print(f"results written to {args.out}/ ({t['total']:.0f} s, {t['cpu_total']:.0f} s of CPU)", file=sys.stderr)
     return 0
 
 

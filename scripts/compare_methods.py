@@ -200,7 +200,8 @@ def experiment_provenance(document) -> str:
             f"- commit: {run.get('commit', '?')}",
             f"- machine: {run.get('machine', '?')}",
             f"- date: {run.get('date', '?')}",
-            f"- wall time: {document.get('timings_s', {}).get('total', float('nan')):.0f} s",
+            f"- wall time: {document.get('timings_s', {}).get('total', float('nan')):.0f} s; CPU time: "
+            f"{document.get('timings_s', {}).get('cpu_total', float('nan')):.0f} s",
         ]
     )
 
