@@ -100,7 +100,8 @@ def _index(cells):
 
 
 def table_markdown(cells, method: str, protocol: str, classifiers, object_sets, touches: int = 1) -> str:
-    """The Table 1 layout: rows classifiers, columns (objects x no selection / selection).
+    """The Table 1 layout: rows classifiers (those measured for this method and protocol), columns (objects x no
+    selection / selection).
 
     Missing cells print as ``-``.
 
@@ -118,6 +119,8 @@ def table_markdown(cells, method: str, protocol: str, classifiers, object_sets, 
         header += [f"{n} objects, no selection", f"{n} objects, selection"]
     lines = ["| " + " | ".join(header) + " |", "|" + "|".join(["---"] + [":---:"] * (len(header) - 1)) + "|"]
     for name in classifiers:
+        if not any(key[:3] == (method, protocol, name) for key in index):
+            continue
         row = [name]
         for n in object_sets:
             for selection in (False, True):
