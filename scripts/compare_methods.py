@@ -190,6 +190,7 @@ def report(document, classifier: str, other: str | None, selection: bool, shown)
 def experiment_provenance(document) -> str:
     """What ``results.json`` says of the run that measured it."""
     run = document["settings"].get("provenance") or {}
+    times = document.get("timings_s", {})
     if not run:
         return "The experiment's command, commit and machine are not recorded in this results.json."
     return "\n".join(
@@ -200,8 +201,8 @@ def experiment_provenance(document) -> str:
             f"- commit: {run.get('commit', '?')}",
             f"- machine: {run.get('machine', '?')}",
             f"- date: {run.get('date', '?')}",
-            f"- wall time: {document.get('timings_s', {}).get('total', float('nan')):.0f} s; CPU time: "
-            f"{document.get('timings_s', {}).get('cpu_total', float('nan')):.0f} s",
+            f"- wall time: {times.get('total', float('nan')):.0f} s"
+            + (f"; CPU time: {times['cpu_total']:.0f} s" if "cpu_total" in times else ""),
         ]
     )
 

@@ -398,3 +398,13 @@ def test_objects_from_a_folder_or_a_list_with_twins_and_bad_files(tmp_path):
         load_objects([str(folder)], SMALL)
     with pytest.warns(UserWarning, match="left out 1 of 4 objects"):
         assert load_objects([str(folder)], SMALL, skip_bad=True).names == ("box", "ball", "rod")
+
+
+def test_a_result_read_back_from_its_json_prints_the_same_tables(tmp_path):
+    from classify.reporting.results import ExperimentResult
+
+    config = QUICK.replace(methods=("random", "uniform"), classifiers=("knn",), replicates=2)
+    r = quick.run(_objects()[:2], config, out_dir=tmp_path)
+    again = ExperimentResult.from_json(json.loads((tmp_path / "results.json").read_text()))
+    assert experiment.format_tables(again) == experiment.format_tables(r)
+    assert again.cell("uniform", "instance", "knn", 2, False, 3) == r.cell("uniform", "instance", "knn", 2, False, 3)

@@ -171,6 +171,38 @@ class ExperimentResult:
         """The Table 1 layout as Markdown."""
         return report.table_markdown(self.cells, method, protocol, self.classifiers, self.object_sets, touches)
 
+    @classmethod
+    def from_json(cls, document: dict) -> ExperimentResult:
+        """The result a ``results.json`` holds (:meth:`to_json`'s inverse, as far as the tables need)."""
+
+        def key(d):
+            return tuple(d[c] for c in _COORDINATES)
+
+        confusions = tuple(
+            ConfusionMatrix(**{**c, "object_names": tuple(c["object_names"]), "counts": np.asarray(c["counts"])})
+            for c in document.get("confusions", [])
+        )
+        return cls(
+            cells=tuple(Cell(**c) for c in document["cells"]),
+            comparisons=tuple(Comparison(**c) for c in document.get("comparisons", [])),
+            confusions=confusions,
+            object_names=tuple(document["object_names"]),
+            object_sets=tuple(document["object_sets"]),
+            classifiers=tuple(document["classifiers"]),
+            settings=document.get("settings", {}),
+            selection_kept=document.get("selection_kept", {}),
+            timings=document.get("timings_s", {}),
+            rates={key(r): np.asarray(r["replicate_by_object"]) for r in document.get("rates", [])},
+            stopping=tuple(StoppingCell(**s) for s in document.get("stopping", [])),
+            stopping_rates={
+                (s["method"], s["protocol"], s["classifier"], s["n_objects"]): (
+                    np.asarray(s["correct"]),
+                    np.asarray(s["touches"]),
+                )
+                for s in document.get("stopping_by_object", [])
+            },
+        )
+
     def to_json(self) -> dict:
         return {
             "settings": self.settings,
