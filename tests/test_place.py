@@ -245,3 +245,16 @@ def test_places_of_a_retessellated_turned_copy_are_located_where_they_lie():
         spacing = np.median(cKDTree(P).query(P, k=2)[0][:, 1])
         assert np.median(error) < 0.5 * spacing and np.mean(error < spacing) > 0.85, (kind, np.median(error))
         assert np.mean(error < spacing) >= np.mean(own < spacing)
+
+
+def test_a_scrambled_control_gives_the_donors_imprints_in_another_order(world):
+    _, samples, knowledge = world
+    names = knowledge.names
+    tests = tuple(samples[n, 0] for n in names)
+    shuffled = shuffled_places(tests, names, 0, 0, "shuffled")
+    scrambled = shuffled_places(tests, names, 0, 0, "scrambled")
+    for a, b in zip(shuffled, scrambled):
+        assert sorted(x.tobytes() for x in a.imprints[0]) == sorted(x.tobytes() for x in b.imprints[0])
+        assert not np.array_equal(a.imprints, b.imprints)
+    with pytest.raises(ValueError, match="unknown control"):
+        shuffled_places(tests, names, 0, 0, "reversed")

@@ -27,6 +27,7 @@ MISMATCHES = {
 #: Control runs: what should bring recognition down to chance.
 CONTROLS = {
     "shuffled": "each test instance gets the imprints of another object's test instance, place for place",
+    "scrambled": "each test instance gets another object's test imprints in a random order",
 }
 
 
@@ -208,8 +209,9 @@ class ExperimentConfig:
         touches used, for every method and policy of the instance protocol.
     control : str or None
         A control run (:data:`CONTROLS`): ``"shuffled"`` gives each test
-        instance another object's test imprints, place for place, which must
-        bring every recognizer to chance.
+        instance another object's test imprints, place for place,
+        ``"scrambled"`` in a random order; either must bring every recognizer
+        down to chance (``classify.experiment.controls``).
     """
 
     methods: tuple = ("attention",)

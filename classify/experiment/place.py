@@ -161,13 +161,14 @@ def place_jobs(stage: InstanceStage, objects: ObjectSet, n: int, config: Experim
         train = [(objects.names[i], i, j) for i in order for j in range(1, settings.train_instances + 1)]
         tests = tuple(stage.places[r, i, 0] for i in order)
         test_plans = {m: tuple(stage.samples[SampleKey(r, m, i, 0)] for i in order) for m in config.methods}
-        if config.control == "shuffled":
-            tests = shuffled_places(tests, names, settings.seed, r)
+        if config.control is not None:
+            tests = shuffled_places(tests, names, settings.seed, r, config.control)
             test_plans = {
                 m: tuple(
                     dataclasses.replace(t, imprints=imprints[None])
                     for t, imprints in zip(
-                        plans, shuffled_imprints(tuple(t.imprints[0] for t in plans), names, settings.seed, r)
+                        plans,
+                        shuffled_imprints(tuple(t.imprints[0] for t in plans), names, settings.seed, r, config.control),
                     )
                 )
                 for m, plans in test_plans.items()

@@ -148,8 +148,8 @@ def policy_jobs(stage, objects, n: int, config: ExperimentConfig) -> list:
             (objects.names[i], j): stage.places[r, i, j] for i in order for j in range(1, settings.train_instances + 1)
         }
         tests = tuple(stage.places[r, i, 0] for i in order)
-        if config.control == "shuffled":
-            tests = shuffled_places(tests, names, settings.seed, r)
+        if config.control is not None:
+            tests = shuffled_places(tests, names, settings.seed, r, config.control)
         # The place-aware recognizer's policies run in its own job (classify.experiment.place).
         for c in (c for c in config.classifiers if c != "place"):
             jobs.append(

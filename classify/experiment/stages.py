@@ -407,7 +407,7 @@ def instance_data(
     stage: InstanceStage, replicate: int, method: str, objects: ObjectSet, order, settings: Settings, control=None
 ) -> InstanceData:
     """Replicate ``replicate``'s imprints of the objects ``order`` (label c is object ``order[c]``); with
-    ``control`` "shuffled", each test instance's imprints are another object's (``classify.experiment.controls``)."""
+    ``control`` (``classify.experiment.controls``), each test instance's imprints are another object's."""
     X, y, inst, point = [], [], [], []
     for c, i in enumerate(order):
         for j in range(1, settings.train_instances + 1):
@@ -419,8 +419,8 @@ def instance_data(
             point.append(np.tile(np.arange(k), sessions))
     test = tuple(stage.samples[SampleKey(replicate, method, i, 0)].imprints[0] for i in order)
     names = tuple(objects.names[i] for i in order)
-    if control == "shuffled":
-        test = shuffled_imprints(test, names, settings.seed, replicate)
+    if control is not None:
+        test = shuffled_imprints(test, names, settings.seed, replicate, control)
     return InstanceData(
         np.concatenate(X),
         np.concatenate(y).astype(np.int64),
