@@ -28,8 +28,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from classify.experiment import codebooks as codebooks_mod
+from classify.experiment.codebooks import training_codebooks
 from classify.experiment.config import Settings
-from classify.experiment.streams import Stream, instance_rng, name_seed
+from classify.experiment.streams import Stream, instance_rng
 from classify.experiment.survey import Survey, touch_survey
 from classify.policies.knowledge import Places, PlaceSample
 from classify.runtime import cache as cache_mod
@@ -47,7 +49,6 @@ __all__ = [
     "method_points",
     "paper_sample",
     "place_sample",
-    "codebook_descriptors",
     "test_perturbation",
     "instance_mesh",
     "instance_samples",
@@ -115,7 +116,7 @@ class SampleTask:
     codebook : bool
         On a training instance, also a touch codebook (``settings.codebook_draws``
         touches) at every touchable place and at every method's points
-        (:func:`codebook_descriptors`).
+        (:mod:`classify.experiment.codebooks`).
     model : meshsal.points.learned.TouchModel, optional
         The replicate's touch model, for the model methods.
     surveyed : Survey, optional
@@ -237,7 +238,9 @@ def method_points(
 
 
 def _key(kind, nominal, name, method, settings, *parts):
-    code = cache_mod.code_fingerprint("meshsal", "tactile") + cache_mod.file_fingerprint(__file__)
+    code = cache_mod.code_fingerprint("meshsal", "tactile") + cache_mod.file_fingerprint(
+        __file__, codebooks_mod.__file__
+    )
     return cache_mod.cache_key(
         kind, mesh_hash(nominal), name, method, settings.key(), list(parts), code, cache_mod.library_versions()
     )
@@ -330,27 +333,6 @@ def place_sample(mesh, ids, features, task: SampleTask, scene) -> PlaceSample:
     )
     imprints = _acquire(mesh, positions, normals, task, 0, scene)
     return PlaceSample(places, np.asarray(imprints, np.float32)[None])
-
-
-def codebook_descriptors(mesh, positions, normals, settings: Settings, rng, scene, where: str) -> np.ndarray:
-    """Polar descriptors of a touch codebook at k points of a training instance, (k, draws, d) float32.
-
-    ``settings.codebook_draws`` touches per point (``tactile.touch_codebook``:
-    each its own device, roll, jitter and tilt, under ``settings.perturbation``).
-    ``where`` names the points in errors.
-    """
-    import tactile
-    from tactile.features import polar_fourier
-
-    positions = np.asarray(positions, np.float64).reshape(-1, 3)
-    if len(positions) == 0:
-        raise ValueError(f"{where}: no touchable place, so no touch codebook can be built")
-    draws = settings.codebook_draws
-    book = tactile.touch_codebook(
-        mesh, positions, normals, settings.sensor, settings.perturbation, draws, rng, scene=scene
-    )
-    d = polar_fourier(book.reshape(-1, *book.shape[2:]))
-    return d.reshape(len(positions), draws, -1).astype(np.float32)
 
 
 def _looked_at(mesh, seen, vertex_saliency, settings: Settings, places: bool):
@@ -492,43 +474,5 @@ def instance_samples(task: SampleTask) -> InstanceSamples:
             places = place_sample(mesh, ids, features, task, scene)
             cache_mod.store(task.cache_dir, places_key, places.to_arrays())
     if books:
-        places, by_method = _codebooks(task, places, by_method, instance, places_book_key, book_keys)
+        places, by_method = training_codebooks(task, places, by_method, instance, places_book_key, book_keys)
     return InstanceSamples({m: by_method[m] for m in methods}, survey, places)
-
-
-def _codebooks(task: SampleTask, places, by_method: dict, instance, places_key, keys: dict):
-    """The training instance's codebooks at its touchable places and at every method's points, from the cache
-    or simulated (each on a stream of its own, so a method's codebook does not depend on the others)."""
-    import dataclasses
-
-    settings = task.settings
-    where = f"{task.name}, replicate {task.replicate}, training instance {task.index}"
-
-    def rng(*more):
-        return instance_rng(settings.seed, task.name, task.replicate, task.index, Stream.CODEBOOK, *more)
-
-    def book(key, positions, normals, draw, label):
-        stored = cache_mod.load(task.cache_dir, key)
-        if stored is None:
-            mesh, _, scene = instance()
-            stored = {"codebook": codebook_descriptors(mesh, positions, normals, settings, draw, scene, label)}
-            cache_mod.store(task.cache_dir, key, stored)
-        return stored["codebook"]
-
-    if places is not None:
-        ok = places.places.touchable
-        touched = book(
-            places_key, places.places.positions[ok], places.places.normals[ok], rng(0), f"{where}: candidate places"
-        )
-        full = np.zeros((len(ok), *touched.shape[1:]), np.float32)
-        full[ok] = touched
-        places = dataclasses.replace(places, codebook=full)
-    out = {}
-    for m, sample in by_method.items():
-        if len(sample.positions) == 0:
-            raise ValueError(f"{where}: method {m} found no touchable point, so no touch codebook can be built")
-        out[m] = dataclasses.replace(
-            sample,
-            codebook=book(keys[m], sample.positions, sample.normals, rng(1, name_seed(m)), f"{where}: {m} points"),
-        )
-    return places, out
