@@ -18,14 +18,16 @@ Every policy chooses from the same states (a belief drawn from a Dirichlet,
 several touches already made) in interleaved rounds, with one BLAS thread as
 in the experiment's workers; the table gives the median wall and CPU time
 per choice (CPU time is what a busy machine does not inflate), the
-per-episode cost of the forecast and of the belief of every place, and the
-place-aware model's fit, once per replicate.
+per-episode cost of the forecast and of the belief of every place (for the
+place-aware belief, each on a new instance: laying its places onto every
+object's included), and the place-aware model's fit, once per replicate.
 
     python -m meshsal.util.reproducible .venv/bin/python benchmarks/bench_policies.py [--objects 16] [--places 330]
 """
 
 from __future__ import annotations
 
+import copy
 import statistics
 from functools import partial
 
@@ -139,14 +141,14 @@ def _measure(args) -> None:
             rows.append(
                 (
                     f"{label}: forecast of every place under every object, once per episode",
-                    [timed(partial(knowledge.forecast, places))[1:] for _ in range(5)],
+                    [timed(partial(knowledge.forecast, copy.copy(places)))[1:] for _ in range(5)],
                 )
             )
             if label == "place-aware":
                 rows.append(
                     (
                         f"{label}: the belief of a touch at every place, once per episode",
-                        [timed(partial(knowledge.posterior, imprints, places))[1:] for _ in range(5)],
+                        [timed(partial(knowledge.posterior, imprints, copy.copy(places)))[1:] for _ in range(5)],
                     )
                 )
             states = _states(places, knowledge, forecast, args.objects, args.repeats, rng)
