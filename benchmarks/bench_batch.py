@@ -15,7 +15,7 @@ as fast as one on two free cores: the "speed-up the CPU time allows",
 printed beside the one measured.  Then the median time of each stage per
 mesh, for the corpus and for the ten embedded YCB scans (15,728 faces), and
 with ``--all`` the whole corpus through ``visuotactile batch --workers 2``,
-timed from the command to its exit.  Tables go to ``docs/benchmarks/batch.md``.
+timed from the command to its exit.  Tables go to ``docs/benchmarks/bench_batch.md``.
 
     .venv/bin/python benchmarks/bench_batch.py [--meshes 120] [--repeats 3] [--corpus DIR] [--all]
 """
@@ -35,7 +35,7 @@ from pathlib import Path
 
 import numpy as np
 import psutil
-from benchlib import machine, write_page
+from benchlib import run
 
 from classify.batch import STAGES, BatchSettings, find_meshes, process_mesh, run_batch
 from classify.runtime.cluster import open_executor
@@ -136,7 +136,6 @@ def main() -> int:
     if not args.corpus.is_dir():
         print(f"corpus not found at {args.corpus}", file=sys.stderr)
         return 1
-    print(machine())
     scratch = Path(tempfile.mkdtemp(prefix="bench_batch_"))
     try:
         folder = _subset(args.corpus, args.meshes, scratch / "meshes")
@@ -149,9 +148,7 @@ def main() -> int:
         body += _stages(runs[1], _ycb_stages(scratch))
         if args.all:
             body += "\n" + _whole_corpus(args.corpus, scratch)
-        body += f"\n{machine()}\n"
         print(body)
-        write_page("batch", "Batch throughput: 1 and 2 workers, wall and CPU time", body)
     finally:
         shutil.rmtree(scratch, ignore_errors=True)
     return 0
@@ -193,4 +190,4 @@ def _stages(one_worker: list[dict], ycb: dict) -> str:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    run("bench_batch", "Corpus batch on Dask workers", main)

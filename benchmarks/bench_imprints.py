@@ -20,14 +20,13 @@ per-mesh cost, reported on its own row and in the other ratio.
 
 from __future__ import annotations
 
-import argparse
 import os
 import statistics
 import sys
 import time
-from pathlib import Path
 
 import numpy as np
+from benchlib import arguments, run
 
 
 def interleaved_medians(cases: dict, repeats: int, warm: bool = False) -> dict:
@@ -53,10 +52,8 @@ def load_average() -> str:
 
 
 def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--meshes-dir", type=Path, default=Path(__file__).resolve().parents[2] / "shared" / "meshes")
+    parser = arguments(__doc__, repeats=5, repeats_help="rounds for the 15-imprint cases")
     parser.add_argument("--mesh", default="nefertiti.obj")
-    parser.add_argument("--repeats", type=int, default=5, help="rounds for the 15-imprint cases")
     parser.add_argument("--batch-repeats", type=int, default=3, help="rounds for the batch cases")
     parser.add_argument("--batch", type=int, default=1000)
     parser.add_argument("--supersample", type=int, default=None, help="override the Sensor default")
@@ -155,4 +152,4 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    run("bench_imprints", "Tactile imprints: fast against exact, and batch throughput", main)

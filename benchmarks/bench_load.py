@@ -1,4 +1,4 @@
-"""Benchmark: ``meshsal.load_mesh`` (scan, pymeshlab, repairs), CPU time per mesh.
+"""Benchmark: ``meshsal.load_mesh`` (checks, pymeshlab, repairs), CPU time per mesh.
 
 The loader is on the path of every mesh of a batch, so its cost is measured
 on the benchmark mesh (nefertiti, 100k faces, OBJ), a YCB scan as shipped
@@ -13,11 +13,12 @@ machine).
 
 from __future__ import annotations
 
-import argparse
 import statistics
 import time
 import warnings
 from pathlib import Path
+
+from benchlib import arguments, run
 
 from meshsal import load_mesh
 from meshsal.objects import ycb
@@ -39,10 +40,8 @@ def cpu_times(path: Path, repeats: int) -> list[float]:
 
 
 def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--meshes-dir", type=Path, default=SHARED / "meshes")
+    parser = arguments(__doc__, repeats=15)
     parser.add_argument("--corpus", type=Path, default=SHARED / "corpus" / "random-objects")
-    parser.add_argument("--repeats", type=int, default=15)
     args = parser.parse_args(argv)
     meshes = [
         ("nefertiti (OBJ, 99,938 faces)", args.meshes_dir / "nefertiti.obj"),
@@ -62,4 +61,4 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    raise SystemExit(main())
+    run("bench_load", "Loading meshes: checks, pymeshlab, repairs", main)

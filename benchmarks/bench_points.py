@@ -4,9 +4,8 @@ Four meshes, each at a 150 mm diagonal: the textured cow (spot), nefertiti
 (100k faces, a relief: a pad reaches nearly everywhere), the hand toy (40k
 faces, concave: hundreds of candidates between the fingers are refused by
 the touch check, and its selection runs on into the fill from every
-vertex) and the hand refined to 124k faces (the size of issue 19's
-creature, which took 11 s once the touch check asked about one candidate at
-a time).  Stages of the attention method, each timed alone: mesh saliency,
+vertex) and the hand refined to 124k faces (a large scan's size, where a
+touch check that asks about candidates one at a time costs seconds).  Stages of the attention method, each timed alone: mesh saliency,
 rendering the 72 views, their eight channel maps, combining them, the fusion
 on the mesh (best set, peaks, votes, selection) without the touch check, and
 what the touch check adds to it; then the whole ``interest_points`` call.
@@ -19,12 +18,11 @@ to 124k faces <= 2 s end to end on 2 cores.
 
 from __future__ import annotations
 
-import argparse
 import dataclasses
 import statistics
 from pathlib import Path
 
-from benchlib import DEFAULT_MESHES, hand_124k, hand_150mm, machine, timed
+from benchlib import arguments, hand_124k, hand_150mm, run, timed
 
 from meshsal import load_mesh, scale_to
 from meshsal.attention import saliency_views
@@ -77,12 +75,9 @@ def stages(mesh, size: int) -> dict:
 
 
 def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--meshes-dir", type=Path, default=DEFAULT_MESHES)
-    parser.add_argument("--repeats", type=int, default=3)
+    parser = arguments(__doc__, repeats=3)
     parser.add_argument("--size", type=int, default=128, help="view size in pixels (default 128)")
     args = parser.parse_args(argv)
-    print(machine())
     rows = []
     for label, mesh in meshes(args.meshes_dir):
         stages(mesh, args.size)  # warm-up: imports, thread pools, page faults
@@ -108,9 +103,8 @@ def main(argv=None) -> int:
             f"{label}: end to end {wall:.2f} s wall, {med['interest_points'][1]:.2f} s CPU "
             f"(target <= {TARGET_S:.0f} s on 2 cores): {verdict}"
         )
-    print(machine())
     return 0
 
 
 if __name__ == "__main__":
-    raise SystemExit(main())
+    run("bench_points", "Interest points end to end, by stage", main)

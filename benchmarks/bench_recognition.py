@@ -24,7 +24,6 @@ runs, wall and CPU time; ratios are peer / ours.
 
 from __future__ import annotations
 
-import argparse
 import statistics
 import sys
 from pathlib import Path
@@ -33,7 +32,7 @@ import numpy as np
 from threadpoolctl import threadpool_limits
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from benchlib import machine, timed  # noqa: E402
+from benchlib import arguments, run, timed  # noqa: E402
 
 
 def grouped(objects: int, groups_per_object: int, per_group: int, features: int, seed: int = 0):
@@ -68,10 +67,8 @@ def main(argv=None) -> int:
     from classify.recognizers.classifiers import KNN, EvolutionarySVM
     from classify.recognizers.folds import GroupFolds
 
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--repeats", type=int, default=5)
+    parser = arguments(__doc__, repeats=5, meshes_dir=False)
     args = parser.parse_args(argv)
-    print(f"{machine()}\n")
     print("| task | ours | scikit-learn peer | peer / ours | |")
     print("|---|---|---|---|---|")
     with threadpool_limits(1):
@@ -125,4 +122,4 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    raise SystemExit(main())
+    run("bench_recognition", "Recognition: folds, kNN fit, evolutionary SVM beside scikit-learn", main)

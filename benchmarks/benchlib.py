@@ -1,14 +1,19 @@
 """What the benchmarks share: the machine they ran on, timing, and the concave test meshes.
 
 Another 2-core machine can be twice as slow, and the machines these run on
-are shared: every benchmark prints :func:`machine` (CPU model, cores, load
-average) with its figures, times with :func:`timed` (wall and process CPU
-time of all threads), and writes its tables to ``docs/benchmarks/`` with
-:func:`write_page` (command, commit, machine and date in the header).
+are shared: every benchmark runs in :func:`page`, which prints :func:`machine`
+(CPU model, cores, load average) before and after its figures and writes
+what it printed to ``docs/benchmarks/`` with :func:`write_page` (command,
+commit, machine and date in the header); it times with :func:`timed` (wall
+and process CPU time of all threads).
 """
 
 from __future__ import annotations
 
+import argparse
+import contextlib
+import io
+import sys
 import time
 from pathlib import Path
 
@@ -29,6 +34,57 @@ def write_page(name: str, title: str, body: str) -> None:
     pages.write_page(Path(__file__).resolve().parents[1] / "docs" / "benchmarks" / f"{name}.md", title, body)
 
 
+class _Tee(io.TextIOBase):
+    """Writes to the terminal and keeps a copy."""
+
+    def __init__(self, terminal):
+        self.terminal, self.copy = terminal, io.StringIO()
+
+    def write(self, text: str) -> int:
+        self.copy.write(text)
+        return self.terminal.write(text)
+
+    def flush(self) -> None:
+        self.terminal.flush()
+
+
+@contextlib.contextmanager
+def page(name: str, title: str):
+    """Run a benchmark: its machine line before and after, and everything it prints as ``docs/benchmarks/NAME.md``.
+
+    The page is written only when the benchmark finishes (not on an error or ``--help``).
+    """
+    tee = _Tee(sys.stdout)
+    with contextlib.redirect_stdout(tee):
+        print(f"{machine()}\n", flush=True)
+        yield
+        print(f"\n{machine()}", flush=True)
+    write_page(name, title, tee.copy.getvalue())
+    print(f"wrote docs/benchmarks/{name}.md", file=sys.stderr)
+
+
+def run(name: str, title: str, main) -> None:
+    """``python benchmarks/NAME.py``: ``main()`` inside :func:`page`, its return value the exit status."""
+    with page(name, title):
+        status = main()
+    raise SystemExit(status)
+
+
+def arguments(doc: str, repeats: int, meshes_dir: bool = True, repeats_help: str = "") -> argparse.ArgumentParser:
+    """The options every benchmark takes: ``--repeats`` and, with ``meshes_dir``, ``--meshes-dir``.
+
+    The description is the first line of ``doc`` (the benchmark's docstring).
+    """
+    parser = argparse.ArgumentParser(description=doc.splitlines()[0])
+    if meshes_dir:
+        parser.add_argument(
+            "--meshes-dir", type=Path, default=DEFAULT_MESHES, help=f"the public test meshes (default {DEFAULT_MESHES})"
+        )
+    help = repeats_help or "timed runs; the figures are their medians"
+    parser.add_argument("--repeats", type=int, default=repeats, help=f"{help} (default {repeats})")
+    return parser
+
+
 def timed(fn):
     """``(result, wall seconds, CPU seconds of the process)`` of ``fn()``."""
     wall, cpu = time.perf_counter(), time.process_time()
@@ -39,7 +95,7 @@ def timed(fn):
 def hand_150mm():
     """The hand toy at a 150 mm diagonal (40k faces): deep creases between the fingers, where a pad
     cannot reach, so the attention method refuses hundreds of candidates and reaches the fill from
-    every vertex (the touch check of issue 19 asked about those one at a time)."""
+    every vertex, where a touch check that asks about candidates one at a time is slowest."""
     from meshsal import scale_to
     from meshsal.objects import toys
 
@@ -47,8 +103,8 @@ def hand_150mm():
 
 
 def hand_124k():
-    """The hand toy refined to the size of issue 19's 124k-face creature: Loop-subdivided once (its
-    colours with it), decimated to 124,000 faces (pymeshlab's quadric edge collapse), 150 mm."""
+    """The hand toy refined to the size of a large scan: Loop-subdivided once (its colours with it),
+    decimated to 124,000 faces (pymeshlab's quadric edge collapse), 150 mm."""
     import igl
     import pymeshlab
 

@@ -15,6 +15,7 @@ import warnings
 def register(subparsers) -> None:
     """Add the recognition subcommands (``experiment``, ``batch``)."""
     from classify.experiment import DEFAULT_REPLICATES, FULL_REPLICATES
+    from classify.experiment.config import CONTROLS, MISMATCHES
     from classify.experiment.protocols import PROTOCOL_REGISTRY, PROTOCOLS
     from classify.policies import POLICIES
     from classify.recognizers.classifiers import CLASSIFIERS
@@ -30,7 +31,7 @@ def register(subparsers) -> None:
             "point, repeated, similarity selection on training folds only: the paper's Table 1 like with "
             "like) and the 'instance' protocol (train on several fresh instances of each object: turned, "
             "resized, repainted, each touched in its own sessions; test on another instance after "
-            "k = 1..n touches, calibrated posteriors multiplied). Rates come with 95 %% bootstrap "
+            "k = 1..n touches, calibrated posteriors multiplied). Rates come with 95 % bootstrap "
             "intervals over replicates and objects; with several --methods, paired differences against "
             "--baseline. Prints Markdown tables and writes results.json, results.csv, "
             "confusion_<classifier>.png and touches.png under --out (with a learned method, each "
@@ -42,8 +43,8 @@ def register(subparsers) -> None:
         "--objects",
         nargs="+",
         metavar="OBJECTS",
-        help="object sets (toys, ycb), object names or mesh files (OBJ/PLY/OFF/STL), separated by "
-        "spaces or commas, e.g. 'toys,ycb'; default: toys",
+        help="object sets (toys, ycb), object names, mesh files (OBJ/PLY/OFF/STL), folders of mesh files "
+        "or list files (.txt, one item per line), separated by spaces or commas, e.g. 'toys,ycb'; default: toys",
     )
     size = p.add_mutually_exclusive_group()
     size.add_argument(
@@ -101,7 +102,9 @@ def register(subparsers) -> None:
     p.add_argument("--train-sessions", type=int, default=2, help="acquisition sessions per training instance")
     p.add_argument("--folds", type=int, default=5, help="paper protocol: cross-validation folds")
     p.add_argument("--repeats", type=int, default=10, help="paper protocol: repeats with reshuffled folds")
-    p.add_argument("--view-size", type=int, default=None, help="rendered view size for the interest points")
+    p.add_argument(
+        "--view-size", type=int, default=None, help="rendered view size for the interest points (default: 128)"
+    )
     p.add_argument(
         "--mode",
         choices=("contour", "pressure"),
@@ -115,7 +118,9 @@ def register(subparsers) -> None:
         help="cache of points, imprints and rates (default $XDG_CACHE_HOME/visuotactile or "
         "./.cache/visuotactile); 'none' disables it",
     )
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument(
+        "--seed", type=int, default=0, help="seed of every random choice: instances, sessions, folds, random baselines"
+    )
     p.add_argument(
         "--features",
         choices=("raw", "polar"),
@@ -127,6 +132,31 @@ def register(subparsers) -> None:
         type=int,
         default=2,
         help="local worker processes without --workers or --scheduler (default 2; results do not depend on it)",
+    )
+    p.add_argument(
+        "--codebook-draws",
+        type=int,
+        default=8,
+        help="place-aware recognizer: simulated touches per place and training instance in its codebooks",
+    )
+    p.add_argument(
+        "--mismatch",
+        type=_csv_list,
+        default=(),
+        help="a mismatch arm: the test instances depart from what training simulates (several apply "
+        f"together): {'; '.join(f'{k}: {v}' for k, v in MISMATCHES.items())}",
+    )
+    p.add_argument(
+        "--control",
+        choices=tuple(CONTROLS),
+        default=None,
+        help=f"a control run that must give chance: {'; '.join(f'{k}: {v}' for k, v in CONTROLS.items())}",
+    )
+    p.add_argument(
+        "--skip-bad",
+        action="store_true",
+        help="run on the objects that load when some files do not (they are listed first); "
+        "by default they stop the run before any work",
     )
     p.add_argument("--quiet", action="store_true", help="no progress bars")
     p.add_argument(
@@ -163,7 +193,7 @@ def register(subparsers) -> None:
     b.add_argument("--n-points", type=int, default=15, help="points (and imprints) per mesh and method")
     b.add_argument("--size-mm", type=float, default=150.0, help="nominal size: principal-frame box diagonal (mm)")
     b.add_argument("--view-size", type=int, default=128, help="rendered view size for the attention points")
-    b.add_argument("--seed", type=int, default=0)
+    b.add_argument("--seed", type=int, default=0, help="seed of the random point methods")
     b.add_argument(
         "--skip-bad",
         action="store_true",
@@ -281,6 +311,8 @@ def _experiment(args) -> int:
         train_instances=args.train_instances,
         train_sessions=args.train_sessions,
         seed=args.seed,
+        codebook_draws=args.codebook_draws,
+        mismatch=args.mismatch,
     )
     config = ExperimentConfig(
         methods=args.methods,
@@ -293,6 +325,7 @@ def _experiment(args) -> int:
         baseline=args.baseline,
         policies=args.policies,
         replicates=FULL_REPLICATES if args.full else (args.replicates or DEFAULT_REPLICATES),
+        control=args.control,
     )
     if args.real:
         result = run_real(args.real, config, out_dir=args.out, quiet=args.quiet, n_jobs=args.jobs)
@@ -303,17 +336,25 @@ def _experiment(args) -> int:
         workers=args.workers, scheduler=args.scheduler, n_jobs=args.jobs, preload=WORKER_MODULES, **_cluster(args)
     ) as executor:
         result = run_experiment(
-            args.objects, config, executor=executor, cache_dir=cache_dir, out_dir=args.out, quiet=args.quiet
+            args.objects,
+            config,
+            executor=executor,
+            cache_dir=cache_dir,
+            out_dir=args.out,
+            quiet=args.quiet,
+            skip_bad=args.skip_bad,
         )
     print(format_tables(result))
     if not args.quiet:
-        print(f"results written to {args.out}/ ({result.timings['total']:.0f} s)", file=sys.stderr)
+        t = result.timings
+        print(f"results written to {args.out}/ ({t['total']:.0f} s, {t['cpu_total']:.0f} s of CPU)", file=sys.stderr)
     return 0
 
 
 def build_parser() -> argparse.ArgumentParser:
     from hw import cli as hw_cli
     from meshsal import cli as meshsal_cli
+    from meshsal.util.arguments import HelpFormatter
     from tactile import cli as tactile_cli
 
     parser = argparse.ArgumentParser(
@@ -325,6 +366,8 @@ def build_parser() -> argparse.ArgumentParser:
     tactile_cli.register(sub)
     register(sub)
     hw_cli.register(sub)
+    for command in sub.choices.values():  # every subcommand's --help shows its defaults
+        command.formatter_class = HelpFormatter
     return parser
 
 

@@ -17,8 +17,9 @@ import time
 from dataclasses import dataclass
 
 from hw.press import PressDetector
-from hw.protocol import PROTOCOLS, FrameParser
+from hw.protocol import FRAME_PROTOCOLS, FrameParser
 from hw.session import Session
+from meshsal.util.arguments import HelpFormatter, add_renamed
 
 __all__ = [
     "PortError",
@@ -159,8 +160,7 @@ def capture(
         before the error stay in the session.
     """
     o = dataclasses.replace(options or CaptureOptions(), **changes)
-    if o.protocol not in PROTOCOLS:
-        raise ValueError(f"unknown protocol {o.protocol!r}; expected one of {PROTOCOLS}")
+    FRAME_PROTOCOLS.get(o.protocol)  # ValueError naming the protocols
     if o.presses is not None and o.presses < 1:
         raise ValueError(f"presses must be at least 1, got {o.presses}")
     stream = sys.stderr if o.stream is None else o.stream
@@ -273,7 +273,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     """The capture options, shared by ``visuotactile capture`` and ``python -m hw.capture``."""
     p.add_argument("--port", required=True, help="device path (/dev/ttyACM0, COM3) or pyserial URL")
     p.add_argument("--baud", type=int, default=115200, help="baud rate (default 115200)")
-    p.add_argument("--protocol", choices=PROTOCOLS, default="binary", help="frame protocol (default binary)")
+    p.add_argument("--protocol", choices=FRAME_PROTOCOLS.names(), default="binary", help=FRAME_PROTOCOLS.help_text())
     p.add_argument("--session", required=True, help="session file (.sqlite); created or resumed")
     p.add_argument("--object", required=True, help="name of the object being pressed")
     ids = p.add_mutually_exclusive_group()
@@ -294,12 +294,16 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         help="give up after this long with bytes but no valid frame (default 5)",
     )
     p.add_argument("--baseline-frames", type=int, default=20, help="quiet frames for the baseline (default 20)")
-    p.add_argument(
+    add_renamed(
+        p,
         "--threshold",
-        type=float,
-        help="summed counts above the baseline that start a press (default: from the rest noise)",
+        p.add_argument(
+            "--press-threshold",
+            type=float,
+            help="summed counts above the baseline that start a press (default: from the rest noise)",
+        ),
     )
-    p.add_argument("--quiet", action="store_true", help="no status lines")
+    p.add_argument("--quiet", action="store_true", help="no status lines on stderr (errors are still printed)")
 
 
 def run(args) -> int:
@@ -307,7 +311,7 @@ def run(args) -> int:
     from hw.plan import load_plan
 
     plan = load_plan(args.points) if args.points else None
-    detector = PressDetector(baseline_frames=args.baseline_frames, threshold=args.threshold)
+    detector = PressDetector(baseline_frames=args.baseline_frames, threshold=args.press_threshold)
     with Session(args.session) as session:
         result = capture(
             args.port,
@@ -333,7 +337,9 @@ def run(args) -> int:
 
 def main(argv: list[str] | None = None) -> int:
     """``python -m hw.capture``: the same as ``visuotactile capture``."""
-    parser = argparse.ArgumentParser(prog="python -m hw.capture", description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(
+        prog="python -m hw.capture", description=__doc__.splitlines()[0], formatter_class=HelpFormatter
+    )
     add_arguments(parser)
     args = parser.parse_args(argv)
     try:

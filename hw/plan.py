@@ -151,6 +151,7 @@ def make_plan(
     seed: int = 0,
     quiet: bool = True,
     source: str = "",
+    model=None,
 ) -> Plan:
     """Plan one press per interest point of ``mesh``.
 
@@ -167,6 +168,8 @@ def make_plan(
         Default ``tactile.Sensor()``.
     source : str
         Mesh file or toy name recorded in the plan.
+    model : meshsal.points.learned.TouchModel, optional
+        Needed by the learned methods ("learned", "attention_learned").
 
     Returns
     -------
@@ -179,7 +182,9 @@ def make_plan(
 
     sensor = tactile.Sensor() if sensor is None else sensor
     scaled = scale_to_principal(mesh, size_mm)
-    pts = meshsal.interest_points(scaled, n=n, method=method, seed=seed, quiet=quiet, pad_width=sensor.width_mm)
+    pts = meshsal.interest_points(
+        scaled, n=n, method=method, seed=seed, quiet=quiet, pad_width=sensor.width_mm, model=model
+    )
     # The pad settles on the plane tactile fits over its footprint, with tactile's angle-0 image axes.
     poses = tactile.sensor_poses(scaled, pts.positions, pts.normals, sensor)
     positions = scaled.transform.to_source(poses.centers)

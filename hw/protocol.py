@@ -30,11 +30,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from meshsal.util.registry import Registry
+
 __all__ = [
     "SYNC",
     "VERSION",
     "HEADER_SIZE",
-    "PROTOCOLS",
+    "FRAME_PROTOCOLS",
     "Frame",
     "crc16_ccitt_false",
     "frame_size",
@@ -47,7 +49,6 @@ __all__ = [
 SYNC = b"\xaa\x55"
 VERSION = 1
 HEADER_SIZE = 14
-PROTOCOLS = ("binary", "text")
 _HEADER = struct.Struct("<2sBBBBII")
 _MAX_COUNTER = 2**32
 
@@ -141,13 +142,19 @@ def encode_text_frame(seq: int, t_us: int, values) -> bytes:
     return (",".join(map(str, [int(seq), int(t_us), *v.ravel().tolist()])) + "\n").encode("ascii")
 
 
+#: The frame protocols, each with its encoder ``(seq, t_us, values) -> bytes``.
+FRAME_PROTOCOLS = Registry(
+    "frame protocol",
+    [
+        ("binary", encode_frame, "CRC-checked binary frames"),
+        ("text", encode_text_frame, "one line of comma-separated numbers per frame, no checksum"),
+    ],
+)
+
+
 def encode(seq: int, t_us: int, values, protocol: str = "binary") -> bytes:
-    """Encode one frame in ``protocol`` ("binary" or "text")."""
-    if protocol == "binary":
-        return encode_frame(seq, t_us, values)
-    if protocol == "text":
-        return encode_text_frame(seq, t_us, values)
-    raise ValueError(f"unknown protocol {protocol!r}; expected one of {PROTOCOLS}")
+    """Encode one frame in ``protocol`` (one of :data:`FRAME_PROTOCOLS`)."""
+    return FRAME_PROTOCOLS.get(protocol)(seq, t_us, values)
 
 
 def _plausible(version: int, rows: int, cols: int, reserved: int) -> bool:
@@ -202,8 +209,7 @@ class FrameParser:
     """
 
     def __init__(self, rows: int | None = None, cols: int | None = None, protocol: str = "binary"):
-        if protocol not in PROTOCOLS:
-            raise ValueError(f"unknown protocol {protocol!r}; expected one of {PROTOCOLS}")
+        FRAME_PROTOCOLS.get(protocol)  # ValueError naming the protocols
         if (rows is None) != (cols is None):
             raise ValueError("give both rows and cols, or neither")
         if rows is not None and not (1 <= rows <= 255 and 1 <= cols <= 255):

@@ -6,12 +6,9 @@ database runs in WAL mode with full sync and every press is its own
 transaction, so a killed process or a pulled cable loses nothing already
 pressed; opening the same file again resumes the session.  Several captures
 may write to one session at once, from any number of processes: the point id
-of a press is chosen inside its own insert transaction (``BEGIN IMMEDIATE``),
-and a new file's schema is created inside one, so processes creating the same
-file together all get one schema.  SQLite's write-ahead log needs shared
-memory and working file locks, which network filesystems may not give: a
-session the log cannot be switched on for is refused (keep sessions on a local
-disk).
+of a press is chosen inside its own insert transaction (``BEGIN IMMEDIATE``).
+The file itself (its schema, creation and migration, and the write-ahead log
+that network filesystems may refuse) is :mod:`hw.session_file`.
 """
 
 from __future__ import annotations
@@ -23,51 +20,11 @@ from pathlib import Path
 
 import numpy as np
 
+from hw import session_file
 from hw.press import Baseline, Press
+from hw.session_file import FORMAT, SCHEMA_VERSION
 
 __all__ = ["FORMAT", "SCHEMA_VERSION", "Session", "PressRecord", "export_imprints", "resample"]
-
-FORMAT = "visuotactile-capture-session"
-# 2: a UNIQUE (object, point_id) index in place of version 1's plain one; version 1 files are migrated on opening.
-SCHEMA_VERSION = 2
-# How long an opening waits for another process to release the file.
-_BUSY_SECONDS = 10.0
-
-_SCHEMA = """
-CREATE TABLE meta (key TEXT PRIMARY KEY, value TEXT NOT NULL);
-CREATE TABLE runs (
-    id INTEGER PRIMARY KEY,
-    started REAL NOT NULL,
-    port TEXT NOT NULL,
-    baud INTEGER NOT NULL,
-    protocol TEXT NOT NULL,
-    object TEXT NOT NULL,
-    baseline BLOB NOT NULL,
-    baseline_noise REAL NOT NULL,
-    threshold_on REAL NOT NULL,
-    threshold_off REAL NOT NULL
-);
-CREATE TABLE presses (
-    id INTEGER PRIMARY KEY,
-    run_id INTEGER NOT NULL REFERENCES runs(id),
-    object TEXT NOT NULL,
-    point_id INTEGER NOT NULL,
-    imprint BLOB NOT NULL,
-    raw BLOB NOT NULL,
-    peak_sum REAL NOT NULL,
-    seq_start INTEGER NOT NULL, seq_peak INTEGER NOT NULL, seq_end INTEGER NOT NULL,
-    t_start_us INTEGER NOT NULL, t_peak_us INTEGER NOT NULL, t_end_us INTEGER NOT NULL,
-    frames INTEGER NOT NULL,
-    host_time REAL NOT NULL,
-    frames_received INTEGER NOT NULL,
-    crc_errors INTEGER NOT NULL,
-    gaps INTEGER NOT NULL,
-    bytes_skipped INTEGER NOT NULL,
-    px REAL, py REAL, pz REAL,
-    ax REAL, ay REAL, az REAL
-);
-CREATE UNIQUE INDEX presses_point ON presses(object, point_id);
-"""
 
 
 @dataclass(frozen=True, eq=False)
@@ -123,100 +80,10 @@ class Session:
 
     def __init__(self, path, create: bool = True):
         self.path = Path(path)
-        if not self.path.exists():
-            if not create:
-                raise FileNotFoundError(f"{self.path}: no such capture session")
-            self.path.parent.mkdir(parents=True, exist_ok=True)
-        try:
-            self._con = sqlite3.connect(self.path, isolation_level=None, timeout=_BUSY_SECONDS)
-        except sqlite3.Error as exc:
-            raise OSError(f"{self.path}: cannot open the session ({exc})") from None
-        try:
-            self._init()
-        except BaseException as exc:
-            self._con.close()
-            if isinstance(exc, sqlite3.OperationalError):  # locked, read-only, I/O: unusable now
-                raise OSError(f"{self.path}: cannot open the session ({exc})") from None
-            if isinstance(exc, sqlite3.DatabaseError):
-                raise ValueError(f"{self.path}: not a capture session ({exc})") from None
-            raise
-
-    def _init(self) -> None:
-        con = self._con
-        # Read first, so a foreign or read-only file is never written; create or migrate inside one
-        # BEGIN IMMEDIATE, looking again there: another process may have done it meanwhile.
-        if not self._tables() or self._meta().get("version") == "1":
-            with self._transaction():
-                if not self._tables():
-                    for statement in _SCHEMA.split(";"):
-                        if statement.strip():
-                            con.execute(statement)
-                    con.executemany(
-                        "INSERT INTO meta VALUES (?, ?)",
-                        [("format", FORMAT), ("version", str(SCHEMA_VERSION)), ("created", repr(time.time()))],
-                    )
-                elif self._meta().get("format") == FORMAT and self._meta().get("version") == "1":
-                    self._migrate_from_1()
-        meta = self._meta()
-        if meta.get("format") != FORMAT:
-            raise sqlite3.DatabaseError("it holds no visuotactile capture session")
-        if meta.get("version") != str(SCHEMA_VERSION):
-            raise sqlite3.DatabaseError(f"session version {meta.get('version')} is not the supported {SCHEMA_VERSION}")
-        mode = self._write_ahead_log()
-        if mode.lower() != "wal":
-            raise OSError(
-                f"{self.path}: SQLite cannot keep a write-ahead log here (journal mode stays {mode!r}): "
-                f"the filesystem lacks the shared memory or file locks it needs, as network "
-                f"filesystems may; keep the session on a local disk"
-            )
-        # FULL: a press is on disk before the next one starts.
-        con.execute("PRAGMA synchronous=FULL")
-
-    def _write_ahead_log(self) -> str:
-        """``PRAGMA journal_mode=WAL``, the mode it leaves; asked again while the file is locked.
-
-        Switching a new file to the log needs it alone, and SQLite answers "locked" at once, without
-        the busy wait, while another process opens it beside this one (seen 4 times in 240 openings
-        of 4 processes on 2 busy cores).
-        """
-        deadline = time.monotonic() + _BUSY_SECONDS
-        while True:
-            try:
-                return self._con.execute("PRAGMA journal_mode=WAL").fetchone()[0]
-            except sqlite3.OperationalError as exc:
-                if "locked" not in str(exc) or time.monotonic() > deadline:
-                    raise
-            time.sleep(0.01)
-
-    def _tables(self) -> set[str]:
-        tables = {r[0] for r in self._con.execute("SELECT name FROM sqlite_master WHERE type='table'")}
-        if tables and "meta" not in tables:
-            raise sqlite3.DatabaseError("it holds no visuotactile capture session")
-        return tables
-
-    def _migrate_from_1(self) -> None:
-        """Version 1 to 2, inside the caller's transaction: the UNIQUE (object, point_id) index."""
-        con = self._con
-        shared = con.execute(
-            "SELECT object, point_id, group_concat(id, ', ') FROM presses"
-            " GROUP BY object, point_id HAVING count(*) > 1 ORDER BY min(id)"
-        ).fetchall()
-        if shared:
-            listed = "; ".join(f"{obj!r} point {pid} (presses {ids})" for obj, pid, ids in shared[:10])
-            more = f" and {len(shared) - 10} more" if len(shared) > 10 else ""
-            raise ValueError(
-                f"{self.path}: presses share a point id: {listed}{more}.  A version 1 session "
-                f"cannot take the index that keeps point ids unique until each (object, point) "
-                f"has one press: delete the extra presses or give them free point ids (sqlite3 "
-                f'{self.path} "UPDATE presses SET point_id = ... WHERE id = ..."), then open it '
-                f"again"
-            )
-        con.execute("DROP INDEX IF EXISTS presses_object")
-        con.execute("CREATE UNIQUE INDEX presses_point ON presses(object, point_id)")
-        con.execute("UPDATE meta SET value = ? WHERE key = 'version'", (str(SCHEMA_VERSION),))
+        self._con = session_file.connect(self.path, create)
 
     def _meta(self) -> dict[str, str]:
-        return dict(self._con.execute("SELECT key, value FROM meta"))
+        return session_file.meta(self._con)
 
     def close(self) -> None:
         self._con.close()
@@ -374,7 +241,7 @@ class Session:
         return int(cur.lastrowid)
 
     def _transaction(self):
-        return _Transaction(self._con)
+        return session_file.transaction(self._con)
 
     def point_ids(self, object_name: str) -> list[int]:
         """Point ids already recorded for ``object_name``, in recording order."""
@@ -417,19 +284,6 @@ class Session:
                 )
             )
         return out
-
-
-class _Transaction:
-    """``BEGIN IMMEDIATE`` ... ``COMMIT``, rolled back on an exception."""
-
-    def __init__(self, con: sqlite3.Connection):
-        self._con = con
-
-    def __enter__(self):
-        self._con.execute("BEGIN IMMEDIATE")
-
-    def __exit__(self, exc_type, *rest):
-        self._con.execute("ROLLBACK" if exc_type else "COMMIT")
 
 
 def resample(imprint: np.ndarray, rows: int = 16, cols: int = 16) -> np.ndarray:

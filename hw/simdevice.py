@@ -25,7 +25,7 @@ import tty
 
 import numpy as np
 
-from hw.protocol import HEADER_SIZE, PROTOCOLS, SYNC, VERSION, encode
+from hw.protocol import FRAME_PROTOCOLS, HEADER_SIZE, SYNC, VERSION, encode
 
 __all__ = ["SimulatedSensor", "open_pty", "serve", "press_targets", "main"]
 
@@ -95,8 +95,7 @@ class SimulatedSensor:
         imprints = np.asarray(imprints, dtype=np.float64)
         if imprints.ndim != 3 or imprints.shape[0] == 0:
             raise ValueError(f"imprints must have shape (k, rows, cols) with k >= 1, got {imprints.shape}")
-        if protocol not in PROTOCOLS:
-            raise ValueError(f"unknown protocol {protocol!r}; expected one of {PROTOCOLS}")
+        FRAME_PROTOCOLS.get(protocol)  # ValueError naming the protocols
         for name, p in (("garbage", garbage), ("bitflips", bitflips), ("drop", drop)):
             if not 0.0 <= p <= 1.0:
                 raise ValueError(f"{name} must be a probability in [0, 1], got {p}")
@@ -284,15 +283,18 @@ def press_targets(mesh, plan=None, n: int = 15, method: str = "random", seed: in
 
 def _parser() -> argparse.ArgumentParser:
     from meshsal.points import POINT_METHODS
+    from meshsal.util.arguments import HelpFormatter, add_renamed
     from tactile.sensor import SENSOR_MODES
 
-    p = argparse.ArgumentParser(prog="python -m hw.simdevice", description=__doc__.split("\n\n")[0])
+    p = argparse.ArgumentParser(
+        prog="python -m hw.simdevice", description=__doc__.split("\n\n")[0], formatter_class=HelpFormatter
+    )
     p.add_argument("--object", required=True, help="a toy name (meshsal.objects.toys.NAMES) or a mesh file")
     p.add_argument(
         "--size-mm", type=float, default=150.0, help="principal-frame box diagonal of the object in mm (default 150)"
     )
     p.add_argument("--points", metavar="PLAN_JSON", help="press the points of this probe plan")
-    p.add_argument("--n", type=int, default=15, help="interest points without a plan (default 15)")
+    add_renamed(p, "--n", p.add_argument("--n-points", type=int, default=15, help="interest points without a plan"))
     p.add_argument(
         "--method",
         default="random",
@@ -314,7 +316,7 @@ def _parser() -> argparse.ArgumentParser:
         default="contour",
         help="imprint mode of the simulated pad (default contour, the paper's image)",
     )
-    p.add_argument("--protocol", choices=PROTOCOLS, default="binary")
+    p.add_argument("--protocol", choices=FRAME_PROTOCOLS.names(), default="binary", help=FRAME_PROTOCOLS.help_text())
     p.add_argument("--garbage", type=float, default=0.0, help="probability of a garbage burst per frame")
     p.add_argument("--bitflips", type=float, default=0.0, help="probability of a flipped bit per frame")
     p.add_argument("--drop", type=float, default=0.0, help="probability of dropping a frame")
@@ -340,7 +342,7 @@ def main(argv: list[str] | None = None) -> int:
 
         plan = load_plan(args.points) if args.points else None
         mesh = scale_to_principal(load_object(args.object), plan.size_mm if plan is not None else args.size_mm)
-        ids, positions, normals = press_targets(mesh, plan, n=args.n, method=args.method, seed=args.seed)
+        ids, positions, normals = press_targets(mesh, plan, n=args.n_points, method=args.method, seed=args.seed)
         sensor = tactile.Sensor(rows=args.rows, cols=args.cols, mode=args.mode)
         imprints = tactile.imprints(mesh, positions, normals, sensor)
         empty = np.flatnonzero(imprints.reshape(len(imprints), -1).max(axis=1) <= 0)

@@ -5,12 +5,11 @@ geometry) -> ``objects`` (the embedded objects and fresh instances of any
 object) -> ``views`` (the 72-view renderer) -> ``attention`` (conspicuity
 maps) -> ``points`` (where to touch).  ``util`` holds the toolkit's
 infrastructure (atomic writes, progress bars, registries).  Public names are
-loaded on first use, so that ``import meshsal`` stays cheap for the command
-line; modules of the flat layout before 0.2 (``meshsal.toys``,
-``meshsal.learned``...) still import, as the modules that replaced them.
+loaded on first use (``lazy_loader``), so that ``import meshsal`` stays cheap
+for the command line.  Modules moved in 0.2 are listed in ``CHANGELOG.md``.
 """
 
-from meshsal.util.lazy import attach
+import lazy_loader
 
 _EXPORTS = {
     "Mesh": "mesh",
@@ -31,6 +30,7 @@ _EXPORTS = {
     "scale_to": "mesh.transform",
     "normalize": "mesh.transform",
     "scale_to_principal": "mesh.transform",
+    "UnitsWarning": "mesh.transform",
     "mean_curvature": "mesh.curvature",
     "mesh_saliency": "mesh.curvature",
     "Camera": "views.cameras",
@@ -43,30 +43,10 @@ _EXPORTS = {
     "TouchModel": "points.learned",
     "fit_touch_model": "points.learned",
     "project_pixel_paper": "views.paper_projection",
+    "write_png": "util.atomic",
 }
 _SUBMODULES = {"util", "mesh", "objects", "views", "attention", "points", "cli"}
-#: Where each module of the flat layout went.
-_MOVED = {
-    "atomic": "util.atomic",
-    "progress": "util.progress",
-    "registry": "util.registry",
-    "jsonfile": "util.jsonfile",
-    "lazy": "util.lazy",
-    "reproducible": "util.reproducible",
-    "io": "mesh.io",
-    "transform": "mesh.transform",
-    "curvature": "mesh.curvature",
-    "embree": "mesh.embree",
-    "toys": "objects.toys",
-    "sdf": "objects.sdf",
-    "ycb": "objects.ycb",
-    "instances": "objects.instances",
-    "render": "views.render",
-    "tracer": "views.tracer",
-    "overlay": "views.overlay",
-    "learned": "points.learned",
-    "touch": "points.touch",
-    "sampling": "points.sampling",
-}
 
-__getattr__, __dir__, __all__ = attach(__name__, _EXPORTS, _SUBMODULES, _MOVED)
+__getattr__, __dir__, __all__ = lazy_loader.attach(
+    __name__, _SUBMODULES, {m: [n for n, where in _EXPORTS.items() if where == m] for m in set(_EXPORTS.values())}
+)

@@ -2,9 +2,55 @@
 
 from __future__ import annotations
 
+import sys
 from pathlib import Path
 
 import numpy as np
+
+from meshsal.util.arguments import HelpFormatter, add_renamed
+
+#: Rendered view size in pixels of every subcommand that renders (``PointOptions.size``).
+VIEW_SIZE = 128
+
+
+def mesh_help() -> str:
+    """What a MESH argument may be: a file or an embedded object's name."""
+    from meshsal.objects import toys, ycb
+
+    return (
+        f"mesh file (OBJ, PLY, OFF, STL) or an embedded object's name: a toy ({', '.join(toys.NAMES)}) "
+        f"or a YCB scan ({', '.join(ycb.NAMES)})"
+    )
+
+
+def add_model(p) -> None:
+    """``--model``, the touch model file the learned methods read."""
+    p.add_argument(
+        "--model",
+        type=Path,
+        default=None,
+        help="touch model JSON (written by 'visuotactile experiment' to touch_models/) for the learned methods",
+    )
+
+
+def touch_model(method: str, path):
+    """The touch model ``--method`` reads, from ``--model``; None for a method that reads none."""
+    from meshsal.points import MODEL_METHODS
+    from meshsal.points.learned import TouchModel
+
+    if method in MODEL_METHODS and path is None:
+        raise ValueError(
+            f"--method {method} needs --model FILE, a touch model written by 'visuotactile experiment' "
+            "(its touch_models/ folder)"
+        )
+    return None if path is None else TouchModel.load(path)
+
+
+def add_view_size(p) -> None:
+    """``--view-size``, and ``--size``, its deprecated spelling until 0.3."""
+    add_renamed(
+        p, "--size", p.add_argument("--view-size", type=int, default=VIEW_SIZE, help="rendered view size in pixels")
+    )
 
 
 def register(subparsers) -> None:
@@ -17,13 +63,14 @@ def register(subparsers) -> None:
 def _add_toys(subparsers) -> None:
     p = subparsers.add_parser(
         "toys",
+        formatter_class=HelpFormatter,
         help="write the six embedded toy objects as PLY",
         description="Write the six procedural toys (cow, glasses, cup, hand, plane, dromedary) "
         "as binary PLY files with vertex colors, in millimetres.",
     )
     p.add_argument("--out", required=True, type=Path, help="output folder")
-    p.add_argument("--seed", type=int, default=0, help="seed of the toys' random details (default 0)")
-    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.add_argument("--seed", type=int, default=0, help="seed of the toys' random details")
+    p.add_argument("--quiet", action="store_true", help=QUIET_HELP)
     p.set_defaults(func=_cmd_toys)
 
 
@@ -38,10 +85,14 @@ def _cmd_toys(args) -> int:
     return 0
 
 
+#: ``--quiet`` means the same in every subcommand.
+QUIET_HELP = "no progress bars or status lines on stderr (warnings and errors are still printed)"
+
+
 def _mesh_subcommand(subparsers, name: str, summary: str, description: str):
     """A subcommand that reads one MESH and writes into the folder --out."""
-    p = subparsers.add_parser(name, help=summary, description=description)
-    p.add_argument("mesh", type=Path, help="mesh file (OBJ, PLY, OFF, STL) or a toy name (cow, glasses, ...)")
+    p = subparsers.add_parser(name, help=summary, description=description, formatter_class=HelpFormatter)
+    p.add_argument("mesh", type=Path, help=mesh_help())
     p.add_argument("--out", required=True, type=Path, help="output folder")
     return p
 
@@ -55,9 +106,9 @@ def _add_render(subparsers) -> None:
         "as PNG files view_SS_K.png, plus contact_sheet.png. With --saliency, also each "
         "view's saliency map and its eight channel maps.",
     )
-    p.add_argument("--size", type=int, default=256, help="image size in pixels (default 256)")
+    add_view_size(p)
     p.add_argument("--saliency", action="store_true", help="also write saliency and channel maps")
-    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.add_argument("--quiet", action="store_true", help=QUIET_HELP)
     p.set_defaults(func=_cmd_render)
 
 
@@ -74,12 +125,12 @@ def _cmd_render(args) -> int:
     from meshsal.views.overlay import tile
     from meshsal.views.render import render_views
 
-    if args.size < 16:
-        raise ValueError(f"--size must be at least 16 pixels, got {args.size}")
+    if args.view_size < 16:
+        raise ValueError(f"--view-size must be at least 16 pixels, got {args.view_size}")
     with naming(args.mesh):
         mesh = load_object(args.mesh)
         cameras = [c for s in view_rig() for c in s]
-        views = render_views(mesh, cameras, size=args.size)
+        views = render_views(mesh, cameras, size=args.view_size)
         results = [None] * len(views)
         if args.saliency:
             from meshsal.attention import saliency_views
@@ -108,64 +159,60 @@ def _add_points(subparsers) -> None:
         subparsers,
         "points",
         "choose interest points on a mesh by visual attention (or a baseline)",
-        "Scale MESH to --size-mm (principal-frame box diagonal), render the 72 views, compute their saliency and choose --n "
-        "interest points (the paper's pipeline, or a baseline with --method). Writes "
+        "Scale MESH to --size-mm (principal-frame box diagonal), render the 72 views, compute their saliency and "
+        "choose --n-points interest points (the paper's pipeline, or a baseline with --method). Writes "
         "saliency.ply (mesh saliency as vertex quality and colours), points.json and points.csv "
-        "(ids from 1, in the mesh file's own units and frame), views.png (the best set's four "
-        "views, saliency overlaid, points numbered) and contact_sheet.png (all 72 saliency maps).",
+        "(ids from 0, in the mesh file's own units and frame), views.png (the best set's four "
+        "views, saliency overlaid, points numbered) and contact_sheet.png (all 72 saliency maps). "
+        "Fewer points than asked (the mesh cannot hold more that far apart and touchable) is a warning; "
+        "none is an error.",
     )
-    p.add_argument("--n", type=int, default=15, help="number of points (default 15)")
+    add_renamed(p, "--n", p.add_argument("--n-points", type=int, default=15, help="number of points"))
     p.add_argument(
         "--method",
         choices=POINT_METHODS.names(),
         default="attention",
-        help=f"how to choose them (default attention): {POINT_METHODS.help_text()}",
+        help=f"how to choose them: {POINT_METHODS.help_text()}",
     )
     p.add_argument(
         "--size-mm",
         type=float,
         default=150.0,
-        help="scale the mesh to this principal-frame box diagonal in mm first, as the experiment does (default 150)",
+        help="scale the mesh to this principal-frame box diagonal in mm first, as the experiment does",
     )
-    p.add_argument(
-        "--pad-mm", type=float, default=32.0, help="width of the tactile pad in mm (default 32: 16 x 16 taxels at 2 mm)"
-    )
+    p.add_argument("--pad-mm", type=float, default=32.0, help="width of the tactile pad in mm (16 x 16 taxels at 2 mm)")
     p.add_argument(
         "--min-spacing-mm",
         type=float,
         default=None,
-        help="no two points closer than this, in mm after scaling (default half of --pad-mm)",
+        help="no two points closer than this, in mm after scaling (default: half of --pad-mm)",
     )
     p.add_argument(
         "--combination",
         choices=COMBINATIONS,
         default="equal",
-        help="how the eight attention channels are summed: the paper's equal weights, each also "
-        "weighted by Itti's N(.), or the weights learned in a touch model (--model) "
-        "(default equal)",
+        help="deprecated, goes in 0.3: --method attention_itti or attention_learned choose the combination",
     )
-    p.add_argument(
-        "--model",
-        type=Path,
-        default=None,
-        help="touch model JSON (written by 'visuotactile experiment' to touch_models/) for the "
-        "learned methods and the learned combination",
-    )
+    add_model(p)
     p.add_argument(
         "--no-touch-check",
         dest="touch",
         action="store_false",
         help="keep points the pad, pressed along the normal, would not meet first",
     )
-    p.add_argument("--size", type=int, default=128, help="rendered view size in pixels (default 128)")
-    p.add_argument(
+    add_view_size(p)
+    add_renamed(
+        p,
         "--threshold",
-        type=float,
-        default=0.5,
-        help="peaks and salient pixels exceed this fraction of their map's maximum (default 0.5)",
+        p.add_argument(
+            "--peak-threshold",
+            type=float,
+            default=0.5,
+            help="peaks and salient pixels exceed this fraction of their map's maximum",
+        ),
     )
-    p.add_argument("--seed", type=int, default=0, help="seed of the random baselines (default 0)")
-    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.add_argument("--seed", type=int, default=0, help="seed of the random baselines")
+    p.add_argument("--quiet", action="store_true", help=QUIET_HELP)
     p.set_defaults(func=_cmd_points)
 
 
@@ -177,50 +224,52 @@ def _cmd_points(args) -> int:
     from meshsal.mesh.transform import scale_to_principal
     from meshsal.objects import load_object
     from meshsal.points import (
-        MODEL_METHODS,
+        ATTENTION_METHODS,
         attention_combination,
         attention_maps,
         best_view_set,
         points_by_method,
         view_channels,
     )
-    from meshsal.points.learned import TouchModel
     from meshsal.util.atomic import write_png
     from meshsal.util.errors import naming
     from meshsal.views import overlay
 
-    if args.size < 16:
-        raise ValueError(f"--size must be at least 16 pixels, got {args.size}")
-    combination = attention_combination(args.method, args.combination)
-    if (args.method in MODEL_METHODS or combination == "learned") and args.model is None:
-        raise ValueError(
-            f"--method {args.method} --combination {args.combination} needs --model FILE, a touch "
-            f"model written by 'visuotactile experiment' (its touch_models/ folder)"
+    if args.view_size < 16:
+        raise ValueError(f"--view-size must be at least 16 pixels, got {args.view_size}")
+    if args.combination != "equal":
+        method = next(m for m, c in ATTENTION_METHODS.items() if c == args.combination)
+        print(
+            f"visuotactile points: warning: --combination is deprecated and goes in 0.3: use --method {method} "
+            "(FutureWarning)",
+            file=sys.stderr,
         )
-    model = None if args.model is None else TouchModel.load(args.model)
+        if args.method == "attention":
+            args.method = method
+    combination = attention_combination(args.method)
+    model = touch_model(args.method, args.model)
     with naming(args.mesh):
         mesh = scale_to_principal(load_object(args.mesh), args.size_mm)
         vertex_saliency = mesh_saliency(mesh)
-        seen = view_channels(mesh, size=args.size, vertex_saliency=vertex_saliency, quiet=args.quiet)
+        seen = view_channels(mesh, size=args.view_size, vertex_saliency=vertex_saliency, quiet=args.quiet)
         weights = model.channel_weights if combination == "learned" else None
         rule = {
             "min_spacing": args.min_spacing_mm,
-            "threshold": args.threshold,
+            "threshold": args.peak_threshold,
             "pad_width": args.pad_mm,
             "touch": args.touch,
         }
         pts = points_by_method(
             mesh,
             [args.method],
-            n=args.n,
+            n=args.n_points,
             seed=args.seed,
             vertex_saliency=vertex_saliency,
             seen=seen,
-            combination=args.combination,
-            weights=weights,
             model=model,
             **rule,
         )[args.method]
+        _fewer_points(args, pts)
         views, maps = seen.views, attention_maps(seen, combination, weights)
 
         to_source = mesh.transform.to_source
@@ -230,11 +279,11 @@ def _cmd_points(args) -> int:
         save_ply(args.out / "saliency.ply", source_mesh, quality=vertex_saliency)
 
         settings = {
-            "n": args.n,
+            "n_points": args.n_points,
             "method": args.method,
             "size_mm": args.size_mm,
-            "view_size": args.size,
-            "threshold": args.threshold,
+            "view_size": args.view_size,
+            "peak_threshold": args.peak_threshold,
             "seed": args.seed,
             "combination": combination,
             "pad_mm": args.pad_mm,
@@ -258,3 +307,20 @@ def _cmd_points(args) -> int:
         f"the maximum"
     )
     return 0
+
+
+def _fewer_points(args, pts) -> None:
+    """Say on stderr that a mesh held fewer points than asked, and why; none at all is an error."""
+    why = []
+    if pts.untouchable > 0:
+        why.append(f"{pts.untouchable} candidates the pad could not touch first were skipped")
+    if len(pts) == 0:
+        raise ValueError(f"{args.mesh}: no {args.method} point found ({'; '.join(why) or 'no candidate'})")
+    if len(pts) < args.n_points:
+        spacing = args.min_spacing_mm if args.min_spacing_mm is not None else args.pad_mm / 2
+        why.append(f"no more lie {spacing:g} mm apart on the mesh at {args.size_mm:g} mm")
+        print(
+            f"visuotactile points: warning: {args.mesh}: {len(pts)} of the {args.n_points} {args.method} points "
+            f"asked for ({'; '.join(why)})",
+            file=sys.stderr,
+        )

@@ -11,7 +11,7 @@ loaded on first use, so that ``import tactile`` stays cheap for the command
 line.
 """
 
-from meshsal.util.lazy import attach
+import lazy_loader
 
 _EXPORTS = {
     "Sensor": "sensor",
@@ -23,8 +23,12 @@ _EXPORTS = {
     "imprints_exact": "section",
     "Perturbation": "perturbation",
     "acquire": "perturbation",
+    "touch_codebook": "perturbation",
     "select_by_similarity": "selection",
     "ImprintSet": "imprint_set",
+    "imprint_grid": "picture",
 }
 
-__getattr__, __dir__, __all__ = attach(__name__, _EXPORTS)
+__getattr__, __dir__, __all__ = lazy_loader.attach(
+    __name__, None, {m: [n for n, where in _EXPORTS.items() if where == m] for m in set(_EXPORTS.values())}
+)

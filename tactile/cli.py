@@ -7,20 +7,21 @@ from pathlib import Path
 
 def register(subparsers) -> None:
     """Add this package's subcommands to the ``visuotactile`` parser."""
-    from tactile.sensor import PLANES, SENSOR_MODES, Sensor
+    from meshsal.cli import QUIET_HELP, mesh_help
+    from meshsal.util.arguments import HelpFormatter
+    from tactile.sensor import SENSOR_MODES, SENSOR_PLANES, Sensor
 
     default = Sensor()
     p = subparsers.add_parser(
         "imprints",
+        formatter_class=HelpFormatter,
         help="simulate the tactile imprints at interest points of a mesh",
         description="Scale MESH to --size-mm, press a simulated 16x16 tactile pad at each point of POINTS "
         "(the points.json written by 'visuotactile points': positions and normals in the mesh "
         "file's units) and write the imprint set (.npz) and imprints.png, a labelled grid of "
-        "the imprints, beside it.",
+        "the imprints, beside it. An imprint set in which the pad touched nothing is an error.",
     )
-    p.add_argument(
-        "mesh", type=Path, metavar="MESH", help="mesh file (OBJ, PLY, OFF, STL) or a toy name (cow, glasses, ...)"
-    )
+    p.add_argument("mesh", type=Path, metavar="MESH", help=mesh_help())
     p.add_argument(
         "--points", type=Path, required=True, metavar="POINTS", help="points.json from 'visuotactile points'"
     )
@@ -30,32 +31,14 @@ def register(subparsers) -> None:
         type=float,
         default=150.0,
         help="principal-frame box diagonal the mesh is scaled to, in mm, as 'visuotactile points' and the "
-        "experiment do (default 150)",
+        "experiment do",
     )
-    p.add_argument(
-        "--mode",
-        choices=SENSOR_MODES.names(),
-        default=default.mode,
-        help=f"contour (the paper's image) or pressure (default {default.mode})",
-    )
-    p.add_argument(
-        "--plane", choices=PLANES, default=default.plane, help=f"how the pad plane is fitted (default {default.plane})"
-    )
-    p.add_argument(
-        "--pitch-mm", type=float, default=default.pitch_mm, help=f"taxel spacing in mm (default {default.pitch_mm})"
-    )
-    p.add_argument(
-        "--depth-mm",
-        type=float,
-        default=default.depth_mm,
-        help=f"pressing depth beyond first contact in mm (default {default.depth_mm})",
-    )
-    p.add_argument(
-        "--supersample",
-        type=int,
-        default=default.supersample,
-        help=f"rays per taxel side (default {default.supersample})",
-    )
+    p.add_argument("--mode", choices=SENSOR_MODES.names(), default=default.mode, help=SENSOR_MODES.help_text())
+    p.add_argument("--plane", choices=SENSOR_PLANES.names(), default=default.plane, help=SENSOR_PLANES.help_text())
+    p.add_argument("--pitch-mm", type=float, default=default.pitch_mm, help="taxel spacing in mm")
+    p.add_argument("--depth-mm", type=float, default=default.depth_mm, help="pressing depth beyond first contact in mm")
+    p.add_argument("--supersample", type=int, default=default.supersample, help="rays per taxel side")
+    p.add_argument("--quiet", action="store_true", help=QUIET_HELP)
     p.set_defaults(func=_cmd_imprints)
 
 
@@ -92,6 +75,7 @@ def _cmd_imprints(args) -> int:
         normals = mesh.transform.apply_direction(normals)
         _check_on_surface(mesh, positions, ids, args)
         images = imprints(mesh, positions, normals, sensor)
+        _check_contact(mesh, positions, normals, sensor, args)
         result = ImprintSet(
             imprints=images,
             labels=[0] * len(images),
@@ -127,4 +111,23 @@ def _check_on_surface(mesh, positions, ids, args) -> None:
             f"{args.points}: {far.size} of {len(off)} points lie off the surface of {args.mesh} (point #{ids[worst]} "
             f"by {off[worst]:.3g} mm at {args.size_mm:g} mm): they were chosen on another mesh, or on another "
             "version of this one"
+        )
+
+
+def _check_contact(mesh, positions, normals, sensor, args) -> None:
+    """Refuse an imprint set in which the pad met the surface nowhere: its imprints would be silent zeros.
+
+    Contact is read from the depths under the pads, not from the images: a
+    contour image of a flat contact is blank.
+    """
+    import numpy as np
+
+    from tactile.raycast import cast_depths
+    from tactile.sensor import sensor_poses
+
+    depth = cast_depths(mesh, sensor_poses(mesh, positions, normals, sensor), sensor)
+    if not np.isfinite(depth).any():
+        raise ValueError(
+            f"{args.points}: the pad met {args.mesh} at none of its {len(positions)} points ({sensor.width_mm:g} mm "
+            f"pad, {sensor.pitch_mm:g} mm pitch, the mesh scaled to {args.size_mm:g} mm): no imprint set written"
         )

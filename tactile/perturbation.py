@@ -19,7 +19,7 @@ from meshsal.mesh import Mesh
 from tactile.raycast import imprints_at
 from tactile.sensor import Sensor, check_points, poses_from_normals, sensor_poses, tangent_frames
 
-__all__ = ["Perturbation", "acquire"]
+__all__ = ["Perturbation", "acquire", "touch_codebook"]
 
 
 @dataclass(frozen=True)
@@ -148,6 +148,7 @@ def acquire(
     rng=0,
     workers: int | None = None,
     scene=None,
+    exact: bool = False,
 ) -> np.ndarray:
     """Simulated sensor readings at k points, with placement and reading errors.
 
@@ -173,6 +174,11 @@ def acquire(
     scene : optional
         ``meshsal.mesh.embree.embree_scene(mesh)``: pass the same mesh's scene to
         amortize the BVH build over many acquisitions.
+    exact : bool
+        Slice the surface exactly (``tactile.imprints_exact_at``) instead of
+        ray casting: the same poses and draws, another simulator of the
+        contact, for checking what a model fitted on ray-cast touches makes of
+        touches it did not simulate.
 
     Returns
     -------
@@ -189,19 +195,91 @@ def acquire(
     True
     """
     sensor = Sensor() if sensor is None else sensor
-    perturb = Perturbation.none() if perturb is None else perturb
-    if not isinstance(perturb, Perturbation):
-        raise ValueError(f"perturb must be a Perturbation, got {type(perturb).__name__}")
+    perturb = _checked(perturb)
     # The device (gain map, dead taxels) comes from its own stream: one session's device is the same
     # whatever points it touches, so methods touching other places meet the same device.
     device, rng = _rng(rng).spawn(2)
-    gain = 1.0 + perturb.gain_spread * device.standard_normal((sensor.rows, sensor.cols))
-    dead = device.random((sensor.rows, sensor.cols)) < perturb.dead_fraction
+    gain, dead = _devices(device, perturb, sensor, ())
+    P, N, _ = check_points(positions, normals)
+    if P.shape[0] == 0:
+        return np.zeros((0, sensor.rows, sensor.cols), dtype=np.float32)
+    return _read(_touch(mesh, P, N, sensor, perturb, rng, workers, scene, exact), gain, dead, sensor, perturb, rng)
+
+
+def touch_codebook(
+    mesh: Mesh,
+    positions,
+    normals,
+    sensor: Sensor | None = None,
+    perturb: Perturbation | None = None,
+    draws: int = 8,
+    rng=0,
+    workers: int | None = None,
+    scene=None,
+) -> np.ndarray:
+    """Many simulated touches at each of k places: what a touch there can feel like, (k, draws, rows, cols).
+
+    Every touch is an acquisition of its own (:func:`acquire`'s model): its
+    own device (gain map, dead taxels), roll, position jitter and tilt, and
+    its own reading noise.  So the touches of a place spread over what one
+    robot and pad can read there, whichever device it turns out to be.
+
+    Parameters
+    ----------
+    mesh : Mesh, in millimetres
+    positions, normals : (k, 3) float64, the places and their outward normals
+    sensor : Sensor, optional
+    perturb : Perturbation, optional (default ``Perturbation.typical()``)
+    draws : int, touches per place (>= 1)
+    rng : numpy.random.Generator or int or None, the source of every draw
+    workers, scene : as for :func:`acquire`
+
+    Returns
+    -------
+    (k, draws, rows, cols) float32 in [0, 1]
+
+    Examples
+    --------
+    >>> from meshsal.mesh import Mesh
+    >>> plane = Mesh(vertices=[[-50, 0, -50], [50, 0, -50], [50, 0, 50], [-50, 0, 50]],
+    ...              faces=[[0, 2, 1], [0, 3, 2]])
+    >>> book = touch_codebook(plane, [[0, 0, 0], [10, 0, 0]], [[0, 1, 0]] * 2, Sensor(mode="pressure"), draws=4)
+    >>> book.shape, len({b.tobytes() for b in book[0]})     # four devices: four different readings
+    ((2, 4, 16, 16), 4)
+    """
+    sensor = Sensor() if sensor is None else sensor
+    perturb = _checked(Perturbation.typical() if perturb is None else perturb)
+    if isinstance(draws, bool) or not isinstance(draws, (int, np.integer)) or draws < 1:
+        raise ValueError(f"draws must be a positive integer, got {draws!r}")
     P, N, _ = check_points(positions, normals)
     k = P.shape[0]
+    device, rng = _rng(rng).spawn(2)
+    gain, dead = _devices(device, perturb, sensor, (k * draws,))
     if k == 0:
-        return np.zeros((0, sensor.rows, sensor.cols), dtype=np.float32)
+        return np.zeros((0, draws, sensor.rows, sensor.cols), dtype=np.float32)
+    P, N = np.repeat(P, draws, axis=0), np.repeat(N, draws, axis=0)
+    images = _read(_touch(mesh, P, N, sensor, perturb, rng, workers, scene, False), gain, dead, sensor, perturb, rng)
+    return images.reshape(k, draws, sensor.rows, sensor.cols)
 
+
+def _checked(perturb) -> Perturbation:
+    perturb = Perturbation.none() if perturb is None else perturb
+    if not isinstance(perturb, Perturbation):
+        raise ValueError(f"perturb must be a Perturbation, got {type(perturb).__name__}")
+    return perturb
+
+
+def _devices(device: np.random.Generator, perturb: Perturbation, sensor: Sensor, count: tuple):
+    """Gain maps and dead-taxel masks, ``(*count, rows, cols)``: one device, or one per touch."""
+    shape = (*count, sensor.rows, sensor.cols)
+    gain = 1.0 + perturb.gain_spread * device.standard_normal(shape)
+    dead = device.random(shape) < perturb.dead_fraction
+    return gain, dead
+
+
+def _touch(mesh, P, N, sensor, perturb, rng, workers, scene, exact) -> np.ndarray:
+    """Clean images of pads placed with the perturbation's placement errors (jitter, roll, tilt)."""
+    k = P.shape[0]
     if perturb.jitter_mm > 0:
         up, right = tangent_frames(N)
         step = perturb.jitter_mm * rng.standard_normal((k, 2))
@@ -214,8 +292,15 @@ def acquire(
     poses = sensor_poses(mesh, P, N, sensor, angles)
     if perturb.tilt_deg > 0:
         poses = poses_from_normals(P, _tilt(poses.normals, perturb.tilt_deg, rng), angles)
-    images = imprints_at(mesh, poses, sensor, workers, scene=scene)
+    if exact:
+        from tactile.section import imprints_exact_at
 
+        return imprints_exact_at(mesh, poses, sensor)
+    return imprints_at(mesh, poses, sensor, workers, scene=scene)
+
+
+def _read(images, gain, dead, sensor: Sensor, perturb: Perturbation, rng) -> np.ndarray:
+    """What the device reads of clean images: cover blur, gains, noise, clipping, dead taxels, the ADC."""
     if perturb.blur_mm > 0:
         from scipy.ndimage import gaussian_filter
 

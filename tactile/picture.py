@@ -18,7 +18,7 @@ def imprint_grid(images, captions=None, scale: int = 8, columns: int = 5) -> np.
     ----------
     images : (k, rows, cols) float in [0, 1]
     captions : sequence of k str, optional
-        Defaults to ``"#1"``, ``"#2"``, ...
+        Defaults to ``"#0"``, ``"#1"``, ... (points are numbered from 0 everywhere).
     scale : int
         Pixels per taxel side.
     columns : int
@@ -39,7 +39,7 @@ def imprint_grid(images, captions=None, scale: int = 8, columns: int = 5) -> np.
     if images.ndim != 3 or images.shape[0] == 0:
         raise ValueError(f"images must have shape (k, rows, cols) with k >= 1, got {images.shape}")
     k, rows, cols = images.shape
-    captions = [f"#{i + 1}" for i in range(k)] if captions is None else [str(c) for c in captions]
+    captions = [f"#{i}" for i in range(k)] if captions is None else [str(c) for c in captions]
     if len(captions) != k:
         raise ValueError(f"need one caption per image ({k}), got {len(captions)}")
     scale, columns = max(1, int(scale)), max(1, min(int(columns), k))

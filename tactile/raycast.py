@@ -237,7 +237,9 @@ def imprints(
     Parameters
     ----------
     mesh : Mesh
-        In millimetres (see ``meshsal.scale_to``).
+        In millimetres (see ``meshsal.scale_to_principal``): a mesh whose size
+        disagrees with the pad's (one in metres, smaller than a taxel) gets a
+        ``meshsal.mesh.transform.UnitsWarning`` naming both sizes.
     positions : (k, 3) float64
         Touched points.
     normals : (k, 3) float64
@@ -272,10 +274,13 @@ def imprints(
     >>> bool((imprints(plane, [[0, 0, 0]], [[0, 1, 0]], Sensor(mode="pressure"), scene=scene) == img).all())
     True
     """
+    from meshsal.mesh.transform import check_pad_size
+
     sensor = Sensor() if sensor is None else sensor
     P, N, A = check_points(positions, normals, angles_deg)
     if P.shape[0] == 0:
         return np.zeros((0, sensor.rows, sensor.cols), dtype=np.float32)
+    check_pad_size(mesh, sensor.width_mm, sensor.pitch_mm)
     return imprints_at(mesh, sensor_poses(mesh, P, N, sensor, A), sensor, workers, scene)
 
 

@@ -19,13 +19,12 @@ from dataclasses import asdict, dataclass
 import numpy as np
 
 from meshsal.mesh import Mesh
-from meshsal.mesh.geometry import tangent_frames
+from meshsal.mesh.geometry import tangent_frames, vertex_area_vectors
 from meshsal.util.registry import Registry
 
 __all__ = [
-    "MODES",
     "SENSOR_MODES",
-    "PLANES",
+    "SENSOR_PLANES",
     "Sensor",
     "Poses",
     "tangent_frames",
@@ -44,8 +43,14 @@ SENSOR_MODES = Registry(
         ("pressure", None, "indentation depth, as a force-resistive array reads it"),
     ],
 )
-MODES = SENSOR_MODES.names()
-PLANES = ("pca", "paper")
+#: How the pad's plane is fitted at a point (:func:`fit_normals`).
+SENSOR_PLANES = Registry(
+    "sensor plane",
+    [
+        ("pca", None, "the area-weighted mean normal of the surface under the pad"),
+        ("paper", None, "the plane through the three nearest vertices, as in the paper"),
+    ],
+)
 
 # The in-plane frame follows world +y (meshes are y-up) unless the normal is
 # within this angle of +-y, where the projection of y degenerates.
@@ -113,10 +118,9 @@ class Sensor:
             if not (np.isfinite(value) and value > 0):
                 raise ValueError(f"Sensor.{name} must be finite and positive, got {value}")
             object.__setattr__(self, name, value)
-        if self.mode not in SENSOR_MODES:
-            raise ValueError(f"Sensor.mode must be one of {SENSOR_MODES.names()}, got {self.mode!r}")
-        if self.plane not in PLANES:
-            raise ValueError(f"Sensor.plane must be one of {PLANES}, got {self.plane!r}")
+        for name, registry in (("mode", SENSOR_MODES), ("plane", SENSOR_PLANES)):
+            if getattr(self, name) not in registry:
+                raise ValueError(f"Sensor.{name} must be one of {registry.names()}, got {getattr(self, name)!r}")
 
     @property
     def width_mm(self) -> float:
@@ -201,22 +205,9 @@ def check_points(positions, normals, angles_deg=None) -> tuple[np.ndarray, np.nd
 # than on (n, 3) rows of three.
 
 
-def _vertex_area_vectors(Vt: np.ndarray, F: np.ndarray) -> np.ndarray:
-    """Per vertex, a third of the area-weighted normals of its faces, (3, n) from (3, n) vertices."""
-    Ft = F.T.astype(np.intp)
-    x, y, z = np.take(Vt, Ft, axis=1)
-    ax, ay, az = x[1] - x[0], y[1] - y[0], z[1] - z[0]
-    bx, by, bz = x[2] - x[0], y[2] - y[0], z[2] - z[0]
-    corners, n = Ft.reshape(-1), Vt.shape[1]
-    return (
-        np.stack(
-            [
-                np.bincount(corners, weights=np.tile(c, 3), minlength=n)
-                for c in (ay * bz - az * by, az * bx - ax * bz, ax * by - ay * bx)
-            ]
-        )
-        / 6.0
-    )
+def _vertex_area_vectors(V: np.ndarray, F: np.ndarray) -> np.ndarray:
+    """Per vertex, a third of the area-weighted normals of its faces, (3, n) from (n, 3) vertices."""
+    return np.ascontiguousarray(vertex_area_vectors(V, F).T) / 6.0
 
 
 def _cells_near(cell: np.ndarray, P: np.ndarray, origin: np.ndarray, size: float, radius: float):
@@ -281,10 +272,10 @@ def _fit_pca(V, F, P, N, radius: float) -> np.ndarray:
     # vertices near them, and get the result of the whole mesh.
     keep = _cells_near(cell, P, origin, size, radius)
     if keep is None:
-        centroids, vectors = _surface_cells(Vt, _vertex_area_vectors(Vt, F), cell)
+        centroids, vectors = _surface_cells(Vt, _vertex_area_vectors(V, F), cell)
     elif keep.any():
         touching = keep[F[:, 0]] | keep[F[:, 1]] | keep[F[:, 2]]
-        area = _vertex_area_vectors(Vt, F[touching])[:, keep]
+        area = _vertex_area_vectors(V, F[touching])[:, keep]
         centroids, vectors = _surface_cells(Vt[:, keep], area, cell[:, keep])
     else:
         return N

@@ -118,6 +118,18 @@ def sphere(radius: float = 40.0, n: int = 40, center=(0.0, 0.0, 0.0)) -> Mesh:
     return Mesh(vertices=V + np.asarray(center, dtype=np.float64), faces=F, name="sphere")
 
 
+def bowl(radius: float = 60.0, n: int = 40, depth: float = 0.65) -> Mesh:
+    """An open hemispherical bowl: the sphere below ``z = (depth - 1) * radius`` reversed, faces outward
+    (away from the centre).  ``.replace(faces=bowl().faces[:, ::-1])`` faces into it, as many scans of open
+    objects do."""
+    s = sphere(radius=radius, n=n)
+    keep = s.vertices[s.faces].mean(axis=1)[:, 2] < (depth - 1.0) * radius + 1e-9
+    used = np.unique(s.faces[keep])
+    index = np.full(s.n_vertices, -1)
+    index[used] = np.arange(used.size)
+    return Mesh(vertices=s.vertices[used], faces=index[s.faces[keep]], name="bowl")
+
+
 def cylinder(radius: float = 20.0, length: float = 120.0, around: int = 256, along: int = 12) -> Mesh:
     """An open tube of the given radius around the x axis, |x| <= length/2, normals outward."""
     uv, F = _grid(along)

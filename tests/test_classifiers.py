@@ -8,7 +8,7 @@ from sklearn.model_selection import train_test_split
 from sklearn.svm import SVC
 
 import classify
-from classify.recognizers.evolutionary_svm import solve_dual, solve_duals
+from classify.recognizers.evolution_strategy import solve_dual, solve_duals
 
 
 def _separable_imprints(n_per_class=30, n_classes=4, seed=0):
@@ -24,7 +24,7 @@ def _separable_imprints(n_per_class=30, n_classes=4, seed=0):
     return np.concatenate(X).astype(np.float32), np.concatenate(y)
 
 
-@pytest.mark.parametrize("name", classify.NAMES)
+@pytest.mark.parametrize("name", classify.PAPER_NAMES)
 def test_each_classifier_separates_planted_classes(name):
     X, y = _separable_imprints(seed=1)
     Xt, yt = _separable_imprints(n_per_class=20, seed=2)
@@ -36,7 +36,7 @@ def test_each_classifier_separates_planted_classes(name):
     np.testing.assert_array_equal(model.classes_[np.argmax(proba, axis=1)], model.predict(Xt))
 
 
-@pytest.mark.parametrize("name", classify.NAMES)
+@pytest.mark.parametrize("name", classify.PAPER_NAMES)
 def test_estimator_contract_clone_and_params(name):
     model = classify.make(name)
     params = model.get_params()
@@ -147,15 +147,15 @@ def test_evolution_strategy_run_does_not_depend_on_its_draw_blocks(
     monkeypatch, block, n, problems, lam, generations, patience, stops_at
 ):
     """The draws are prepared a block of generations at a time: any block size gives the same run, bit for bit."""
-    from classify.recognizers import evolutionary_svm
+    from classify.recognizers import evolution_strategy
 
     rng = np.random.default_rng(3)
     X = rng.normal(size=(n, 4))
     K = np.exp(-0.5 * ((X[:, None] - X[None]) ** 2).sum(-1))
     Y = np.where(rng.random((problems, n)) < 0.4, 1.0, -1.0)
     runs = []
-    for size in (evolutionary_svm._BLOCK, block):
-        monkeypatch.setattr(evolutionary_svm, "_BLOCK", size)
+    for size in (evolution_strategy._BLOCK, block):
+        monkeypatch.setattr(evolution_strategy, "_BLOCK", size)
         runs.append(solve_dual(K, Y, C=1.0, pairs=2, lam=lam, max_generations=generations, patience=patience))
     (a0, w0, g0), (a1, w1, g1) = runs
     assert g0 == g1 == stops_at
@@ -216,3 +216,10 @@ def test_knn_neighbours_are_the_first_k_of_the_full_sort_ties_included():
         full = np.lexsort((np.broadcast_to(tiebreak, d2.shape), d2), axis=1)
         for k in (1, 3, 9, m):
             np.testing.assert_array_equal(_ranked(d2, tiebreak, k), full[:, : min(k, m)])
+
+
+def test_the_evolution_strategy_is_importable_beside_its_estimator():
+    from classify.recognizers import evolution_strategy, evolutionary_svm
+
+    for name in ("Strategy", "solve_dual", "solve_duals"):
+        assert getattr(evolutionary_svm, name) is getattr(evolution_strategy, name)

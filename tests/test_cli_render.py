@@ -18,7 +18,7 @@ def sphere_file(tmp_path):
 
 def test_render_writes_72_views_and_a_contact_sheet(sphere_file, tmp_path, capsys):
     out = tmp_path / "views"
-    assert main(["render", str(sphere_file), "--out", str(out), "--size", "32", "--quiet"]) == 0
+    assert main(["render", str(sphere_file), "--out", str(out), "--view-size", "32", "--quiet"]) == 0
     views = sorted(out.glob("view_*.png"))
     assert len(views) == 72
     first = cv2.imread(str(views[0]))
@@ -32,7 +32,7 @@ def test_render_saliency_writes_the_map_and_eight_channels_per_view(sphere_file,
     from meshsal.attention import CHANNELS
 
     out = tmp_path / "views"
-    assert main(["render", str(sphere_file), "--out", str(out), "--size", "32", "--saliency", "--quiet"]) == 0
+    assert main(["render", str(sphere_file), "--out", str(out), "--view-size", "32", "--saliency", "--quiet"]) == 0
     assert len(list(out.glob("view_*_saliency.png"))) == 72
     for name in CHANNELS:
         assert len(list(out.glob(f"view_*_{name}.png"))) == 72
@@ -42,7 +42,7 @@ def test_render_saliency_writes_the_map_and_eight_channels_per_view(sphere_file,
 
 
 def test_render_shows_progress_on_stderr_unless_quiet(sphere_file, tmp_path, capsys):
-    assert main(["render", str(sphere_file), "--out", str(tmp_path / "v"), "--size", "16"]) == 0
+    assert main(["render", str(sphere_file), "--out", str(tmp_path / "v"), "--view-size", "16"]) == 0
     assert "render [" in capsys.readouterr().err
 
 
@@ -57,8 +57,8 @@ def test_render_of_a_bad_mesh_fails_with_the_loaders_message(tmp_path, capsys):
 
 
 def test_render_rejects_a_tiny_size(sphere_file, tmp_path, capsys):
-    assert main(["render", str(sphere_file), "--out", str(tmp_path), "--size", "4", "--quiet"]) == 1
-    assert "--size" in capsys.readouterr().err
+    assert main(["render", str(sphere_file), "--out", str(tmp_path), "--view-size", "4", "--quiet"]) == 1
+    assert "--view-size" in capsys.readouterr().err
 
 
 def test_toys_writes_six_coloured_plys(tmp_path):
@@ -84,9 +84,30 @@ def test_help_of_every_subcommand(capsys):
     assert "--out" in capsys.readouterr().out
 
 
+def test_every_subcommand_takes_quiet_names_ycb_objects_and_shows_its_defaults():
+    import argparse
+
+    from classify.cli import build_parser
+
+    commands = next(a for a in build_parser()._actions if isinstance(a, argparse._SubParsersAction)).choices
+    for name, parser in commands.items():
+        text = parser.format_help()
+        assert "--quiet" in text and "%%" not in text, name
+        for action in parser._actions:
+            shown = action.default not in (None, (), argparse.SUPPRESS) and action.nargs != 0
+            if shown and action.help != argparse.SUPPRESS:
+                assert "default" in parser._get_formatter()._format_action(action), (name, action.dest)
+        if any(a.dest == "mesh" for a in parser._actions):
+            assert "foam_brick" in text and "dromedary" in text, name
+    points = " ".join(commands["points"].format_help().split())
+    assert "--n-points N_POINTS number of points (default: 15)" in points
+    assert "--view-size VIEW_SIZE rendered view size in pixels (default: 128)" in points
+    assert "95 % bootstrap" in " ".join(commands["experiment"].format_help().split())
+
+
 def test_render_takes_a_toy_name_for_a_mesh(tmp_path):
     out = tmp_path / "cup"
-    assert main(["render", "cup", "--out", str(out), "--size", "16", "--quiet"]) == 0
+    assert main(["render", "cup", "--out", str(out), "--view-size", "16", "--quiet"]) == 0
     assert len(list(out.glob("view_*.png"))) == 72
 
 
@@ -99,10 +120,27 @@ def test_a_repair_warning_names_the_file_and_not_our_source_line(tmp_path, capsy
     mesh = icosphere(radius=10.0, subdivisions=2)
     path = tmp_path / "stray.obj"
     write_obj(path, mesh.replace(vertices=np.vstack([mesh.vertices, [99.0, 99, 99]])))
-    assert main(["render", str(path), "--out", str(tmp_path / "v"), "--size", "16", "--quiet"]) == 0
+    assert main(["render", str(path), "--out", str(tmp_path / "v"), "--view-size", "16", "--quiet"]) == 0
     err = capsys.readouterr().err
     warned = [line for line in err.splitlines() if "warning" in line]
     assert len(warned) == 1, err
     assert warned[0].startswith("visuotactile render: warning: ") and str(path) in warned[0]
     assert "unreferenced" in warned[0] and warned[0].endswith("(MeshRepairWarning)")
     assert ".py:" not in err
+
+
+@pytest.mark.parametrize(
+    "argv, old, new, dest, value",
+    [
+        (["render", "cup", "--out", "o", "--size", "64"], "--size", "--view-size", "view_size", 64),
+        (["points", "cup", "--out", "o", "--n", "4"], "--n", "--n-points", "n_points", 4),
+        (["plan", "cup", "--out", "o.json", "--n", "4"], "--n", "--n-points", "n_points", 4),
+        (["capture", "--port", "p", "--session", "s", "--object", "cup", "--threshold", "40"], "--threshold",
+         "--press-threshold", "press_threshold", 40.0),
+    ],
+)  # fmt: skip
+def test_a_renamed_option_keeps_its_old_spelling_for_a_release(capsys, argv, old, new, dest, value):
+    from classify.cli import build_parser
+
+    assert getattr(build_parser().parse_args(argv), dest) == value
+    assert f"visuotactile {argv[0]}: warning: {old} is deprecated and goes in 0.3: use {new}" in capsys.readouterr().err

@@ -20,7 +20,7 @@ from conftest import missing
 from classify.runtime.cluster import LOOPBACK, tls_security
 
 ROOT = Path(__file__).resolve().parents[1]
-SECTION = "### Running a cluster safely"
+SECTION = "## Running a cluster safely"
 LOOPBACKS = {LOOPBACK, "::1"}
 
 

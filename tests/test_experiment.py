@@ -70,7 +70,8 @@ def test_results_csv_is_identical_for_one_and_two_jobs(tmp_path):
     one = quick.run(_objects(), config, n_jobs=1, out_dir=tmp_path / "one")
     two = quick.run(_objects(), config, n_jobs=2, out_dir=tmp_path / "two")
     assert (tmp_path / "one" / "results.csv").read_text() == (tmp_path / "two" / "results.csv").read_text()
-    assert one.rates.keys() == two.rates.keys() and len(one.rates) == 5 * 2 * (1 + 6)
+    # The paper's five with and without selection in both protocols; the place-aware one in the instance protocol.
+    assert one.rates.keys() == two.rates.keys() and len(one.rates) == 5 * 2 * (1 + 6) + 6
 
 
 def test_every_rate_has_an_interval_and_methods_a_paired_comparison(tmp_path):
@@ -332,3 +333,78 @@ def test_every_method_and_classifier_of_a_replicate_meets_the_same_instances_dev
     assert len(acquired) == 2 * 2 * 3 and set(acquired.values()) == {len(methods)}
     runs = list(touch_sets.values())
     assert len(runs) == 4 and all(sorted(run) == sorted(runs[0]) for run in runs)
+
+
+def test_the_place_aware_recognizer_runs_every_plan_and_policy_and_a_shuffled_control_is_at_chance(tmp_path):
+    config = QUICK.replace(
+        methods=("uniform",),
+        protocols=("instance",),
+        classifiers=("knn", "place"),
+        policies=("info_gain",),
+        replicates=3,
+    )
+    r = quick.run(_objects(), config, out_dir=tmp_path)
+    for method, protocol in (("uniform", "instance"), ("info_gain", "sequential")):
+        assert r.cell(method, protocol, "place", 3, False, 3).mean > 100.0 / 3
+    with open(tmp_path / "results.csv") as fh:
+        rows = [row for row in csv.DictReader(fh) if row["classifier"] == "place"]
+    assert {(row["method"], row["protocol"], row["selection"]) for row in rows} == {
+        ("uniform", "instance", "false"),
+        ("info_gain", "sequential", "false"),
+    }
+    shuffled = quick.run(_objects(), config.replace(control="shuffled"))
+    for method, protocol in (("uniform", "instance"), ("info_gain", "sequential")):
+        for c in ("knn", "place"):
+            for k in (1, 3):
+                cell = shuffled.cell(method, protocol, c, 3, False, k)
+                assert cell.ci_low <= 100.0 / 3, (method, c, k, cell)  # never above chance
+
+
+def test_a_mismatch_arm_changes_the_test_instances_only():
+    from classify.experiment.samples import SampleTask, instance_samples, nominal_mesh
+
+    ball = nominal_mesh(shapes.sphere(radius=50.0, n=24).replace(name="ball"), SMALL)
+    arm = Settings(n_points=6, train_instances=2, train_sessions=1, mismatch=("subdivided", "noise_double"))
+
+    def sample(settings, index):
+        return instance_samples(SampleTask(ball, "ball", ("uniform",), settings, 0, index, places=True))
+
+    for a, b in zip(sample(SMALL, 1).places.to_arrays().values(), sample(arm, 1).places.to_arrays().values()):
+        np.testing.assert_array_equal(a, b)  # a training instance is the same in every arm
+    plain, other = sample(SMALL, 0), sample(arm, 0)
+    assert other.places.places.vertex_ids.max() > plain.places.places.vertex_ids.max()  # four times the faces
+    with pytest.raises(ValueError, match="unknown mismatch"):
+        Settings(mismatch=("warped",))
+    with pytest.raises(ValueError, match="contradict"):
+        Settings(mismatch=("decimated", "subdivided"))
+
+
+def test_objects_from_a_folder_or_a_list_with_twins_and_bad_files(tmp_path):
+    from classify.experiment.stages import load_objects
+
+    folder = tmp_path / "shelf"
+    (folder / "deep").mkdir(parents=True)
+    for mesh, where in zip(_objects(), ("box.obj", "deep/ball.obj", "rod.obj")):
+        shapes.write_obj(folder / where, mesh)
+    (folder / "copy_of_box.obj").write_bytes((folder / "box.obj").read_bytes())
+    with pytest.warns(UserWarning, match=r"same bytes are one object: copy_of_box \(= box\)"):
+        found = load_objects([str(folder)], SMALL)
+    assert found.names == ("box", "ball", "rod")  # by path: box.obj, (copy_of_box.obj,) deep/ball.obj, rod.obj
+    listing = tmp_path / "objects.txt"
+    listing.write_text("# my shelf\nshelf/rod.obj\n\nshelf/box.obj  # the box\n")
+    assert load_objects([str(listing)], SMALL).names == ("rod", "box")
+    (folder / "broken.obj").write_text("v 0 0 0\nv 1 0 0\nf 1 2 9\n")
+    with pytest.raises(ValueError, match=r"1 of 4 objects do not load \(--skip-bad runs on the rest\).*broken.obj"):
+        load_objects([str(folder)], SMALL)
+    with pytest.warns(UserWarning, match="left out 1 of 4 objects"):
+        assert load_objects([str(folder)], SMALL, skip_bad=True).names == ("box", "ball", "rod")
+
+
+def test_a_result_read_back_from_its_json_prints_the_same_tables(tmp_path):
+    from classify.reporting.results import ExperimentResult
+
+    config = QUICK.replace(methods=("random", "uniform"), classifiers=("knn",), replicates=2)
+    r = quick.run(_objects()[:2], config, out_dir=tmp_path)
+    again = ExperimentResult.from_json(json.loads((tmp_path / "results.json").read_text()))
+    assert experiment.format_tables(again) == experiment.format_tables(r)
+    assert again.cell("uniform", "instance", "knn", 2, False, 3) == r.cell("uniform", "instance", "knn", 2, False, 3)

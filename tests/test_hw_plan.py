@@ -95,9 +95,25 @@ def test_cli_plan_on_a_toy(tmp_path):
     from classify.cli import main
 
     out = tmp_path / "cup.json"
-    assert main(["plan", "cup", "--method", "random", "--n", "5", "--out", str(out)]) == 0
+    assert main(["plan", "cup", "--method", "random", "--n-points", "5", "--out", str(out)]) == 0
     plan = load_plan(out)
     assert len(plan.points) == 5 and (tmp_path / "cup.csv").exists()
     assert main(["plan", str(tmp_path / "nope.obj"), "--out", str(out)]) == 1
     # Similarity sanity: a toy is made in millimetres, so the frame only centres and rescales.
     assert isinstance(plan.frame, Similarity) and plan.frame.scale > 0
+
+
+def test_cli_plan_with_a_learned_method_needs_and_takes_a_model(tmp_path, capsys):
+    from models import one_feature_model
+
+    from classify.cli import main
+
+    out = tmp_path / "cup.json"
+    assert main(["plan", "cup", "--method", "learned", "--out", str(out)]) == 1
+    assert "visuotactile plan: error: --method learned needs --model FILE" in capsys.readouterr().err
+    assert not out.exists()
+    one_feature_model("curvature").save(tmp_path / "model.json")
+    argv = ["plan", "cup", "--method", "learned", "--model", str(tmp_path / "model.json"), "--n-points", "4"]
+    assert main(argv + ["--quiet", "--out", str(out)]) == 0
+    assert [p.id for p in load_plan(out).points] == [0, 1, 2, 3]
+    assert capsys.readouterr().err == ""  # --quiet: no status line

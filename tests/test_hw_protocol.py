@@ -11,6 +11,7 @@ from hw.protocol import (
     HEADER_SIZE,
     FrameParser,
     crc16_ccitt_false,
+    encode,
     encode_frame,
     encode_text_frame,
     frame_size,
@@ -38,9 +39,18 @@ def test_round_trip_binary_and_text():
     rng = np.random.default_rng(0)
     values = rng.integers(0, 65536, size=(16, 16)).astype(np.uint16)
     for protocol, enc in (("binary", encode_frame), ("text", encode_text_frame)):
-        (frame,) = FrameParser(protocol=protocol).feed(enc(2**32 - 1, 123456, values))
+        data = enc(2**32 - 1, 123456, values)
+        assert encode(2**32 - 1, 123456, values, protocol) == data
+        (frame,) = FrameParser(protocol=protocol).feed(data)
         assert frame.seq == 2**32 - 1 and frame.t_us == 123456
         assert frame.values.dtype == np.uint16 and np.array_equal(frame.values, values)
+
+
+def test_an_unknown_protocol_is_refused_naming_the_protocols():
+    with pytest.raises(ValueError, match="unknown frame protocol 'csv'; choose from binary, text"):
+        encode(0, 0, np.zeros((2, 2)), "csv")
+    with pytest.raises(ValueError, match="unknown frame protocol 'csv'; choose from binary, text"):
+        FrameParser(protocol="csv")
 
 
 def test_encode_rejects_bad_values():

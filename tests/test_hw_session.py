@@ -9,6 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from hw import session_file
 from hw.press import Baseline, Press
 from hw.session import Session, resample
 
@@ -317,18 +318,18 @@ def test_a_filesystem_without_a_write_ahead_log_is_refused(tmp_path, monkeypatch
 
 def test_a_file_created_by_another_opener_between_look_and_lock_is_taken_as_it_is(tmp_path, monkeypatch):
     path = tmp_path / "s.sqlite"
-    transaction, first = Session._transaction, []
+    transaction, first = session_file.transaction, []
 
-    def another_opener_first(self):
+    def another_opener_first(con):
         if not first:  # once: this opener has seen no tables
-            first.append(self)
+            first.append(con)
             with Session(path) as other:
                 other.ensure_sensor(16, 16)
-        return transaction(self)
+        return transaction(con)
 
-    monkeypatch.setattr(Session, "_transaction", another_opener_first)
+    monkeypatch.setattr(session_file, "transaction", another_opener_first)
     with Session(path) as s:
-        assert first == [s] and s.sensor == (16, 16)
+        assert first == [s._con] and s.sensor == (16, 16)
         assert len(s._con.execute("SELECT * FROM meta WHERE key = 'format'").fetchall()) == 1
 
 

@@ -86,7 +86,7 @@ def test_plan_simdevice_capture_export_chain(tmp_path):
     from tactile import ImprintSet
 
     plan_path, truth, session, out = (tmp_path / n for n in ("plan.json", "truth.npz", "s.sqlite", "real.npz"))
-    assert main(["plan", "cup", "--method", "random", "--n", "15", "--out", str(plan_path)]) == 0
+    assert main(["plan", "cup", "--method", "random", "--n-points", "15", "--out", str(plan_path)]) == 0
     sim = subprocess.Popen(
         [
             sys.executable,

@@ -88,9 +88,10 @@ def test_obj_vertex_colors(tmp_path):
 
 
 def test_obj_negative_indices_and_slashes(tmp_path):
-    text = "v 0 0 0\nv 1 0 0\nv 0 1 0\nvn 0 0 1\nf -3//1 -2//1 -1//1\nv 0 0 1\nf 2 1 -1\n"
+    # Two triangles at a right angle, facing out of the angle between them.
+    text = "v 0 0 0\nv 1 0 0\nv 0 1 0\nvn 0 0 1\nf -3//1 -1//1 -2//1\nv 0 0 1\nf 1 2 -1\n"
     m = load_clean(write(tmp_path / "neg.obj", text))
-    np.testing.assert_array_equal(m.faces, [[0, 1, 2], [1, 0, 3]])
+    np.testing.assert_array_equal(m.faces, [[0, 2, 1], [0, 1, 3]])
 
 
 def textured_obj(tmp_path, image=True, extra_faces=""):
@@ -221,10 +222,10 @@ def test_duplicates_with_different_colors_are_kept_apart(tmp_path):
     assert report.boundary_loops == 1 and report.closed_components == 0  # the seam opens the surface
 
 
-def test_repeated_index_face_dropped_and_counted(tmp_path):
+def test_a_face_repeating_a_vertex_is_left_out(tmp_path):
+    # It has no area: pymeshlab leaves it out as it reads the file, and the rest needs no repair.
     F = np.vstack([TETRA_F, [[0, 0, 1]]])
-    with pytest.warns(MeshRepairWarning, match=r"r\.ply: dropped 1 zero-area faces"):
-        m = load_mesh(write(tmp_path / "r.ply", ply_ascii(TETRA_V, F)))
+    m = load_clean(write(tmp_path / "r.ply", ply_ascii(TETRA_V, F)))
     np.testing.assert_array_equal(m.faces, TETRA_F)
 
 
@@ -273,7 +274,6 @@ def test_empty_file(tmp_path, content):
 @pytest.mark.parametrize(
     "name, content",
     [
-        ("bad.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nhello world\nf 1 2 3\n"),
         ("bad.obj", "v 0 0 zero\n"),
         ("bad.ply", "plyx\nformat ascii 1.0\nend_header\n"),
         ("bad.ply", "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nend_header\n1\n2\n3\n"),
@@ -294,17 +294,21 @@ def test_binary_garbage_in_text_format(tmp_path):
 
 
 @pytest.mark.parametrize(
-    "name, content",
+    "name, content, problem",
     [
-        ("i.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 4\n"),
-        ("i.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 0 1 2\n"),
-        ("i.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf -1 -2 -4\n"),
-        ("i.ply", ply_ascii(TETRA_V[:3], [[0, 1, 3]])),
-        ("i.off", "OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1 3\n"),
+        ("i.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 4\n", "out of range"),
+        ("i.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 0 1 2\n", "out of range"),
+        ("i.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf -1 -2 -4\n", "out of range"),
+        ("i.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 100000000\n", "out of range"),  # pymeshlab: SIGSEGV
+        ("i.obj", "f 1 2 3\nv 0 0 0\nv 1 0 0\nv 0 1 0\n", "out of range"),  # before its vertices
+        ("i.ply", ply_ascii(TETRA_V[:3], [[0, 1, 3]]), "out of range"),
+        ("i.ply", ply_ascii(SQUARE, [[0, 1, 2, 400000000]]), "out of range"),  # pymeshlab: SIGSEGV
+        ("i.off", "OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1 3\n", "out of range"),
+        ("i.off", "OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1 -5\n", "out of range"),  # pymeshlab: SIGSEGV
     ],
 )
-def test_face_index_out_of_range(tmp_path, name, content):
-    expect_error(write(tmp_path / name, content), "out of range")
+def test_face_index_out_of_range(tmp_path, name, content, problem):
+    expect_error(write(tmp_path / name, content), problem)
 
 
 def test_texture_index_out_of_range(tmp_path):
@@ -374,10 +378,132 @@ def test_truncated_binary_stl(tmp_path):
     expect_error(tmp_path / "cut.stl", "unparseable content", "truncated")
 
 
-def test_faces_lost_by_pymeshlab_raise(tmp_path):
-    # pymeshlab turns this non-planar pentagon into fewer than the 3 triangles it needs.
+@pytest.mark.parametrize(
+    "header",
+    [
+        "ply\nformat ascii 1.0\nelement vertex 1000000000000\nproperty float x\nproperty float y\nproperty float z\n",
+        "ply\nformat binary_little_endian 1.0\nelement vertex 3\nproperty float x\nproperty float y\n"
+        "property float z\nelement face 1000000000000\nproperty list uchar int vertex_indices\n",
+    ],
+)
+def test_a_ply_header_declaring_more_than_the_file_holds_is_refused_before_pymeshlab_allocates(tmp_path, header):
+    # pymeshlab allocates what the header declares: std::bad_alloc or std::length_error for 10^12.
+    path = tmp_path / "huge.ply"
+    path.write_bytes(header.encode() + b"end_header\n" + b"0 0 0\n" * 3)
+    expect_error(path, "the PLY header declares", "1,000,000,000,000", "more than the")
+
+
+def test_an_off_header_declaring_more_than_the_file_holds_is_refused(tmp_path):
+    expect_error(write(tmp_path / "huge.off", "OFF\n1000000000000 1 0\n0 0 0\n"), "declares 1000000000000 vertices")
+
+
+def test_a_binary_stl_declaring_more_facets_than_it_holds_is_refused(tmp_path):
+    # pymeshlab reads the 10^9 facets its bytes 80-84 declare from 134 bytes for minutes.
+    path = tmp_path / "huge.stl"
+    path.write_bytes(b"\0" * 80 + np.uint32(10**9).tobytes() + bytes(50))
+    expect_error(path, "binary STL of 1000000000 facets has 50000000084")
+
+
+# --------------------------------------------------------------------------- variants of valid files
+
+
+@pytest.mark.parametrize("binary", [False, True], ids=["ascii", "binary"])
+def test_meshlab_ply_with_per_face_texture_coordinates(tmp_path, binary):
+    # MeshLab writes wedge texture coordinates as a list of floats on each face, after its vertex indices.
+    header = (
+        f"ply\nformat {'binary_little_endian' if binary else 'ascii'} 1.0\ncomment TextureFile tex.png\n"
+        "element vertex 4\nproperty float x\nproperty float y\nproperty float z\nelement face 4\n"
+        "property list uchar int vertex_indices\nproperty list uchar float texcoord\nend_header\n"
+    )
+    uv = [0, 0, 1, 0, 0, 1]
+    if binary:
+        faces = np.zeros(4, dtype=[("n", "u1"), ("i", "<i4", (3,)), ("m", "u1"), ("uv", "<f4", (6,))])
+        faces["n"], faces["i"], faces["m"], faces["uv"] = 3, TETRA_F, 6, uv
+        body = TETRA_V.astype("<f4").tobytes() + faces.tobytes()
+    else:
+        rows = [" ".join(map(str, v)) for v in TETRA_V]
+        rows += [f"3 {a} {b} {c} 6 " + " ".join(map(str, uv)) for a, b, c in TETRA_F]
+        body = ("\n".join(rows) + "\n").encode()
+    (tmp_path / "meshlab.ply").write_bytes(header.encode() + body)
+    m = load_clean(tmp_path / "meshlab.ply")
+    np.testing.assert_array_equal(m.faces, TETRA_F)
+    np.testing.assert_array_equal(m.vertices, TETRA_V)
+    # A damaged index among them is still caught before pymeshlab reads it.
+    if binary:
+        faces["i"][2, 1] = 400_000_000
+        (tmp_path / "bad.ply").write_bytes(header.encode() + TETRA_V.astype("<f4").tobytes() + faces.tobytes())
+        expect_error(tmp_path / "bad.ply", "face 2 has a vertex index out of range")
+
+
+def test_ascii_stl_with_several_solids(tmp_path):
+    def solid(name, triangles):
+        facets = "".join(
+            "facet normal 0 0 0\n outer loop\n"
+            + "".join(f"  vertex {x} {y} {z}\n" for x, y, z in t)
+            + " endloop\nendfacet\n"
+            for t in triangles
+        )
+        return f"solid {name}\n{facets}endsolid {name}\n"
+
+    second = TETRA_V[TETRA_F] + [5.0, 0.0, 0.0]
+    path = write(tmp_path / "two.stl", solid("a", TETRA_V[TETRA_F]) + solid("b", second))
+    with pytest.warns(MeshRepairWarning, match="merged 16 duplicate vertices"):
+        m, report = load_mesh(path, report=True)
+    assert (m.n_vertices, m.n_faces, report.components, report.closed_components) == (8, 8, 2, 2)
+
+
+def test_obj_polygons_are_triangulated_by_pymeshlab(tmp_path):
+    # A concave L-shaped hexagon from a corner beside its notch: a fan from there would cover the notch too
+    # (area 4), ear cutting covers the L (with one flat triangle, which the repair drops).
+    L = [[0, 0, 0], [2, 0, 0], [2, 1, 0], [1, 1, 0], [1, 2, 0], [0, 2, 0]]
+    text = "".join(f"v {x} {y} {z}\n" for x, y, z in L) + "f 3 4 5 6 1 2\n"
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", MeshRepairWarning)
+        m = load_mesh(write(tmp_path / "L.obj", text))
+    areas = face_areas(m.vertices, m.faces)
+    assert (areas > 0).all() and areas.sum() == pytest.approx(3.0)
+    # A non-planar pentagon: pymeshlab's triangulation is the reading, whatever a fan would count.
     text = "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nv 0.5 0.5 1\nf 1 2 3 4 5\n"
-    expect_error(write(tmp_path / "penta.obj", text), "the file holds 5 vertices and 3 triangles")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", MeshRepairWarning)
+        m = load_mesh(write(tmp_path / "penta.obj", text))
+    assert m.n_faces >= 1 and (face_areas(m.vertices, m.faces) > 0).all()
+
+
+def test_off_with_comments_between_and_after_its_lines(tmp_path):
+    # As trimesh's models/comments.off has it: pymeshlab refuses the comment after the second vertex.
+    text = (
+        "OFF\n#\n#  cube.off\n#  A cube.\n#\n\n8 6 12\n"
+        "  1.632993   0.000000   1.154701\n"
+        "  0.000000   1.632993   1.154701 # see this vertex be weird\n"
+        " -1.632993   0.000000   1.154701\n  0.000000  -1.632993   1.154701\n"
+        "  1.632993   0.000000  -1.154701\n  0.000000   1.632993  -1.154701\n"
+        " -1.632993   0.000000  -1.154701\n  0.000000  -1.632993  -1.154701\n"
+        "# the faces, with an RGBA colour each\n"
+        "  4  0 1 2 3  1.000 0.000 0.000 0.75\n  4  7 4 0 3  0.300 0.400 0.000 0.75\n"
+        "  4  4 5 1 0  0.200 0.500 0.100 0.75\n  4  5 6 2 1  0.100 0.600 0.200 0.75\n"
+        "  4  3 2 6 7  0.000 0.700 0.300 0.75\n  4  6 5 4 7  0.000 1.000 0.000 0.75\n"
+    )
+    m, report = load_clean_report(write(tmp_path / "comments.off", text))
+    assert (m.n_vertices, m.n_faces, report.closed_components) == (8, 12, 1)
+    assert m.vertices[1].tolist() == [0.0, 1.632993, 1.154701]
+
+
+def test_obj_texture_coordinates_after_the_faces(tmp_path):
+    text = (
+        "mtllib t.mtl\nusemtl paint\nv 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nf 1/1 2/2 3/3\nf 1/1 3/3 4/4\n"
+        "vt 0 0\nvt 1 0\nvt 1 1\nvt 0 1\n"
+    )
+    textured_obj(tmp_path)  # the texture and its material library
+    m = load_clean(write(tmp_path / "late.obj", text))
+    assert m.texture.shape == (2, 4, 3)
+    np.testing.assert_allclose(m.uv, m.vertices[m.faces][:, :, :2])
+
+
+def test_pymeshlab_reads_what_it_knows_and_skips_the_rest(tmp_path):
+    text = "v 0 0 0\nv 1 0 0\nv 0 1 0\nhello world\nvn 0 0 1\nf 1//1 2//1 3//1\n"
+    m = load_clean(write(tmp_path / "extra.obj", text))
+    assert m.n_faces == 1
 
 
 # --------------------------------------------------------------------------- garbage never crashes
@@ -571,6 +697,47 @@ def test_a_texture_over_the_pixel_cap_is_dropped_before_it_is_decoded(tmp_path, 
     assert m.texture is None and m.uv is None and m.n_faces == 2
 
 
+def png_bomb(path, width, height):
+    """A grey PNG of ``width x height`` zero pixels in a few hundred kB, compressed row by row."""
+    import struct
+    import zlib
+
+    def chunk(kind, data):
+        return struct.pack(">I", len(data)) + kind + data + struct.pack(">I", zlib.crc32(kind + data))
+
+    z = zlib.compressobj(9)
+    row = bytes(width + 1)
+    idat = b"".join(z.compress(row) for _ in range(height)) + z.flush()
+    ihdr = struct.pack(">IIBBBBB", width, height, 8, 0, 0, 0, 0)
+    path.write_bytes(b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", ihdr) + chunk(b"IDAT", idat) + chunk(b"IEND", b""))
+
+
+BOMB_SCRIPT = """
+import resource, sys, warnings
+from meshsal.mesh.io import load_mesh
+warnings.simplefilter("ignore")
+load_mesh(sys.argv[1] + "/small.obj")
+before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+mesh = load_mesh(sys.argv[1] + "/t.obj")
+print(mesh.texture is None, (resource.getrusage(resource.RUSAGE_SELF).ru_maxrss - before) // 1024)
+"""
+
+
+def test_no_reader_decodes_a_texture_over_the_cap(tmp_path):
+    # pymeshlab decodes the images a material library names, whatever their size (this one: 144 MB as grey
+    # bytes, 200 MB more at its peak): it reads the OBJ without its library, and only our capped reader reads it.
+    textured_obj(tmp_path, image=False)
+    write(tmp_path / "t.mtl", "newmtl paint\nmap_Kd tex.png\n")  # without options, which pymeshlab skips
+    png_bomb(tmp_path / "tex.png", 12000, 12000)
+    write(tmp_path / "small.obj", obj_text(TETRA_V, TETRA_F))
+    result = subprocess.run(
+        [sys.executable, "-c", BOMB_SCRIPT, str(tmp_path)], capture_output=True, text=True, timeout=120
+    )
+    assert result.returncode == 0, result.stderr[-2000:]
+    dropped, grown_mb = result.stdout.split()
+    assert dropped == "True" and int(grown_mb) < 32, result.stdout
+
+
 @pytest.mark.parametrize("suffix", [".png", ".jpg", ".bmp", ".tiff"])
 def test_texture_sizes_from_headers_or_after_decoding(tmp_path, suffix):
     image = np.random.default_rng(0).integers(0, 255, (30, 50, 3), dtype=np.uint8)
@@ -591,9 +758,9 @@ def test_load_mesh_passes_its_texture_cap_on(tmp_path):
 
 
 def test_a_material_library_over_its_cap_is_not_read(tmp_path, monkeypatch):
-    from meshsal.mesh import formats
+    from meshsal.mesh import texture
 
     path = textured_obj(tmp_path)
-    monkeypatch.setattr(formats, "MAX_MATERIAL_BYTES", 10)
+    monkeypatch.setattr(texture, "MAX_MATERIAL_BYTES", 10)
     with pytest.warns(MeshRepairWarning, match=r"t\.obj: material library 't\.mtl' has \d+ bytes, over the cap of 10"):
         assert load_mesh(path).texture is None

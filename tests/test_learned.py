@@ -238,7 +238,9 @@ def test_cli_learned_points_from_a_model_file(tmp_path, capsys):
     from classify.cli import main
 
     def points(out, *options):
-        return main(["points", "cup", *options, "--n", "4", "--size", "32", "--quiet", "--out", str(tmp_path / out)])
+        return main(
+            ["points", "cup", *options, "--n-points", "4", "--view-size", "32", "--quiet", "--out", str(tmp_path / out)]
+        )
 
     assert points("none", "--method", "learned") != 0
     assert "--model" in capsys.readouterr().err
@@ -249,7 +251,7 @@ def test_cli_learned_points_from_a_model_file(tmp_path, capsys):
     document = json.loads((tmp_path / "o" / "points.json").read_text())
     assert document["method"] == "learned" and len(document["points"]) == 4
     assert document["settings"]["model"] == str(model_path)
-    assert points("w", "--combination", "learned", "--model", str(model_path)) == 0
+    assert points("w", "--method", "attention_learned", "--model", str(model_path)) == 0
     document = json.loads((tmp_path / "w" / "points.json").read_text())
     assert document["combination"] == "learned"
     assert document["settings"]["channel_weights"] == dict.fromkeys(CHANNELS, 1.0)

@@ -5,6 +5,7 @@ import pytest
 from shapes import icosphere, plane
 
 from meshsal.mesh import closed_orientation, surface_distance, vertex_normals
+from meshsal.mesh.geometry import vertex_area_vectors
 
 
 def test_sphere_vertex_normals_point_radially_outwards():
@@ -25,6 +26,19 @@ def test_normals_are_area_weighted_and_zero_at_isolated_vertices():
     np.testing.assert_allclose(N[0], expected, atol=1e-12)
     np.testing.assert_allclose(N[1], [0, 0, 1], atol=1e-12)
     np.testing.assert_array_equal(N[5], 0.0)
+    A = vertex_area_vectors(V, F)  # the same sums before normalizing: twice the area along each face's normal
+    np.testing.assert_allclose(A[0], [0.0, 4.0, 1.0], atol=1e-12)
+    np.testing.assert_allclose(A[[1, 2, 3, 4]], [[0, 0, 1], [0, 0, 1], [0, 4, 0], [0, 4, 0]], atol=1e-12)
+    np.testing.assert_array_equal(A[5], 0.0)
+
+
+def test_vertex_area_vectors_point_along_the_vertex_normals():
+    sphere = icosphere(radius=3.0, subdivisions=3)
+    V = sphere.vertices * [1.0, 0.5, 2.0]  # an ellipsoid: faces of many sizes and turns
+    A = vertex_area_vectors(V, sphere.faces)
+    np.testing.assert_allclose(
+        A / np.linalg.norm(A, axis=1, keepdims=True), vertex_normals(V, sphere.faces), atol=1e-12
+    )
 
 
 def test_a_degenerate_face_adds_nothing_to_its_corners():

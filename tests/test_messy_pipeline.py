@@ -77,9 +77,9 @@ def test_point_methods_never_choose_a_vertex_without_a_normal(files, name, metho
     check(mesh, meshsal.interest_points(mesh, n=6, method=method, size=32))
 
 
-def test_the_issue_composite_no_longer_stops_the_points_command(files, tmp_path, capsys):
-    # A composite with a double-sided triangle: the farthest-point baseline proposed a corner whose only faces
-    # were the triangle and its twin, and the touch check raised "normals must be non-zero", naming no file.
+def test_a_composite_with_a_double_sided_triangle_gets_its_points(files, tmp_path, capsys):
+    # The farthest-point baseline may propose a corner whose only faces are the triangle and its twin; that
+    # corner has no normal to press along, so it must not reach the touch check ("normals must be non-zero").
     assert (
         main(
             [
@@ -89,9 +89,9 @@ def test_the_issue_composite_no_longer_stops_the_points_command(files, tmp_path,
                 str(tmp_path),
                 "--method",
                 "uniform",
-                "--n",
+                "--n-points",
                 "6",
-                "--size",
+                "--view-size",
                 "32",
                 "--quiet",
             ]
@@ -178,7 +178,9 @@ def test_an_error_deep_in_a_command_names_the_mesh(files, tmp_path, capsys, monk
         import meshsal.views.render as render
 
         monkeypatch.setattr(render, "render_views", lambda *a, **k: (_ for _ in ()).throw(ValueError("no light")))
-    argv = [command, str(path), "--out", str(tmp_path), "--size", "32"] + (["--quiet"] if command == "points" else [])
+    argv = [command, str(path), "--out", str(tmp_path), "--view-size", "32"] + (
+        ["--quiet"] if command == "points" else []
+    )
     assert main(argv) == 1
     message = capsys.readouterr().err
     assert f"visuotactile {command}: error: {path}: " in message, message
@@ -188,7 +190,19 @@ def test_an_error_in_imprints_names_the_mesh(files, tmp_path, capsys, monkeypatc
     path = files["cup"]
     assert (
         main(
-            ["points", str(path), "--out", str(tmp_path), "--method", "uniform", "--n", "3", "--size", "32", "--quiet"]
+            [
+                "points",
+                str(path),
+                "--out",
+                str(tmp_path),
+                "--method",
+                "uniform",
+                "--n-points",
+                "3",
+                "--view-size",
+                "32",
+                "--quiet",
+            ]
         )
         == 0
     )
@@ -205,7 +219,7 @@ def test_an_error_in_imprints_names_the_mesh(files, tmp_path, capsys, monkeypatc
 def test_a_bug_deep_in_a_command_keeps_its_traceback_and_names_the_mesh(files, tmp_path, monkeypatch):
     fail_in_curvature(monkeypatch, IndexError("index 7 is out of bounds"))
     with pytest.raises(IndexError) as info:
-        main(["points", str(files["cup"]), "--out", str(tmp_path), "--size", "32", "--quiet"])
+        main(["points", str(files["cup"]), "--out", str(tmp_path), "--view-size", "32", "--quiet"])
     assert f"while processing {files['cup']}" in info.value.__notes__
 
 

@@ -60,11 +60,11 @@ def test_every_command_taking_a_mesh_takes_a_ycb_name(tmp_path, capsys):
                 "foam_brick",
                 "--out",
                 str(tmp_path),
-                "--n",
+                "--n-points",
                 "3",
                 "--method",
                 "uniform",
-                "--size",
+                "--view-size",
                 "32",
                 "--quiet",
             ]

@@ -1,5 +1,6 @@
 """Interest points: planted features, invariances, baselines, spacing, the CLI and the paper's projection."""
 
+import dataclasses
 import json
 
 import igl
@@ -195,7 +196,7 @@ def test_points_are_distinct_spaced_and_votes_match_views(planted):
     mesh, _, _, pts = planted
     assert len(set(pts.vertex_ids.tolist())) == len(pts)
     assert pairwise_min(pts.positions) >= pts.min_spacing
-    np.testing.assert_allclose(pts.min_spacing, 16.0 / 150.0 * np.linalg.norm(np.ptp(mesh.vertices, axis=0)))
+    assert pts.min_spacing == 16.0  # half the 32 mm pad, as on the command line
     assert pts.votes.dtype == np.int64 and np.all((pts.votes >= 0) & (pts.votes <= 72))
     assert [len(v) for v in pts.views] == pts.votes.tolist()
     assert all(0 <= k < 72 for v in pts.views for k in v)
@@ -207,7 +208,7 @@ def test_points_are_distinct_spaced_and_votes_match_views(planted):
 def test_translation_and_uniform_scale_keep_the_points(planted):
     mesh, _, _, pts = planted
     moved = mesh.replace(vertices=mesh.vertices * 7.5 + [300.0, -120.0, 45.0])
-    other = interest_points(moved, n=15, size=SIZE)
+    other = interest_points(moved, n=15, size=SIZE, pad_width=7.5 * 32.0)  # the pad scaled alike
     # Invariant up to float32 rounding in Embree, whose kernels differ between CPUs: a rounding may swap two
     # candidates whose saliency ties, so most points must be the same vertices, at the same places.
     same = np.isin(other.vertex_ids, pts.vertex_ids)
@@ -345,7 +346,7 @@ def test_cli_writes_every_file_in_the_source_frame(tmp_path, capsys):
     path = tmp_path / "planted.ply"
     save_ply(path, source)
     out = tmp_path / "out"
-    assert main(["points", str(path), "--n", "6", "--size", "48", "--quiet", "--out", str(out)]) == 0
+    assert main(["points", str(path), "--n-points", "6", "--view-size", "48", "--quiet", "--out", str(out)]) == 0
     for name in ("saliency.ply", "points.json", "points.csv", "views.png", "contact_sheet.png"):
         assert (out / name).is_file() and (out / name).stat().st_size > 0, name
     quality = load_vertex_quality(out / "saliency.ply")
@@ -355,19 +356,21 @@ def test_cli_writes_every_file_in_the_source_frame(tmp_path, capsys):
     doc = json.loads((out / "points.json").read_text())
     assert doc["mesh"] == str(path) and doc["settings"]["method"] == "attention"
     pts = doc["points"]
-    assert [p["id"] for p in pts] == list(range(1, 7))
+    assert [p["id"] for p in pts] == list(range(6))  # from 0, as probe plans and capture sessions
     positions = np.array([p["position"] for p in pts])
     assert distance_to_surface(positions, source).max() < 1e-6
     assert np.allclose(np.linalg.norm([p["normal"] for p in pts], axis=1), 1.0)
     from meshsal.mesh.transform import principal_diagonal  # the experiment's sizing rule
 
-    np.testing.assert_allclose(doc["min_spacing"], 16.0 / 150.0 * principal_diagonal(source.vertices, source.faces)[1])
+    diagonal = principal_diagonal(source.vertices, source.faces)[1]
+    np.testing.assert_allclose(doc["min_spacing"], 16.0 / 150.0 * diagonal)
+    np.testing.assert_allclose(doc["frame"]["scale"], 150.0 / diagonal)  # the frame the points were chosen in
     assert doc["combination"] == "equal" and doc["untouchable"] >= 0
-    assert (doc["format"], doc["version"]) == ("visuotactile.points", 1)
+    assert (doc["format"], doc["version"]) == ("visuotactile.points", 2)
     again = InterestPoints.load(out / "points.json")  # the versioned format round-trips
     np.testing.assert_allclose(again.positions, positions)
     assert again.method == "attention" and len(again.vertex_saliency) == source.n_vertices
-    assert again.ids.tolist() == list(range(1, 7)) and again.votes.tolist() == [p["votes"] for p in pts]
+    assert again.ids.tolist() == list(range(6)) and again.votes.tolist() == [p["votes"] for p in pts]
     rows = (out / "points.csv").read_text().strip().splitlines()
     assert rows[0].startswith("id,") and len(rows) == 7
     np.testing.assert_allclose([float(v) for v in rows[1].split(",")[2:5]], positions[0])
@@ -382,11 +385,85 @@ def test_cli_baseline_and_progress(tmp_path, capsys):
     path = tmp_path / "s.ply"
     save_ply(path, mesh)
     assert (
-        main(["points", str(path), "--method", "uniform", "--n", "5", "--size", "32", "--out", str(tmp_path / "o")])
+        main(
+            [
+                "points",
+                str(path),
+                "--method",
+                "uniform",
+                "--n-points",
+                "5",
+                "--view-size",
+                "32",
+                "--out",
+                str(tmp_path / "o"),
+            ]
+        )
         == 0
     )
     assert "saliency" in capsys.readouterr().err
     assert len(json.loads((tmp_path / "o" / "points.json").read_text())["points"]) == 5
+
+
+def test_cli_old_spellings_still_work_for_a_release_with_a_warning(tmp_path, capsys):
+    from classify.cli import main
+
+    argv = ["points", "cup", "--method", "uniform", "--quiet", "--out", str(tmp_path)]
+    assert main(argv + ["--n", "4", "--size", "32", "--threshold", "0.4"]) == 0
+    err = capsys.readouterr().err
+    for old, new in (("--n", "--n-points"), ("--size", "--view-size"), ("--threshold", "--peak-threshold")):
+        assert f"visuotactile points: warning: {old} is deprecated and goes in 0.3: use {new}" in err
+    settings = json.loads((tmp_path / "points.json").read_text())["settings"]
+    assert (settings["n_points"], settings["view_size"], settings["peak_threshold"]) == (4, 32, 0.4)
+
+
+def test_cli_says_when_a_mesh_holds_fewer_points_than_asked(tmp_path, capsys):
+    from classify.cli import main
+
+    argv = ["points", "cup", "--method", "uniform", "--n-points", "8", "--min-spacing-mm", "120"]
+    assert main(argv + ["--view-size", "32", "--quiet", "--out", str(tmp_path)]) == 0
+    got = len(json.loads((tmp_path / "points.json").read_text())["points"])
+    assert 1 <= got < 8
+    err = capsys.readouterr().err
+    assert f"visuotactile points: warning: cup: {got} of the 8 uniform points asked for" in err
+    assert "no more lie 120 mm apart on the mesh at 150 mm" in err
+
+
+def test_cli_fails_and_writes_nothing_when_no_point_is_found(tmp_path, capsys, monkeypatch):
+    import meshsal.points
+    from classify.cli import main
+
+    def nothing(mesh, methods, **options):
+        pts = interest_points(mesh, n=1, method="uniform")
+        none = np.zeros(0, np.int64)
+        empty = InterestPoints(
+            none, np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0), none, pts.vertex_saliency, (), "uniform", -1, 16.0
+        )
+        return {methods[0]: dataclasses.replace(empty, untouchable=809)}
+
+    monkeypatch.setattr(meshsal.points, "points_by_method", nothing)
+    out = tmp_path / "out"
+    assert main(["points", "cup", "--method", "uniform", "--view-size", "16", "--quiet", "--out", str(out)]) == 1
+    err = capsys.readouterr().err
+    assert "visuotactile points: error: cup: no uniform point found (809 candidates the pad could not touch" in err
+    assert not out.exists() or not any(out.iterdir())
+
+
+def test_cli_an_open_bowl_facing_inward_gets_its_points(tmp_path, capsys):
+    # Its faces point into it, as in many scans of open objects: turned outward as it loads, it is touchable.
+    from classify.cli import main
+
+    bowl = shapes.bowl()
+    shapes.write_obj(tmp_path / "bowl.obj", bowl.replace(faces=bowl.faces[:, ::-1]))
+    argv = ["points", str(tmp_path / "bowl.obj"), "--method", "mesh_saliency", "--view-size", "32", "--quiet"]
+    assert main(argv + ["--out", str(tmp_path / "out")]) == 0
+    captured = capsys.readouterr()
+    assert "turned 1 open components outward" in captured.err and "asked for" not in captured.err
+    points = json.loads((tmp_path / "out" / "points.json").read_text())["points"]
+    assert len(points) == 15
+    # Every normal points away from the bowl's centre, out of its convex side.
+    radial = np.array([p["position"] for p in points])
+    assert (np.einsum("ij,ij->i", np.array([p["normal"] for p in points]), radial) > 0).all()
 
 
 def test_cli_bad_mesh_fails_with_the_loader_message(tmp_path, capsys):
@@ -429,6 +506,45 @@ def test_combination_is_a_choice_and_is_recorded(tmp_path):
         assert all(0.0 <= s <= 1.0 for s in shares) and max(shares) > 0
     with pytest.raises(ValueError, match="combination"):
         interest_points(mesh, n=3, size=SIZE, combination="loudest")
+
+
+def test_each_attention_method_keeps_its_own_combination():
+    from meshsal.points import PointOptions, points_by_method
+
+    mesh, _, _ = planted_sphere()
+    with pytest.warns(FutureWarning, match="PointOptions.combination is deprecated"):
+        both = points_by_method(mesh, ["attention", "attention_itti"], PointOptions(n=6, size=SIZE, combination="itti"))
+    assert (both["attention"].combination, both["attention_itti"].combination) == ("equal", "itti")
+    equal = interest_points(mesh, n=6, size=SIZE)
+    itti = interest_points(mesh, n=6, size=SIZE, method="attention_itti")
+    assert equal.vertex_ids.tolist() != itti.vertex_ids.tolist()  # two combinations, two sets of points
+    assert both["attention"].vertex_ids.tolist() == equal.vertex_ids.tolist()
+    assert both["attention_itti"].vertex_ids.tolist() == itti.vertex_ids.tolist()
+    with pytest.warns(FutureWarning):  # asked for alone, 'attention' still takes it until 0.3
+        old = interest_points(mesh, n=6, size=SIZE, combination="itti")
+    assert old.combination == "itti" and old.vertex_ids.tolist() == itti.vertex_ids.tolist()
+
+
+def test_points_are_saved_in_the_frame_of_the_file_they_came_from(tmp_path):
+    from meshsal.mesh.transform import scale_to_principal
+
+    mesh, _, _ = planted_sphere(radius=0.4)
+    source = mesh.replace(vertices=mesh.vertices + [2.0, 1.0, -3.0])
+    pts = interest_points(scale_to_principal(source, 150.0), n=4, method="uniform")
+    pts.save(tmp_path / "points.json")  # no frame= : the points carry theirs
+    pts.save_csv(tmp_path / "points.csv")
+    again = InterestPoints.load(tmp_path / "points.json")
+    assert distance_to_surface(again.positions, source).max() < 1e-6
+    rows = (tmp_path / "points.csv").read_text().strip().splitlines()[1:]
+    np.testing.assert_allclose([[float(v) for v in r.split(",")[2:5]] for r in rows], again.positions)
+    assert [int(r.split(",")[0]) for r in rows] == again.ids.tolist() == [0, 1, 2, 3]
+
+
+def test_a_version_1_points_file_counts_from_1_and_reads_from_0(tmp_path):
+    path = tmp_path / "points.json"
+    records = [{"id": k, "position": [k, 0, 0], "normal": [0, 0, 1]} for k in (1, 2, 7)]
+    path.write_text(json.dumps({"format": "visuotactile.points", "version": 1, "points": records}))
+    assert InterestPoints.load(path).ids.tolist() == [0, 1, 6]
 
 
 def test_plateau_fraction_tells_a_peak_from_a_plateau():

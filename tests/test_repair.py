@@ -8,6 +8,7 @@ import igl
 import messy
 import numpy as np
 import pytest
+import shapes
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -99,7 +100,7 @@ def test_only_the_planted_fold_leaves_vertices_without_a_normal(corpus, name, fm
 
 @pytest.mark.parametrize("name", ["double_sided_fin", "composite_double_sided", "everything_apart"])
 def test_double_sided_triangles_leave_no_zero_normal(corpus, name):
-    # Before the repair, the tip of the fin (and the decal's corners) had only a face and its twin.
+    # As written, the tip of the fin (and the decal's corners) has only a face and its twin.
     case = CASES[name]
     before = normal_defined(case.vertices, case.faces)
     assert not before[np.unique(case.faces)].all()
@@ -172,6 +173,63 @@ def test_a_cavity_keeps_facing_into_its_hole():
     fixed, report = repair_mesh(Mesh(vertices=V, faces=F))
     assert not report.repaired and report.closed_components == 2
     np.testing.assert_array_equal(fixed.faces, F)
+
+
+def facing_away(mesh, center) -> np.ndarray:
+    """Whether each face's normal points away from ``center``."""
+    from meshsal.mesh import face_normals
+
+    return (
+        np.einsum("ij,ij->i", face_normals(mesh.vertices, mesh.faces), mesh.vertices[mesh.faces].mean(1) - center) > 0
+    )
+
+
+def test_an_open_bowl_facing_inward_is_turned_outward_by_ray_casting(tmp_path):
+    bowl = shapes.bowl()
+    assert facing_away(bowl, 0.0).all()
+    inward = bowl.replace(faces=bowl.faces[:, ::-1])
+    shapes.write_obj(tmp_path / "bowl.obj", inward)
+    with pytest.warns(MeshRepairWarning, match=r"bowl\.obj: turned 1 open components outward \(ray casting\)"):
+        fixed, report = load_mesh(tmp_path / "bowl.obj", report=True)
+    assert facing_away(fixed, 0.0).all()
+    assert (report.outward_open_components, report.outward_components, report.components) == (1, 0, 1)
+    assert report.boundary_loops == 1 and report.boundary_edges == 230
+    again, _ = repair_mesh(inward)
+    np.testing.assert_array_equal(again.faces, fixed.faces)  # seeded: the same rays every time
+
+
+def test_open_components_that_face_outward_or_either_way_are_left_as_they_are():
+    bowl, tube = shapes.bowl(), shapes.cylinder(around=64, along=4)
+    V, F = messy.union((bowl.vertices, bowl.faces), (tube.vertices + [0, 0, 150], tube.faces))
+    fixed, report = repair_mesh(Mesh(vertices=V, faces=F))
+    assert not report.repaired and report.components == 2
+    np.testing.assert_array_equal(fixed.faces, F)
+    # A flat disc is seen alike from both sides: left as it is, whichever way it faces.
+    disc = shapes.plane(size=50.0, n=8)
+    for faces in (disc.faces, disc.faces[:, ::-1]):
+        fixed, report = repair_mesh(disc.replace(faces=faces))
+        assert not report.repaired
+        np.testing.assert_array_equal(fixed.faces, faces)
+
+
+def test_an_open_part_inside_a_closed_one_sees_no_sky_and_is_left_as_it_is():
+    # Inside a box no ray escapes: the counts tie at zero and the bowl keeps the way it faces.
+    bowl, box = shapes.bowl(radius=20.0, n=16), shapes.box(half=60.0, n=8)
+    V, F = messy.union((box.vertices, box.faces), (bowl.vertices, bowl.faces[:, ::-1]))
+    fixed, report = repair_mesh(Mesh(vertices=V, faces=F))
+    assert report.outward_open_components == 0 and report.closed_components == 1
+    np.testing.assert_array_equal(fixed.faces, F)
+
+
+def test_a_face_on_an_edge_of_three_is_cut_off_even_when_every_vertex_keeps_one_fan():
+    # A tetrahedron and a fin on one of its edges, with the fin paired with a tetrahedron face there: around
+    # both ends of the edge the faces still form one fan each, yet the edge holds three (the corpus's 523.obj).
+    V = np.array([[0, 3, 2], [1, 0, 2], [2, 0, 2], [0, 3, 0], [2, 3, 1]], float)
+    F = np.array([[3, 2, 4], [3, 4, 0], [0, 2, 3], [4, 2, 0], [1, 3, 2]])
+    V2, F2, _, _, report = repair_arrays(V, F, source="fin")
+    assert Edges(F2, len(V2)).counts.max() == 2 and igl.is_vertex_manifold(F2).all()
+    assert (report.nonmanifold_edges, report.nonmanifold_vertices, report.added_vertices) == (1, 2, 2)
+    assert report.closed_components == 1
 
 
 def test_uv_and_colours_follow_their_faces_and_vertices():

@@ -257,3 +257,19 @@ def test_without_the_pin_the_lower_instruction_set_changes_the_cows_points(runs)
     assert "*AVX2?" in lower["kernels"]["opencv"] and "*AVX2 " in native["kernels"]["opencv"]  # the forcing took
     # Since the channels' rewrite the same vertices win here, but their scores (and so any tie) move.
     assert lower["points"]["cow"]["sha256"] != native["points"]["cow"]["sha256"]
+
+
+def test_a_table_maker_warns_when_its_process_is_not_pinned(monkeypatch):
+    import warnings
+
+    from meshsal.util import reproducible
+
+    monkeypatch.setattr(reproducible, "is_pinned", lambda environ=None: False)
+    with pytest.warns(reproducible.KernelPinWarning, match="python -m meshsal.util.reproducible"):
+        reproducible.warn_if_unpinned("run_experiment")
+    monkeypatch.undo()
+    assert reproducible.is_pinned()  # the test suite runs pinned (conftest)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        reproducible.warn_if_unpinned("run_experiment")
+    assert reproducible.is_pinned({"VISUOTACTILE_KERNELS": "native"})

@@ -41,7 +41,8 @@ def planted_field(mesh, view):
 
 def test_curvature_interpolates_vertex_values_exactly():
     v = SimpleNamespace(
-        vertex_ids=np.array([[[0, 1, 2], [1, 2, 3]], [[-1, -1, -1], [0, 1, 2]]]),
+        face_id=np.array([[0, 1], [-1, 0]]),
+        faces=np.array([[0, 1, 2], [1, 2, 3]]),
         bary=np.array([[[1, 0, 0], [0.2, 0.3, 0.5]], [[0, 0, 0], [0.25, 0.25, 0.5]]], np.float32),
     )
     values = np.array([10.0, 12.0, 14.0, 20.0])  # min-max over the mesh: (v - 10) / 10
@@ -135,7 +136,7 @@ def test_combine_maps_shows_a_hot_spot_not_a_plateau():
     far = erode_mask(mask) & (np.hypot(rows - 40, cols - 90) > 10)
     for normalize in (False, True):
         m = combine_maps(channels, mask, normalize=normalize)
-        # Before the median was removed, half the maximum covered all the object with
+        # Without the median removed, half the maximum would cover all the object with
         # equal weights and 19% of it with N(.).
         assert attention.plateau_fraction(m, mask) < 0.01, normalize
         assert np.hypot(*np.subtract(np.unravel_index(np.argmax(m), m.shape), (40, 90))) <= 1.0
@@ -262,3 +263,43 @@ def test_percentiles_of_rows_are_numpys_bit_for_bit(q):
         got = _percentiles(values, q)
         assert got.dtype == np.float32
         np.testing.assert_array_equal(got, [np.float32(np.percentile(row, q)) for row in values])
+
+
+def _combine_on_whole_images(channels, mask, erode=None, normalize=True, floor=50.0):
+    """combine_maps with equal weights by its definition, on whole images: every channel cut to the eroded
+    silhouette (zero elsewhere), scaled to its maximum, lowered by its floor percentile, weighted by N(.)."""
+    import cv2
+
+    from meshsal.attention.combine import _percentiles
+    from meshsal.attention.pyramid import normalize_maps, scale_to_max
+
+    inside = erode_mask(mask, erode)
+    h, w = inside.shape
+    total = np.zeros((h, w), np.float32)
+    for name in CHANNELS:
+        cut = scale_to_max(np.where(inside, channels[name], 0.0).astype(np.float32))
+        if floor is not None and inside.any():
+            cut = np.maximum(cut - _percentiles(cut[inside][None], floor)[0], np.float32(0.0))
+        gain = 1.0
+        if normalize and cut.any():
+            small = cv2.resize(cut, (max(1, w // 16), max(1, h // 16)), interpolation=cv2.INTER_AREA)
+            gain *= float(normalize_maps(small[None]).max())
+        total += np.float32(gain) * cut
+    return scale_to_max(total)
+
+
+@pytest.mark.parametrize("normalize, floor", [(True, 50.0), (False, 50.0), (True, None), (False, 90.0)])
+def test_combine_maps_on_the_silhouettes_pixels_is_its_whole_image_definition(normalize, floor):
+    rng = np.random.default_rng(17)
+    mask = np.zeros((96, 112), bool)
+    mask[10:80, 20:100] = True
+    mask[40:50, 50:60] = False  # a hole
+    channels = {name: rng.random((96, 112)).astype(np.float32) for name in CHANNELS}
+    channels["contrast"][:] = 0.0  # a channel that does not respond
+    channels["color"][30:40, 30:40] += 3.0  # a peaked one
+    channels["entropy"] = channels["entropy"].astype(np.float64)  # taken as float32
+    got = combine_maps(channels, mask, normalize=normalize, floor=floor)
+    want = _combine_on_whole_images(channels, mask, normalize=normalize, floor=floor)
+    assert got.dtype == np.float32 and got.shape == mask.shape and not got[~erode_mask(mask)].any()
+    np.testing.assert_array_equal(got.view(np.int32), want.view(np.int32))
+    assert not combine_maps(channels, np.zeros_like(mask), normalize=normalize, floor=floor).any()

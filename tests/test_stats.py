@@ -127,3 +127,30 @@ def test_intervals_follow_the_objects_names_not_their_order():
     assert stats.summarize(R[:, turn], 7).ci_low != a.ci_low
     with pytest.raises(ValueError, match="distinct object names"):
         stats.summarize(R, 7, names[:4])
+
+
+def test_a_missing_comparison_names_what_was_asked_and_what_exists():
+    from classify.reporting.results import Comparison, ExperimentResult, MissingCell
+
+    def comparison(method, classifier):
+        return Comparison(method, "uniform", "instance", classifier, 6, False, 1, 1.0, 0.0, 2.0, 0.5, 10)
+
+    result = ExperimentResult(
+        cells=(),
+        comparisons=(comparison("attention", "knn"), comparison("attention", "svm")),
+        confusions=(),
+        object_names=(),
+        object_sets=(),
+        classifiers=("knn", "svm"),
+    )
+    assert result.comparison("attention", "instance", "svm", 6, False).classifier == "svm"
+    with pytest.raises(KeyError) as caught:
+        result.comparison("learned", "instance", "knn", 16, False)
+    assert isinstance(caught.value, MissingCell)
+    assert str(caught.value) == (
+        "no comparison at method='learned', protocol='instance', classifier='knn', n_objects=16, selection=False, "
+        "touches=1; measured: method 'attention' (not 'learned'); protocol 'instance'; classifier 'knn', 'svm'; "
+        "n_objects 6 (not 16); selection False; touches 1"
+    )
+    with pytest.raises(MissingCell, match="no cell at method='attention'.*: this result has none$"):
+        result.cell("attention", "instance", "knn", 6, False)

@@ -7,7 +7,7 @@ from models import one_feature_model
 
 from meshsal.mesh import Mesh
 from meshsal.points import METHODS, MODEL_METHODS, interest_points
-from meshsal.points.touch import contact_gap, default_pad_width, pad_rays, pad_touches, touchable
+from meshsal.points.touch import PAD_WIDTH, contact_gap, pad_rays, pad_touches, touchable
 
 PAD = 32.0
 
@@ -162,7 +162,7 @@ def test_bad_inputs():
 @pytest.mark.parametrize("method", METHODS)
 def test_every_method_proposes_only_touchable_points(method):
     mesh = spiky_ball()
-    pad = default_pad_width(mesh)
+    pad = PAD_WIDTH
     model = one_feature_model("curvature") if method in MODEL_METHODS else None
     pts = interest_points(mesh, n=10, method=method, size=48, seed=3, model=model)
     assert pts.untouchable >= 0
@@ -173,7 +173,7 @@ def test_every_method_proposes_only_touchable_points(method):
 def test_the_check_changes_what_is_chosen():
     """Without the check some method lands beside a spike; with it, the count of skipped candidates says so."""
     mesh = spiky_ball()
-    pad = default_pad_width(mesh)
+    pad = PAD_WIDTH
     lost = {}
     for method in ("uniform", "random", "mesh_saliency", "curvature"):
         free = interest_points(mesh, n=10, method=method, seed=3, touch=False)

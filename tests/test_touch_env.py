@@ -59,14 +59,17 @@ def test_the_env_made_by_id_is_the_env(env, cache):
 def test_info_gain_through_the_env_touches_what_run_episode_touches(env, cache):
     run = run_policy(env, "info_gain", episodes=6, seed=3)
     assert set(run.objects) == {"ball", "domed"} and run.touches.tolist() == [3] * 6
-    # The knowledge fitted apart, on instances 1 and 2 of replicate 0 as the sequential protocol fits it.
+    # The knowledge fitted apart, on instances 1 and 2 of replicate 0 as the sequential protocol fits it: the
+    # place-aware recognizer on their codebooks.
     nominal = {m.name: nominal_mesh(m, SETTINGS) for m in shapes.ball_and_domed()}
     training = {
-        (name, j): instance_samples(SampleTask(mesh, name, (), SETTINGS, 0, j, places=True, cache_dir=cache)).places
+        (name, j): instance_samples(
+            SampleTask(mesh, name, (), SETTINGS, 0, j, places=True, codebook=True, cache_dir=cache)
+        ).places
         for name, mesh in nominal.items()
         for j in (1, 2)
     }
-    knowledge = fit_knowledge(training, Recognizer("knn", features="polar"))
+    knowledge = fit_knowledge(training, Recognizer("place"))
     for e, (name, replicate) in enumerate(zip(run.objects, run.replicates)):
         episode = run_episode(
             InfoGainPolicy(),
@@ -116,7 +119,9 @@ def test_the_observation_shows_only_what_was_touched_and_info_the_truth_only_at_
     np.testing.assert_array_equal(observation["imprints"][:2], sample.imprints[0, [first, second]])
     state = touch_state(env, observation)
     assert state.touched == (first, second) and np.array_equal(state.imprints, sample.imprints[0, [first, second]])
-    felt = env.knowledge.posterior(sample.imprints[0, [first, second]]).prod(axis=0)
+    touched = [first, second]
+    felt = env.knowledge.posterior_at(sample.imprints[0, touched], sample.places.positions[touched], sample.places)
+    felt = felt.prod(axis=0)
     assert np.allclose(observation["belief"], felt / felt.sum())
 
 

@@ -9,7 +9,7 @@ import pytest
 from meshsal import load_mesh
 from meshsal.mesh import face_areas
 from meshsal.mesh.io import MeshRepairWarning, save_ply
-from meshsal.objects import toys
+from meshsal.objects import toy_shapes, toys
 
 
 @pytest.fixture(scope="module")
@@ -193,12 +193,12 @@ def test_dromedary_has_a_darker_hump_and_dark_eyes_in_front(toy):
 @pytest.mark.parametrize("name", ["hand", "cup"])
 def test_culled_field_matches_the_full_field_near_the_surface(name):
     # make() evaluates each part only near its own box; that must not move the surface.
-    design = toys._DESIGNS[name]()
-    field, lo, hi = toys._design_field(design)
+    shape = getattr(toy_shapes, name)()
+    field, lo, hi = toys._shape_field(shape)
     P = np.random.default_rng(0).uniform(lo - 10.0, hi + 10.0, (60000, 3))
-    exact, culled = toys._field(design.parts, P), field(P)
+    exact, culled = toys._field(shape.parts, P), field(P)
     assert np.all(culled <= exact + 1e-9)  # a lower bound far away
     assert np.array_equal(exact > 0, culled > 0)
-    near = np.abs(exact) < 4.0 * design.spacing
+    near = np.abs(exact) < 4.0 * shape.spacing
     assert near.sum() > 1000
     np.testing.assert_allclose(culled[near], exact[near], rtol=0, atol=1e-9)

@@ -10,11 +10,25 @@ from __future__ import annotations
 import dataclasses
 from dataclasses import dataclass, field
 
-__all__ = ["DEFAULT_REPLICATES", "FULL_REPLICATES", "Settings", "ExperimentConfig"]
+__all__ = ["DEFAULT_REPLICATES", "FULL_REPLICATES", "MISMATCHES", "CONTROLS", "Settings", "ExperimentConfig"]
 
 #: Replicates of the instance protocol in a quick run (the default) and in a full run.
 DEFAULT_REPLICATES = 5
 FULL_REPLICATES = 20
+
+#: How a mismatch arm makes the test instances differ from what the training touches and codebooks simulate.
+MISMATCHES = {
+    "exact": "the test touches are exact plane sections (tactile.imprint_exact), the codebooks ray cast",
+    "noise_half": "the test device's reading noise and gain spread are half what the codebooks assume",
+    "noise_double": "the test device's reading noise and gain spread are twice what the codebooks assume",
+    "decimated": "the test instances have half the faces (other vertices than training touched)",
+    "subdivided": "the test instances have every face split in four",
+}
+#: Control runs: what should bring recognition down to chance.
+CONTROLS = {
+    "shuffled": "each test instance gets the imprints of another object's test instance, place for place",
+    "scrambled": "each test instance gets another object's test imprints in a random order",
+}
 
 
 def _typical():
@@ -54,6 +68,16 @@ class Settings:
         Instance variation (``meshsal.objects.instances.draw_instance``).
     seed : int
         Base seed of every draw.
+    codebook_draws : int
+        Simulated touches per place and training instance in the touch
+        codebooks of the place-aware recognizer (``tactile.touch_codebook``).
+    mismatch : tuple of str
+        A mismatch arm (:data:`MISMATCHES`, several apply together): the test
+        instances and their touches depart from what training simulates.
+        Training instances and their codebooks do not depend on it.
+
+    Cache keys hold :meth:`key`; the codebooks add ``codebook_draws`` and the
+    test instances ``mismatch``, so the rest is reused across them.
     """
 
     n_points: int = 15
@@ -67,6 +91,8 @@ class Settings:
     hue_deg: float = 30.0
     brightness_spread: float = 0.15
     seed: int = 0
+    codebook_draws: int = 8
+    mismatch: tuple = ()
 
     def __post_init__(self):
         if int(self.n_points) != self.n_points or self.n_points < 1:
@@ -79,9 +105,18 @@ class Settings:
             raise ValueError(f"train_sessions must be at least 1, got {self.train_sessions}")
         if self.size_mm is not None and not self.size_mm > 0:
             raise ValueError(f"size_mm must be positive (or None: real sizes), got {self.size_mm}")
+        if int(self.codebook_draws) != self.codebook_draws or self.codebook_draws < 1:
+            raise ValueError(f"codebook_draws must be a positive integer, got {self.codebook_draws!r}")
+        mismatch = (self.mismatch,) if isinstance(self.mismatch, str) else tuple(self.mismatch)
+        unknown = [m for m in mismatch if m not in MISMATCHES]
+        if unknown:
+            raise ValueError(f"unknown mismatch {', '.join(unknown)}; choose from {', '.join(MISMATCHES)}")
+        if {"decimated", "subdivided"} <= set(mismatch) or {"noise_half", "noise_double"} <= set(mismatch):
+            raise ValueError(f"mismatches {list(mismatch)} contradict each other: choose one of each pair")
+        object.__setattr__(self, "mismatch", tuple(sorted(set(mismatch))))
 
     def key(self) -> str:
-        """A canonical text of every field, for cache keys."""
+        """A canonical text of every field but ``codebook_draws`` and ``mismatch``, for cache keys."""
         return repr(
             [
                 self.n_points,
@@ -112,6 +147,8 @@ class Settings:
             "hue_deg": self.hue_deg,
             "brightness_spread": self.brightness_spread,
             "seed": self.seed,
+            "codebook_draws": self.codebook_draws,
+            "mismatch": list(self.mismatch),
         }
 
 
@@ -141,7 +178,8 @@ class ExperimentConfig:
     protocols : tuple of str
         Subset of ``classify.experiment.protocols.PROTOCOLS``.
     classifiers : tuple of str
-        Subset of ``classify.NAMES``.
+        Subset of ``classify.NAMES``.  The place-aware recognizer ("place")
+        needs training instances, so it runs in the instance protocol only.
     settings : Settings
         Points, sensor, perturbation, instances and seed.
     replicates : int
@@ -169,6 +207,11 @@ class ExperimentConfig:
         The stopping rule's thresholds: stop when the top class's calibrated
         posterior reaches p (or after the last touch); accuracy against
         touches used, for every method and policy of the instance protocol.
+    control : str or None
+        A control run (:data:`CONTROLS`): ``"shuffled"`` gives each test
+        instance another object's test imprints, place for place,
+        ``"scrambled"`` in a random order; either must bring every recognizer
+        down to chance (``classify.experiment.controls``).
     """
 
     methods: tuple = ("attention",)
@@ -185,6 +228,7 @@ class ExperimentConfig:
     baseline: str | None = None
     policies: tuple = ()
     stop_levels: tuple = (0.5, 0.8, 0.9, 0.95, 0.98, 0.99, 0.995, 0.999)
+    control: str | None = None
 
     def replace(self, **changes) -> ExperimentConfig:
         """A copy with some fields changed; an unknown field is a TypeError naming it."""
@@ -219,6 +263,8 @@ class ExperimentConfig:
         policies = POLICIES.check(self.policies) if self.policies else ()
         if policies and "instance" not in protocols:
             raise ValueError("touch policies run on the instance protocol's instances: add it to the protocols")
+        if self.control is not None and self.control not in CONTROLS:
+            raise ValueError(f"unknown control {self.control!r}; choose from {', '.join(CONTROLS)}")
         levels = tuple(float(p) for p in self.stop_levels)
         if any(not 0.0 < p <= 1.0 for p in levels):
             raise ValueError(f"stop levels must lie in (0, 1], got {list(levels)}")
@@ -249,6 +295,7 @@ class ExperimentConfig:
             "features": self.features,
             "policies": list(self.policies),
             "stop_levels": list(self.stop_levels),
+            "control": self.control,
             **self.settings.to_json(),
             "classifier_params": {
                 c: {k: repr(v) for k, v in make(c, **self.params.get(c, {})).get_params().items()}

@@ -7,14 +7,16 @@ devices and touch knowledge.
 
 The training side is built once, at construction: the objects' training
 instances (instances 1..``train_instances`` of replicate 0, as in the
-instance protocol), touched once at every candidate place, and the touch
-knowledge fitted on them (:func:`classify.policies.fit_knowledge`).  Each
+instance protocol), touched once at every candidate place with a codebook
+of simulated touches there, and the touch knowledge fitted on them
+(:func:`classify.policies.fit_knowledge`: by default the place-aware
+recognizer, whose belief knows where each touch was taken).  Each
 episode (:meth:`TouchEnv.reset`) draws an object uniformly and one of the
 test instances: instance 0 (the instance protocol's test instance) of one of
 ``test_replicates``, an instance training never saw (a different pose, size,
 paint and device).  Replicate 0's test instance is the one the sequential
 protocol's replicate 0 touches, so with the same settings and recognizer
-(``--features polar``) the env reproduces its episodes.
+(``--classifiers place``) the env reproduces its episodes.
 
 Observation (a ``spaces.Dict``, places padded to ``P_max = (POOL_FACTOR +
 PEAK_FACTOR) * n_points`` candidates, ``k_max = n_points`` touches):
@@ -31,7 +33,7 @@ key             shape, dtype            what
 ``touched``     (P_max,) int16          0 untouched, else which touch (1, 2...) touched the place
 ``imprints``    (k_max, rows, cols)     what touch i felt (zeros for a touch not yet made, or one
                 float32                 that touched nothing)
-``belief``      (C,) float64            the calibrated posteriors of the touches so far multiplied
+``belief``      (C,) float64            the single-touch posteriors of the touches so far multiplied
                                         and normalized, classes as ``names`` (uniform at first)
 ``touches``     Discrete(k_max + 1)     touches used so far
 ==============  ======================  =========================================================
@@ -87,7 +89,15 @@ from gymnasium import spaces
 from classify.experiment.config import FULL_REPLICATES, Settings
 from classify.experiment.samples import SampleTask, instance_samples
 from classify.experiment.stages import load_objects
-from classify.policies import POLICIES, TouchPolicy, TouchState, available_places, decisions, fit_knowledge
+from classify.policies import (
+    POLICIES,
+    TouchPolicy,
+    TouchState,
+    available_places,
+    decisions,
+    fit_knowledge,
+    touched_belief,
+)
 from classify.recognizers.touches import Recognizer
 from meshsal.points.places import PEAK_FACTOR, POOL_FACTOR
 
@@ -111,8 +121,11 @@ class TouchEnv(gymnasium.Env):
         sensor, perturbation, training instances, instance variation and the
         base seed of every instance and device (default ``Settings()``).
     classifier : str or Recognizer
-        The single-touch classifier (``classify.NAMES``) on roll-invariant
-        polar descriptors, or a :class:`~classify.recognizers.touches.Recognizer`.
+        What the belief is made of: ``"place"`` (default), the place-aware
+        likelihood of touch codebooks simulated on the training instances
+        (``classify.recognizers.place``), or a place-free single-touch
+        classifier (``classify.NAMES``) on roll-invariant polar descriptors,
+        or a :class:`~classify.recognizers.touches.Recognizer`.
     touch_cost : float
         Reward lost per touch (>= 0), against 1 for a right answer.
     test_replicates : iterable of int
@@ -130,7 +143,7 @@ class TouchEnv(gymnasium.Env):
     ----------
     names : tuple of str
         The objects (classes), sorted.
-    knowledge : classify.policies.TouchKnowledge
+    knowledge : classify.policies.PlaceKnowledge or classify.policies.TouchKnowledge
         Fitted on the training instances only.
     settings : Settings
     touch_cost : float
@@ -147,7 +160,7 @@ class TouchEnv(gymnasium.Env):
         self,
         objects=("cow", "cup"),
         settings: Settings | None = None,
-        classifier="knn",
+        classifier="place",
         touch_cost: float = 0.01,
         test_replicates=range(FULL_REPLICATES),
         seed: int = 0,
@@ -156,7 +169,9 @@ class TouchEnv(gymnasium.Env):
         from classify.recognizers.classifiers import CLASSIFIERS
         from classify.runtime import cache as cache_mod
         from meshsal.points.learned import FEATURES
+        from meshsal.util.reproducible import warn_if_unpinned
 
+        warn_if_unpinned("TouchEnv")
         self.settings = Settings() if settings is None else settings
         if not (math.isfinite(touch_cost) and touch_cost >= 0):
             raise ValueError(f"touch_cost must be finite and >= 0, got {touch_cost!r}")
@@ -175,6 +190,7 @@ class TouchEnv(gymnasium.Env):
             if isinstance(classifier, Recognizer)
             else Recognizer(CLASSIFIERS.check((classifier,))[0], features="polar")
         )
+        self._recognizer = recognizer
         self._first_seed = int(seed)
         self.cache_dir = cache_mod.default_dir() if cache_dir == "default" else cache_dir
         loaded = load_objects(objects, self.settings)
@@ -215,7 +231,15 @@ class TouchEnv(gymnasium.Env):
 
     def _place_sample(self, name: str, replicate: int, index: int):
         task = SampleTask(
-            self._nominal[name], name, (), self.settings, replicate, index, places=True, cache_dir=self.cache_dir
+            self._nominal[name],
+            name,
+            (),
+            self.settings,
+            replicate,
+            index,
+            places=True,
+            codebook=self._recognizer.classifier == "place",
+            cache_dir=self.cache_dir,
         )
         return instance_samples(task).places
 
@@ -253,7 +277,7 @@ class TouchEnv(gymnasium.Env):
         self._episode = _Episode(
             sample,
             self.knowledge.forecast(sample.places),
-            self.knowledge.posterior(sample.imprints[0]),
+            self.knowledge.posterior(sample.imprints[0], sample.places),
             truth,
             replicate,
             np.full(len(self.names), 1.0 / len(self.names)),
@@ -280,8 +304,7 @@ class TouchEnv(gymnasium.Env):
             felt = action < len(places) and bool(available_places(places, e.touched, self.min_spacing)[action])
             e.steps.append(action if felt else -1)
             if felt:
-                belief = e.belief * np.maximum(e.felt[action], 1e-300)  # as classify.policies.run_episode
-                e.belief = belief / belief.sum()
+                e.belief = touched_belief(e.belief, e.felt[action])
             e.over = len(e.steps) == self.max_touches or not available_places(places, e.touched, self.min_spacing).any()
         else:
             e.over = True

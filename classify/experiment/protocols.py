@@ -57,6 +57,7 @@ __all__ = [
     "InstanceJob",
     "InstanceOutcome",
     "instance_job",
+    "plan_outcome",
 ]
 
 #: The evaluation protocols (this module's docstring describes them).
@@ -318,12 +319,46 @@ def instance_job(job: InstanceJob) -> InstanceOutcome:
             else np.zeros((0, n_classes))
             for t in data.test
         ]
+    return plan_outcome(
+        proba,
+        data.names,
+        job.n_touches,
+        job.sets_per_k,
+        job.seed,
+        job.replicate,
+        job.stop_levels,
+        len(rows) / len(data.train_y),
+    )
+
+
+def plan_outcome(
+    proba: list,
+    names: tuple,
+    n_touches: int,
+    sets_per_k: int,
+    seed: int,
+    replicate: int,
+    stop_levels: tuple,
+    kept: float = 1.0,
+) -> InstanceOutcome:
+    """A fixed plan recognized from its single-touch posteriors: rates after 1..``n_touches`` touches, the
+    single-touch confusion and the stopping rule.
+
+    Parameters
+    ----------
+    proba : list of (k_c, C) float64, each object's test touches' posteriors (calibrated or place-aware), in the
+        plan's order
+    names : tuple of str, the objects (seeds of the touch sets and tie breaks)
+    n_touches, sets_per_k, seed, replicate, stop_levels : as :class:`InstanceJob`
+    kept : float, the fraction of training imprints selection kept
+    """
+    n_classes = len(proba)
     truth = np.concatenate([np.full(len(p), c) for c, p in enumerate(proba)]).astype(np.int64)
     guess = np.concatenate([np.argmax(p, axis=1) for p in proba]).astype(np.int64)
     confusion = _confusion(truth, guess, n_classes)
-    rates = np.zeros((job.n_touches, n_classes))
-    sets = np.full(job.n_touches, np.iinfo(np.int64).max)
-    for k in range(1, job.n_touches + 1):
+    rates = np.zeros((n_touches, n_classes))
+    sets = np.full(n_touches, np.iinfo(np.int64).max)
+    for k in range(1, n_touches + 1):
         for c, p in enumerate(proba):
             if len(p) == 0:
                 sets[k - 1] = 0
@@ -331,26 +366,26 @@ def instance_job(job: InstanceJob) -> InstanceOutcome:
             chosen = touch_sets(
                 len(p),
                 min(k, len(p)),
-                job.sets_per_k,
-                recognition_rng(job.seed, job.replicate, k, data.names[c], Stream.TOUCH_SETS),
+                sets_per_k,
+                recognition_rng(seed, replicate, k, names[c], Stream.TOUCH_SETS),
             )
-            picks = fuse(p, chosen, recognition_rng(job.seed, job.replicate, k, data.names[c], Stream.TIES))
+            picks = fuse(p, chosen, recognition_rng(seed, replicate, k, names[c], Stream.TIES))
             rates[k - 1, c] = 100.0 * np.mean(picks == c)
             sets[k - 1] = min(sets[k - 1], len(chosen) if len(p) >= k else 0)
-    stop_correct, stop_touches = _plan_stops(job, proba)
-    return InstanceOutcome(rates, sets, confusion, len(rows) / len(data.train_y), stop_correct, stop_touches)
+    stop_correct, stop_touches = _plan_stops(proba, names, n_touches, seed, replicate, stop_levels)
+    return InstanceOutcome(rates, sets, confusion, kept, stop_correct, stop_touches)
 
 
-def _plan_stops(job: InstanceJob, proba: list) -> tuple[np.ndarray, np.ndarray]:
+def _plan_stops(proba: list, names, n_touches, seed, replicate, stop_levels) -> tuple[np.ndarray, np.ndarray]:
     """The stopping rule on the plan's points in order: 100 where right at the stop, and the touches used."""
-    correct = np.zeros((len(job.stop_levels), len(proba)))
-    used = np.zeros((len(job.stop_levels), len(proba)))
+    correct = np.zeros((len(stop_levels), len(proba)))
+    used = np.zeros((len(stop_levels), len(proba)))
     for c, p in enumerate(proba):
-        if len(p) == 0 or not job.stop_levels:
+        if len(p) == 0 or not stop_levels:
             continue
-        beliefs = np.cumprod(np.maximum(p[: job.n_touches], 1e-300), axis=0)
+        beliefs = np.cumprod(np.maximum(p[:n_touches], 1e-300), axis=0)
         beliefs /= beliefs.sum(axis=1, keepdims=True)
-        rng = recognition_rng(job.seed, job.replicate, 0, job.data.names[c], Stream.EPISODE_TIES)
-        right, touches_used = stopping_curve([beliefs], np.array([c]), job.stop_levels, [rng])
+        rng = recognition_rng(seed, replicate, 0, names[c], Stream.EPISODE_TIES)
+        right, touches_used = stopping_curve([beliefs], np.array([c]), stop_levels, [rng])
         correct[:, c], used[:, c] = 100.0 * right[:, 0], touches_used[:, 0]
     return correct, used

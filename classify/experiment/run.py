@@ -23,7 +23,9 @@ import numpy as np
 from threadpoolctl import threadpool_limits
 
 from classify.experiment.config import DEFAULT_REPLICATES, FULL_REPLICATES, ExperimentConfig, Settings
+from classify.experiment.place import place_recognition
 from classify.experiment.protocols import PROTOCOLS
+from classify.experiment.sequential import policy_recognition
 from classify.experiment.stages import (
     InstanceStage,
     ObjectSet,
@@ -33,7 +35,6 @@ from classify.experiment.stages import (
     load_objects,
     paper_recognition,
     paper_stage,
-    policy_recognition,
 )
 from classify.reporting import stats
 from classify.reporting.results import (
@@ -70,6 +71,30 @@ __all__ = [
 #: What a worker process of the experiment imports as it starts, while the objects load (``worker_pool``'s
 #: ``preload``): the stages, scikit-learn, OpenCV, the mesh libraries (2-3 s).
 WORKER_MODULES = (__name__, "meshsal.points", "meshsal.attention.rig", "meshsal.objects.instances", "tactile")
+
+
+def _cpu_seconds() -> float:
+    """User and system CPU seconds of this process and of its children that have ended."""
+    import resource
+
+    own, children = resource.getrusage(resource.RUSAGE_SELF), resource.getrusage(resource.RUSAGE_CHILDREN)
+    return own.ru_utime + own.ru_stime + children.ru_utime + children.ru_stime
+
+
+def _provenance() -> dict:
+    """Where and when this run measured: its command line, the commit, the machine, the date (UTC)."""
+    import datetime
+    import shlex
+    import sys
+
+    from meshsal.util import pages
+
+    return {
+        "command": shlex.join(sys.argv),
+        "commit": pages.commit(),
+        "machine": pages.machine(),
+        "date": datetime.datetime.now(datetime.UTC).strftime("%Y-%m-%d %H:%M UTC"),
+    }
 
 
 def _object_sets(n_all: int) -> tuple:
@@ -168,6 +193,7 @@ def run_experiment(
     cache_dir="default",
     out_dir=None,
     quiet: bool = False,
+    skip_bad: bool = False,
     **changes,
 ) -> ExperimentResult:
     """Interest points -> imprints -> recognition, under the paper and instance protocols.
@@ -192,6 +218,9 @@ def run_experiment(
         model (``touch_models/replicate_<r>.json``) go (nothing written when None).
     quiet : bool
         No progress bars on stderr.
+    skip_bad : bool
+        Run on the objects that load when some do not (they are listed in a
+        warning); by default they are listed in an error before any work.
 
     Returns
     -------
@@ -202,8 +231,11 @@ def run_experiment(
     >>> r = run_experiment(["cow", "cup"], replicates=2, quiet=True)     # doctest: +SKIP
     >>> print(format_tables(r))                                          # doctest: +SKIP
     """
-    started = time.perf_counter()
+    from meshsal.util.reproducible import warn_if_unpinned
+
+    started, cpu_started = time.perf_counter(), _cpu_seconds()
     config = (config or ExperimentConfig()).replace(**changes).checked()
+    warn_if_unpinned("run_experiment")
     settings = config.settings
     if cache_dir == "default":
         cache_dir = cache_mod.default_dir()
@@ -214,7 +246,7 @@ def run_experiment(
     with threadpool_limits(1), workers as pool:
         # Local workers start while the objects load, and build the toys; a bad file still stops the run before any work.
         local = executor is None or isinstance(executor, ProcessPoolExecutor)
-        objects = load_objects(objects, settings, pool if local else None)
+        objects = load_objects(objects, settings, pool if local else None, skip_bad=skip_bad)
         # Workers render with one thread each; alone, the stage renders with every core.
         runtime = Runtime(pool, cache_dir, None if isinstance(pool, Inline) else 1, quiet)
         if "paper" in config.protocols and paper_methods:
@@ -223,8 +255,15 @@ def run_experiment(
             timings["paper"] = time.perf_counter() - t0
         if "instance" in config.protocols:
             t0 = time.perf_counter()
+            place = "place" in config.classifiers
             stage = instance_stage(
-                objects, config.methods, settings, config.replicates, runtime, places=bool(config.policies)
+                objects,
+                config.methods,
+                settings,
+                config.replicates,
+                runtime,
+                places=bool(config.policies) or place,
+                codebook=place,
             )
             timings["instance_points_and_imprints"] = time.perf_counter() - t0
             t0 = time.perf_counter()
@@ -237,15 +276,23 @@ def run_experiment(
                 for n in _object_sets(len(objects)):
                     measurements += policy_recognition(n, stage, objects, config, runtime)
                 timings["sequential"] = time.perf_counter() - t0
+            if place:
+                t0 = time.perf_counter()
+                for n in _object_sets(len(objects)):
+                    measurements += place_recognition(n, stage, objects, config, runtime)
+                timings["place"] = time.perf_counter() - t0
 
     summary = _summarize(measurements, config, objects.names)
     timings["total"] = time.perf_counter() - started
+    # CPU time of this process and of its finished local workers: what a busy machine does not inflate.
+    timings["cpu_total"] = _cpu_seconds() - cpu_started
     run_settings = {
         "objects": list(objects.names),
         **config.to_json(),
         "libraries": cache_mod.library_versions(),
         "cache_dir": None if cache_dir is None else str(cache_dir),
         "learned_channel_weights": [m.channel_weights for m in stage.models],
+        "provenance": _provenance(),
     }
     result = ExperimentResult(
         object_names=objects.names,

@@ -28,6 +28,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from classify.experiment import codebooks as codebooks_mod
+from classify.experiment.codebooks import training_codebooks
 from classify.experiment.config import Settings
 from classify.experiment.streams import Stream, instance_rng
 from classify.experiment.survey import Survey, touch_survey
@@ -46,6 +48,8 @@ __all__ = [
     "point_options",
     "paper_sample",
     "place_sample",
+    "test_perturbation",
+    "instance_mesh",
     "instance_samples",
 ]
 
@@ -63,6 +67,9 @@ class TouchSample:
     positions: np.ndarray
     normals: np.ndarray
     imprints: np.ndarray
+    #: (k, draws, d) float32, the polar descriptors of a touch codebook at the points (training instances of a
+    #: run with the place-aware recognizer; stored apart from the rest).
+    codebook: np.ndarray | None = None
 
     def to_arrays(self) -> dict:
         return {"positions": self.positions, "normals": self.normals, "imprints": self.imprints}
@@ -103,7 +110,12 @@ class SampleTask:
     survey : bool
         Also the instance's touch survey (:func:`classify.experiment.survey.touch_survey`).
     places : bool
-        Also its candidate places and their imprints, for the touch policies (:func:`place_sample`).
+        Also its candidate places and their imprints, for the touch policies
+        and the place-aware recognizer (:func:`place_sample`).
+    codebook : bool
+        On a training instance, also a touch codebook (``settings.codebook_draws``
+        touches) at every touchable place and at every method's points
+        (:mod:`classify.experiment.codebooks`).
     model : meshsal.points.learned.TouchModel, optional
         The replicate's touch model, for the model methods.
     surveyed : Survey, optional
@@ -120,6 +132,7 @@ class SampleTask:
     index: int
     survey: bool = False
     places: bool = False
+    codebook: bool = False
     model: object = None
     surveyed: Survey | None = None
     cache_dir: object = None
@@ -190,7 +203,9 @@ def _point_seed(settings: Settings, name: str, replicate: int, index: int) -> in
 
 
 def _key(kind, nominal, name, method, settings, *parts):
-    code = cache_mod.code_fingerprint("meshsal", "tactile") + cache_mod.file_fingerprint(__file__)
+    code = cache_mod.code_fingerprint("meshsal", "tactile") + cache_mod.file_fingerprint(
+        __file__, codebooks_mod.__file__
+    )
     return cache_mod.cache_key(
         kind, mesh_hash(nominal), name, method, settings.key(), list(parts), code, cache_mod.library_versions()
     )
@@ -220,24 +235,42 @@ def paper_sample(task: PaperSampleTask) -> TouchSample:
     )
 
 
-def _sessions(mesh, pts, task: SampleTask, scene) -> TouchSample:
-    """The acquisition sessions of one instance at its points: the same devices and rolls for every method."""
+def test_perturbation(settings: Settings, index: int):
+    """The perturbation of instance ``index``'s sessions: the settings', but for a test instance (0) under a noise
+    mismatch arm, whose reading noise and gain spread are halved or doubled."""
+    import dataclasses
+
+    factor = {"noise_half": 0.5, "noise_double": 2.0}
+    p = settings.perturbation
+    for m in settings.mismatch if index == 0 else ():
+        if m in factor:
+            p = dataclasses.replace(p, noise=p.noise * factor[m], gain_spread=p.gain_spread * factor[m])
+    return p
+
+
+def _acquire(mesh, positions, normals, task: SampleTask, session: int, scene):
+    """One acquisition session of the instance: its device and rolls; exact sections on a test instance of the
+    ``exact`` mismatch arm."""
     import tactile
 
     settings = task.settings
+    return tactile.acquire(
+        mesh,
+        positions,
+        normals,
+        settings.sensor,
+        test_perturbation(settings, task.index),
+        instance_rng(settings.seed, task.name, task.replicate, task.index, Stream.SESSION, session),
+        scene=scene,
+        exact=task.index == 0 and "exact" in settings.mismatch,
+    )
+
+
+def _sessions(mesh, pts, task: SampleTask, scene) -> TouchSample:
+    """The acquisition sessions of one instance at its points: the same devices and rolls for every method."""
+    settings = task.settings
     sessions = 1 if task.index == 0 else settings.train_sessions
-    stack = [
-        tactile.acquire(
-            mesh,
-            pts.positions,
-            pts.normals,
-            settings.sensor,
-            settings.perturbation,
-            instance_rng(settings.seed, task.name, task.replicate, task.index, Stream.SESSION, s),
-            scene=scene,
-        )
-        for s in range(sessions)
-    ]
+    stack = [_acquire(mesh, pts.positions, pts.normals, task, s, scene) for s in range(sessions)]
     return TouchSample(
         np.asarray(pts.positions, np.float64),
         np.asarray(pts.normals, np.float64),
@@ -254,7 +287,6 @@ def place_sample(mesh, ids, features, task: SampleTask, scene) -> PlaceSample:
     (every place, instead of a method's n points): session 0 of the same
     streams as the methods' sessions, so the same devices.
     """
-    import tactile
     from meshsal.mesh import vertex_normals
     from meshsal.points.touch import touchable
 
@@ -264,8 +296,7 @@ def place_sample(mesh, ids, features, task: SampleTask, scene) -> PlaceSample:
     places = Places(
         ids, positions, normals, features, touchable(mesh, positions, normals, settings.sensor.width_mm, scene=scene)
     )
-    rng = instance_rng(settings.seed, task.name, task.replicate, task.index, Stream.SESSION, 0)
-    imprints = tactile.acquire(mesh, positions, normals, settings.sensor, settings.perturbation, rng, scene=scene)
+    imprints = _acquire(mesh, positions, normals, task, 0, scene)
     return PlaceSample(places, np.asarray(imprints, np.float32)[None])
 
 
@@ -299,46 +330,55 @@ def _model_hash(model) -> str:
     )
 
 
+def instance_mesh(task: SampleTask):
+    """Instance ``task.index`` of ``task.replicate``: the nominal mesh turned, resized, repainted; a test instance
+    of a re-tessellation mismatch arm is re-tessellated (``meshsal.objects.instances.retessellate``)."""
+    from meshsal.objects.instances import TESSELLATIONS, make_instance, retessellate
+
+    settings = task.settings
+    mesh = make_instance(task.nominal, instance_spec(settings, task.name, task.replicate, task.index))
+    for kind in settings.mismatch if task.index == 0 else ():
+        if kind in TESSELLATIONS:
+            mesh = retessellate(mesh, kind)
+    return mesh
+
+
 def instance_samples(task: SampleTask) -> InstanceSamples:
-    """One instance: each method's points and the imprints of its sessions, and its survey if asked.
+    """One instance: each method's points and the imprints of its sessions, its survey, places and codebooks if asked.
 
     Instance 0 is the test instance (one session), the others train
     (``settings.train_sessions`` sessions each).  The instance is built,
     rendered and its mesh saliency computed once for all methods
-    (:func:`method_points`); each method's sample is cached on its own, so
+    (:func:`meshsal.points.method_points`); each method's sample is cached on its own, so
     adding a method later reuses the others.  The model methods take the
     replicate's ``model``: "learned" chooses from the instance's ``surveyed``
     pool without rendering, "attention_learned" renders with the model's
-    channel weights.
+    channel weights.  A training instance's codebooks (``task.codebook``)
+    are cached apart, by the number of draws: they need the mesh, never its
+    rendering.
 
     Returns
     -------
     InstanceSamples
     """
-    from meshsal.mesh.curvature import mesh_saliency
-    from meshsal.mesh.embree import embree_scene
-    from meshsal.objects.instances import make_instance
-    from meshsal.points import ATTENTION_METHODS, MODEL_METHODS, method_points, view_channels
+    from meshsal.points import ATTENTION_METHODS, MODEL_METHODS, method_points
 
     settings = task.settings
     methods = list(dict.fromkeys(task.methods))
     model_part = [] if task.model is None else [_model_hash(task.model)]
-    keys = {
-        m: _key(
-            "instance",
-            task.nominal,
-            task.name,
-            m,
-            settings,
-            task.replicate,
-            task.index,
-            *(model_part if m in MODEL_METHODS else []),
-        )
-        for m in methods
-    }
-    survey_key = _key("survey", task.nominal, task.name, "", settings, task.replicate, task.index)
-    places_key = _key("places", task.nominal, task.name, "", settings, task.replicate, task.index)
-    found = {m: cache_mod.load(task.cache_dir, key) for m, key in keys.items()}
+    # A test instance of a mismatch arm is another instance; training instances are the same in every arm.
+    arm = [list(settings.mismatch)] if task.index == 0 and settings.mismatch else []
+
+    def key(kind, method="", *more):
+        return _key(kind, task.nominal, task.name, method, settings, task.replicate, task.index, *arm, *more)
+
+    keys = {m: key("instance", m, *(model_part if m in MODEL_METHODS else [])) for m in methods}
+    survey_key, places_key = key("survey"), key("places")
+    books = task.codebook and task.index >= 1
+    draws = [settings.codebook_draws]
+    book_keys = {m: key("codebook", m, *draws, *(model_part if m in MODEL_METHODS else [])) for m in methods}
+    places_book_key = key("codebook", "", *draws)
+    found = {m: cache_mod.load(task.cache_dir, k) for m, k in keys.items()}
     by_method = {m: TouchSample.from_arrays(a) for m, a in found.items() if a is not None}
     survey = None
     if task.survey:
@@ -349,40 +389,55 @@ def instance_samples(task: SampleTask) -> InstanceSamples:
         stored = cache_mod.load(task.cache_dir, places_key)
         places = None if stored is None else PlaceSample.from_arrays(stored)
     missing = [m for m in methods if m not in by_method]
-    if not missing and (not task.survey or survey is not None) and (not task.places or places is not None):
-        return InstanceSamples({m: by_method[m] for m in methods}, survey, places)
-    mesh = make_instance(task.nominal, instance_spec(settings, task.name, task.replicate, task.index))
-    vertex_saliency = mesh_saliency(mesh)
-    seen = None
-    if (
-        any(m in ATTENTION_METHODS for m in missing)
-        or (task.survey and survey is None)
-        or (task.places and places is None)
-    ):
-        seen = view_channels(
-            mesh, size=settings.view_size or 128, vertex_saliency=vertex_saliency, threads=task.threads
-        )
-    scene = embree_scene(mesh)
-    options = point_options(settings, _point_seed(settings, task.name, task.replicate, task.index), task.threads)
-    picked = method_points(
-        mesh, missing, options, model=task.model, surveyed=task.surveyed, vertex_saliency=vertex_saliency, seen=seen
-    )
-    for m in missing:
-        by_method[m] = _sessions(mesh, picked[m], task, scene)
-        cache_mod.store(task.cache_dir, keys[m], by_method[m].to_arrays())
     want_survey, want_places = task.survey and survey is None, task.places and places is None
-    if want_survey or want_places:
-        pool, ids, features = _looked_at(mesh, seen, vertex_saliency, settings, want_places)
-    if want_survey:
-        # The test instance is never touched before the test.
-        rng = (
-            instance_rng(settings.seed, task.name, task.replicate, task.index, Stream.SURVEY)
-            if task.index >= 1
-            else None
+    built = {}
+
+    def instance():
+        """The mesh, its mesh saliency and its Embree scene, built on first need."""
+        if not built:
+            from meshsal.mesh.curvature import mesh_saliency
+            from meshsal.mesh.embree import embree_scene
+
+            mesh = instance_mesh(task)
+            built.update(mesh=mesh, saliency=mesh_saliency(mesh), scene=embree_scene(mesh))
+        return built["mesh"], built["saliency"], built["scene"]
+
+    if missing or want_survey or want_places:
+        mesh, vertex_saliency, scene = instance()
+        seen = None
+        if any(m in ATTENTION_METHODS for m in missing) or want_survey or want_places:
+            from meshsal.points import view_channels
+
+            seen = view_channels(
+                mesh, size=settings.view_size or 128, vertex_saliency=vertex_saliency, threads=task.threads
+            )
+        options = point_options(settings, _point_seed(settings, task.name, task.replicate, task.index), task.threads)
+        picked = method_points(
+            mesh,
+            missing,
+            options,
+            model=task.model,
+            surveyed=task.surveyed,
+            vertex_saliency=vertex_saliency,
+            seen=seen,
         )
-        survey = touch_survey(mesh, pool, features[: pool.size], settings, scene, rng)
-        cache_mod.store(task.cache_dir, survey_key, survey.to_arrays())
-    if want_places:
-        places = place_sample(mesh, ids, features, task, scene)
-        cache_mod.store(task.cache_dir, places_key, places.to_arrays())
+        for m in missing:
+            by_method[m] = _sessions(mesh, picked[m], task, scene)
+            cache_mod.store(task.cache_dir, keys[m], by_method[m].to_arrays())
+        if want_survey or want_places:
+            pool, ids, features = _looked_at(mesh, seen, vertex_saliency, settings, want_places)
+        if want_survey:
+            # The test instance is never touched before the test.
+            rng = (
+                instance_rng(settings.seed, task.name, task.replicate, task.index, Stream.SURVEY)
+                if task.index >= 1
+                else None
+            )
+            survey = touch_survey(mesh, pool, features[: pool.size], settings, scene, rng)
+            cache_mod.store(task.cache_dir, survey_key, survey.to_arrays())
+        if want_places:
+            places = place_sample(mesh, ids, features, task, scene)
+            cache_mod.store(task.cache_dir, places_key, places.to_arrays())
+    if books:
+        places, by_method = training_codebooks(task, places, by_method, instance, places_book_key, book_keys)
     return InstanceSamples({m: by_method[m] for m in methods}, survey, places)

@@ -22,11 +22,13 @@ import numpy as np
 from threadpoolctl import threadpool_limits
 
 from classify.experiment.config import ExperimentConfig
+from classify.experiment.controls import shuffled_places
+from classify.experiment.stages import InstanceStage, Measurement, ObjectSet, Runtime, recognition_key, run_jobs
 from classify.experiment.streams import Stream, name_seed, recognition_rng
 from classify.policies import POLICIES, decisions, fit_knowledge, run_episode, stopping_curve
 from classify.recognizers.touches import Recognizer
 
-__all__ = ["PolicyJob", "PolicyOutcome", "policy_job"]
+__all__ = ["PolicyJob", "PolicyOutcome", "policy_job", "run_policies", "policy_recognition", "policy_measurement"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -79,29 +81,59 @@ class PolicyOutcome:
 
 def policy_job(job: PolicyJob) -> PolicyOutcome:
     """Fit the touch knowledge on the training instances, then run every policy on every test instance."""
-    n, K, L = len(job.names), job.touches, len(job.stop_levels)
-    rates = np.zeros((len(job.policies), K, n))
-    stop_correct, stop_touches = np.zeros((len(job.policies), L, n)), np.zeros((len(job.policies), L, n))
-    touched = np.full((len(job.policies), n, K), -1, np.int64)
-    choice_s = np.zeros(len(job.policies))
     with threadpool_limits(1):
         knowledge = fit_knowledge(job.training, job.recognizer)
-        felt = [knowledge.posterior(test.imprints[0]) for test in job.tests]
-        for q, name in enumerate(job.policies):
-            seconds = []
-            for c, test in enumerate(job.tests):
-                rng = recognition_rng(job.seed, job.replicate, 0, job.names[c], Stream.EPISODE, name_seed(name))
-                episode = run_episode(POLICIES.get(name)(), test, knowledge, K, job.min_spacing, rng, felt=felt[c])
-                ties = recognition_rng(job.seed, job.replicate, 0, job.names[c], Stream.EPISODE_TIES)
-                picks = decisions(episode.beliefs, ties)
-                last = np.minimum(np.arange(K), len(picks) - 1)
-                rates[q, :, c] = 100.0 * (picks[last] == c)
-                ties = recognition_rng(job.seed, job.replicate, 0, job.names[c], Stream.EPISODE_TIES)
-                right, used = stopping_curve([episode.beliefs], np.array([c]), job.stop_levels, [ties])
-                stop_correct[q, :, c], stop_touches[q, :, c] = 100.0 * right[:, 0], used[:, 0]
-                touched[q, c, : len(episode.vertex_ids)] = episode.vertex_ids
-                seconds.extend(episode.choice_s)
-            choice_s[q] = float(np.median(seconds)) if seconds else 0.0
+        return run_policies(
+            knowledge,
+            job.tests,
+            job.names,
+            job.policies,
+            job.touches,
+            job.min_spacing,
+            job.seed,
+            job.replicate,
+            job.stop_levels,
+        )
+
+
+def run_policies(
+    knowledge,
+    tests: tuple,
+    names: tuple,
+    policies: tuple,
+    touches: int,
+    min_spacing: float,
+    seed: int,
+    replicate: int,
+    stop_levels: tuple,
+) -> PolicyOutcome:
+    """Every policy on every test instance (``tests`` in the order of ``names``), with ``knowledge``'s belief.
+
+    The episodes' draws come from the streams of ``seed``, ``replicate``, the
+    object's name and the policy's, never from the knowledge: every belief
+    meets the same episodes.
+    """
+    n, K, L = len(names), touches, len(stop_levels)
+    rates = np.zeros((len(policies), K, n))
+    stop_correct, stop_touches = np.zeros((len(policies), L, n)), np.zeros((len(policies), L, n))
+    touched = np.full((len(policies), n, K), -1, np.int64)
+    choice_s = np.zeros(len(policies))
+    felt = [knowledge.posterior(test.imprints[0], test.places) for test in tests]
+    for q, name in enumerate(policies):
+        seconds = []
+        for c, test in enumerate(tests):
+            rng = recognition_rng(seed, replicate, 0, names[c], Stream.EPISODE, name_seed(name))
+            episode = run_episode(POLICIES.get(name)(), test, knowledge, K, min_spacing, rng, felt=felt[c])
+            ties = recognition_rng(seed, replicate, 0, names[c], Stream.EPISODE_TIES)
+            picks = decisions(episode.beliefs, ties)
+            last = np.minimum(np.arange(K), len(picks) - 1)
+            rates[q, :, c] = 100.0 * (picks[last] == c)
+            ties = recognition_rng(seed, replicate, 0, names[c], Stream.EPISODE_TIES)
+            right, used = stopping_curve([episode.beliefs], np.array([c]), stop_levels, [ties])
+            stop_correct[q, :, c], stop_touches[q, :, c] = 100.0 * right[:, 0], used[:, 0]
+            touched[q, c, : len(episode.vertex_ids)] = episode.vertex_ids
+            seconds.extend(episode.choice_s)
+        choice_s[q] = float(np.median(seconds)) if seconds else 0.0
     return PolicyOutcome(rates, stop_correct, stop_touches, touched, choice_s)
 
 
@@ -116,7 +148,10 @@ def policy_jobs(stage, objects, n: int, config: ExperimentConfig) -> list:
             (objects.names[i], j): stage.places[r, i, j] for i in order for j in range(1, settings.train_instances + 1)
         }
         tests = tuple(stage.places[r, i, 0] for i in order)
-        for c in config.classifiers:
+        if config.control is not None:
+            tests = shuffled_places(tests, names, settings.seed, r, config.control)
+        # The place-aware recognizer's policies run in its own job (classify.experiment.place).
+        for c in (c for c in config.classifiers if c != "place"):
             jobs.append(
                 PolicyJob(
                     training,
@@ -132,3 +167,71 @@ def policy_jobs(stage, objects, n: int, config: ExperimentConfig) -> list:
                 )
             )
     return jobs
+
+
+def policy_recognition(
+    n: int, stage: InstanceStage, objects: ObjectSet, config: ExperimentConfig, runtime: Runtime
+) -> list[Measurement]:
+    """The sequential protocol on the first ``n`` objects: one :class:`Measurement` per policy and classifier."""
+    free = [c for c in config.classifiers if c != "place"]
+    if not free:
+        return []
+    jobs = policy_jobs(stage, objects, n, config)
+    back = np.argsort(objects.by_name(n))
+    arrays = [
+        a
+        for job in jobs[:: len(free)]
+        for sample in (*job.training.values(), *job.tests)
+        for a in sample.to_arrays().values()
+    ]
+    key = recognition_key(
+        "sequential",
+        arrays,
+        [
+            config.settings.key(),
+            config.params,
+            config.features,
+            list(config.policies),
+            free,
+            config.stop_levels,
+            config.replicates,
+            config.control,
+        ],
+    )
+    outcomes = run_jobs(runtime, key, PolicyOutcome, policy_job, jobs, f"policies, {n} objects")
+    out = []
+    for q, policy in enumerate(config.policies):
+        for c in free:
+            mine = [o for job, o in zip(jobs, outcomes) if job.recognizer.classifier == c]
+            out.append(
+                policy_measurement(
+                    policy,
+                    c,
+                    n,
+                    [o.rates[q] for o in mine],
+                    [o.stop_correct[q] for o in mine],
+                    [o.stop_touches[q] for o in mine],
+                    back,
+                )
+            )
+    return out
+
+
+def policy_measurement(policy: str, classifier: str, n: int, rates, stop_correct, stop_touches, back) -> Measurement:
+    """One policy's :class:`Measurement` from its replicates' (k, objects) rates and (levels, objects) stops,
+    objects by name (``back`` puts them back in the order given)."""
+    stack = np.stack(rates)[:, :, back]  # (replicates, k, objects)
+    K = stack.shape[1]
+    stopping = (np.stack(stop_correct)[:, :, back], np.stack(stop_touches)[:, :, back])
+    return Measurement(
+        policy,
+        "sequential",
+        classifier,
+        n,
+        False,
+        {k: stack[:, k - 1, :] for k in range(1, K + 1)},
+        dict.fromkeys(range(1, K + 1), 1),
+        None,
+        None,
+        stopping,
+    )

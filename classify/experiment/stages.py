@@ -12,6 +12,7 @@ cluster); every stage reads and writes the content-keyed cache.
 from __future__ import annotations
 
 import dataclasses
+import warnings
 from dataclasses import dataclass
 from typing import NamedTuple
 
@@ -19,6 +20,7 @@ import numpy as np
 from threadpoolctl import threadpool_limits
 
 from classify.experiment.config import ExperimentConfig, Settings
+from classify.experiment.controls import shuffled_imprints
 from classify.experiment.protocols import (
     InstanceData,
     InstanceJob,
@@ -57,6 +59,8 @@ __all__ = [
     "Measurement",
     "paper_recognition",
     "instance_recognition",
+    "run_jobs",
+    "recognition_key",
 ]
 
 
@@ -76,18 +80,23 @@ class ObjectSet:
         return np.array(sorted(range(len(names)), key=lambda i: names[i]), dtype=np.int64)
 
 
-def load_objects(objects, settings: Settings, pool=None) -> ObjectSet:
+def load_objects(objects, settings: Settings, pool=None, skip_bad: bool = False) -> ObjectSet:
     """The objects' names and nominal meshes, all loaded before any work (a bad file stops here).
 
     ``objects``: None (the toys), strings for ``meshsal.objects.resolve_objects``
-    (set names, object names, mesh files, comma-separated or not) or
-    ``meshsal.Mesh`` objects with distinct names (repaired as the loader
-    repairs files: ``meshsal.repair_mesh``).  With ``settings.size_mm``
+    (set names, object names, mesh files, folders, list files, comma-separated
+    or not) or ``meshsal.Mesh`` objects with distinct names (repaired as the
+    loader repairs files: ``meshsal.repair_mesh``).  With ``settings.size_mm``
     None the objects keep their real sizes (named objects only: the units of
     a file or an in-memory mesh are not known).  ``pool`` (local worker
     processes with this process's kernel pin, anything with an ordered
     ``map``) builds the toys, a second of CPU each, while this process loads
     the rest: the same meshes.
+
+    Files with the same bytes are one object (a warning names both).  Files
+    that do not load are all listed in one error before any work; with
+    ``skip_bad`` they are listed in a warning instead and the run goes on
+    without them.
     """
     import meshsal
     from meshsal import objects as objects_mod
@@ -101,11 +110,31 @@ def load_objects(objects, settings: Settings, pool=None) -> ObjectSet:
         # Meshes built in memory did not pass the loader's repairs: they get them here.
         meshes = [_repaired(m) for m in meshes]
     else:
-        refs = objects_mod.resolve_objects(items)
+        refs, same = objects_mod.distinct_files(objects_mod.resolve_objects(items))
+        if same:
+            warnings.warn(
+                "files with the same bytes are one object: "
+                + ", ".join(f"{name} (= {first})" for name, first in same.items()),
+                stacklevel=2,
+            )
         built_elsewhere = [ref for ref in refs if ref.kind == "toy"] if pool is not None else []
         pending = pool.map(objects_mod.load_ref, built_elsewhere) if built_elsewhere else ()
-        loaded = {ref.name: objects_mod.load_ref(ref) for ref in refs if ref not in built_elsewhere}
+        loaded, bad = {}, {}
+        for ref in refs:
+            if ref not in built_elsewhere:
+                try:
+                    loaded[ref.name] = objects_mod.load_ref(ref)
+                except (ValueError, OSError) as exc:
+                    bad[ref.name] = f"{exc}"
         loaded.update(zip((ref.name for ref in built_elsewhere), pending))
+        if bad:
+            listed = "; ".join(bad.values())
+            if not skip_bad:
+                raise ValueError(
+                    f"{len(bad)} of {len(refs)} objects do not load (--skip-bad runs on the rest): {listed}"
+                )
+            warnings.warn(f"left out {len(bad)} of {len(refs)} objects that do not load: {listed}", stacklevel=2)
+            refs = tuple(ref for ref in refs if ref.name not in bad)
         meshes = [loaded[ref.name] for ref in refs]
         units = [ref.units_mm for ref in refs]
     names = tuple(m.name for m in meshes)
@@ -117,8 +146,6 @@ def load_objects(objects, settings: Settings, pool=None) -> ObjectSet:
 
 
 def _repaired(mesh):
-    import warnings
-
     from meshsal.mesh.io import MeshRepairWarning
     from meshsal.mesh.repair import repair_mesh
 
@@ -192,15 +219,23 @@ def paper_stage(objects: ObjectSet, methods, settings: Settings, runtime: Runtim
 
 
 def instance_stage(
-    objects: ObjectSet, methods, settings: Settings, replicates: int, runtime: Runtime, places: bool = False
+    objects: ObjectSet,
+    methods,
+    settings: Settings,
+    replicates: int,
+    runtime: Runtime,
+    places: bool = False,
+    codebook: bool = False,
 ) -> InstanceStage:
     """Every instance's points and imprints for every method, and each replicate's touch model.
 
     One task per instance computes all methods that need no model, sharing
-    its rendering, plus its touch survey when a model method is asked for
-    and its places when ``places`` (touch policies); then each replicate's
-    model is fitted on its training instances' surveys; then the model
-    methods run on every instance.
+    its rendering, plus its touch survey when a model method is asked for,
+    its places when ``places`` (touch policies, the place-aware recognizer)
+    and, on a training instance, its touch codebooks when ``codebook`` (the
+    place-aware recognizer); then each replicate's model is fitted on its
+    training instances' surveys; then the model methods run on every
+    instance (with their codebooks).
     """
     plain = tuple(m for m in methods if m not in MODEL_METHODS)
     learned = tuple(m for m in methods if m in MODEL_METHODS)
@@ -223,7 +258,7 @@ def instance_stage(
 
     done = runtime.map(
         _instance_samples,
-        [task(r, i, j, plain, survey=bool(learned), places=places) for r, i, j in where],
+        [task(r, i, j, plain, survey=bool(learned), places=places, codebook=codebook) for r, i, j in where],
         "instances: points+imprints",
     )
     samples = {SampleKey(r, m, i, j): out.by_method[m] for (r, i, j), out in zip(where, done) for m in plain}
@@ -238,7 +273,7 @@ def instance_stage(
     )
     done = runtime.map(
         _instance_samples,
-        [task(r, i, j, learned, model=models[r], surveyed=surveys[r, i, j]) for r, i, j in where],
+        [task(r, i, j, learned, model=models[r], surveyed=surveys[r, i, j], codebook=codebook) for r, i, j in where],
         "instances: learned points+imprints",
     )
     samples.update({SampleKey(r, m, i, j): out.by_method[m] for (r, i, j), out in zip(where, done) for m in learned})
@@ -285,7 +320,7 @@ def _outcomes_from(arrays, cls, count):
     ]
 
 
-def _run_jobs(runtime: Runtime, key: str, cls, run, jobs: list, desc: str, outcomes=None) -> list:
+def run_jobs(runtime: Runtime, key: str, cls, run, jobs: list, desc: str, outcomes=None) -> list:
     """``run(job)`` for every job, in order, through the cache (one entry for all of them).
 
     ``outcomes`` (given a job per several outcomes) turns the jobs' results into the list of outcomes.
@@ -296,14 +331,15 @@ def _run_jobs(runtime: Runtime, key: str, cls, run, jobs: list, desc: str, outco
     return _outcomes_from(found, cls, len(found) // len(dataclasses.fields(cls)))
 
 
-def _recognition_key(kind, arrays, parts):
+def recognition_key(kind, arrays, parts):
     code = cache_mod.code_fingerprint("classify", "tactile")
     return cache_mod.cache_key(kind, cache_mod.hash_arrays(*arrays), parts, code, cache_mod.library_versions())
 
 
 def _recognizers(config: ExperimentConfig):
-    """Every (classifier, selection) of the config, in the order the tables list them."""
-    return [(c, s) for c in config.classifiers for s in (False, True)]
+    """Every (classifier, selection) of the place-free classifiers, in the order the tables list them (the
+    place-aware recognizer has its own job: ``classify.experiment.place``)."""
+    return [(c, s) for c in config.classifiers if c != "place" for s in (False, True)]
 
 
 def paper_recognition(
@@ -322,7 +358,7 @@ def paper_recognition(
     splits = paper_splits(y, groups, config.folds, config.repeats, seed)
     jobs = [(c, s, r) for c, s in _recognizers(config) for r in range(config.repeats)]
     # One job per classifier and repeat, with and without selection: a fold selection leaves whole is fitted once.
-    shared = [(c, r) for c in config.classifiers for r in range(config.repeats)]
+    shared = [(c, r) for c in config.classifiers if c != "place" for r in range(config.repeats)]
     work = [
         PaperJob(
             X,
@@ -334,7 +370,7 @@ def paper_recognition(
         )
         for c, r in shared
     ]
-    key = _recognition_key(
+    key = recognition_key(
         "paper",
         (X, y, groups),
         [config.folds, config.repeats, seed, config.threshold, config.params, jobs, config.features],
@@ -344,7 +380,7 @@ def paper_recognition(
         by_job = {(c, s, r): o for (c, r), pair in zip(shared, done) for s, o in zip((False, True), pair)}
         return [by_job[j] for j in jobs]
 
-    outcomes = _run_jobs(runtime, key, PaperOutcome, paper_job, work, f"paper: {method}, {n} objects", in_job_order)
+    outcomes = run_jobs(runtime, key, PaperOutcome, paper_job, work, f"paper: {method}, {n} objects", in_job_order)
     out = []
     for c, s in _recognizers(config):
         mine = [o for (cj, sj, _), o in zip(jobs, outcomes) if (cj, sj) == (c, s)]
@@ -368,9 +404,10 @@ def paper_recognition(
 
 
 def instance_data(
-    stage: InstanceStage, replicate: int, method: str, objects: ObjectSet, order, settings: Settings
+    stage: InstanceStage, replicate: int, method: str, objects: ObjectSet, order, settings: Settings, control=None
 ) -> InstanceData:
-    """Replicate ``replicate``'s imprints of the objects ``order`` (label c is object ``order[c]``)."""
+    """Replicate ``replicate``'s imprints of the objects ``order`` (label c is object ``order[c]``); with
+    ``control`` (``classify.experiment.controls``), each test instance's imprints are another object's."""
     X, y, inst, point = [], [], [], []
     for c, i in enumerate(order):
         for j in range(1, settings.train_instances + 1):
@@ -381,13 +418,16 @@ def instance_data(
             inst.append(np.full(sessions * k, j))
             point.append(np.tile(np.arange(k), sessions))
     test = tuple(stage.samples[SampleKey(replicate, method, i, 0)].imprints[0] for i in order)
+    names = tuple(objects.names[i] for i in order)
+    if control is not None:
+        test = shuffled_imprints(test, names, settings.seed, replicate, control)
     return InstanceData(
         np.concatenate(X),
         np.concatenate(y).astype(np.int64),
         np.concatenate(inst).astype(np.int64),
         np.concatenate(point).astype(np.int64),
         test,
-        tuple(objects.names[i] for i in order),
+        names,
     )
 
 
@@ -400,7 +440,7 @@ def instance_recognition(
     names = objects.names[:n]
     order = objects.by_name(n)
     back = np.argsort(order)
-    data = [instance_data(stage, r, method, objects, order, settings) for r in range(config.replicates)]
+    data = [instance_data(stage, r, method, objects, order, settings, config.control) for r in range(config.replicates)]
     jobs = [(r, c, s) for r in range(config.replicates) for c, s in _recognizers(config)]
     work = [
         InstanceJob(
@@ -415,7 +455,7 @@ def instance_recognition(
         for r, c, s in jobs
     ]
     arrays = [a for d in data for a in (d.train_X, d.train_y, d.train_instance, d.train_point, *d.test)]
-    key = _recognition_key(
+    key = recognition_key(
         "instance",
         arrays,
         [
@@ -429,7 +469,7 @@ def instance_recognition(
             config.stop_levels,
         ],
     )
-    outcomes = _run_jobs(runtime, key, InstanceOutcome, instance_job, work, f"instances: {method}, {n} objects")
+    outcomes = run_jobs(runtime, key, InstanceOutcome, instance_job, work, f"instances: {method}, {n} objects")
     out = []
     for c, s in _recognizers(config):
         mine = [o for (_, cj, sj), o in zip(jobs, outcomes) if (cj, sj) == (c, s)]
@@ -457,59 +497,4 @@ def instance_recognition(
                 stopping,
             )
         )
-    return out
-
-
-def policy_recognition(
-    n: int, stage: InstanceStage, objects: ObjectSet, config: ExperimentConfig, runtime: Runtime
-) -> list[Measurement]:
-    """The sequential protocol on the first ``n`` objects: one :class:`Measurement` per policy and classifier."""
-    from classify.experiment.sequential import PolicyOutcome, policy_job, policy_jobs
-
-    jobs = policy_jobs(stage, objects, n, config)
-    back = np.argsort(objects.by_name(n))
-    arrays = [
-        a
-        for job in jobs[:: len(config.classifiers)]
-        for sample in (*job.training.values(), *job.tests)
-        for a in sample.to_arrays().values()
-    ]
-    key = _recognition_key(
-        "sequential",
-        arrays,
-        [
-            config.settings.key(),
-            config.params,
-            config.features,
-            list(config.policies),
-            list(config.classifiers),
-            config.stop_levels,
-            config.replicates,
-        ],
-    )
-    outcomes = _run_jobs(runtime, key, PolicyOutcome, policy_job, jobs, f"policies, {n} objects")
-    out = []
-    for q, policy in enumerate(config.policies):
-        for c in config.classifiers:
-            mine = [o for job, o in zip(jobs, outcomes) if job.recognizer.classifier == c]
-            stack = np.stack([o.rates[q] for o in mine])[:, :, back]  # (replicates, k, objects)
-            K = stack.shape[1]
-            stopping = (
-                np.stack([o.stop_correct[q] for o in mine])[:, :, back],
-                np.stack([o.stop_touches[q] for o in mine])[:, :, back],
-            )
-            out.append(
-                Measurement(
-                    policy,
-                    "sequential",
-                    c,
-                    n,
-                    False,
-                    {k: stack[:, k - 1, :] for k in range(1, K + 1)},
-                    dict.fromkeys(range(1, K + 1), 1),
-                    None,
-                    None,
-                    stopping,
-                )
-            )
     return out

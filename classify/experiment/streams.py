@@ -37,6 +37,10 @@ class Stream(IntEnum):
     EPISODE_TIES = 6
     #: The touch survey's device and rolls (learned methods).
     SURVEY = 7
+    #: A training instance's touch codebooks (followed by 0 for its places, 1 and a method's name seed for its points).
+    CODEBOOK = 8
+    #: A control run's donors (``classify.experiment.controls``).
+    CONTROL = 9
 
 
 def name_seed(name: str) -> int:

@@ -6,14 +6,25 @@ API, the built-in policies and their registry) and ``episodes`` (a policy
 touching a test instance, and the stopping rule).
 """
 
-from classify.policies.episodes import Episode, available_places, decisions, run_episode, stopping_curve
+from classify.policies.episodes import (
+    Episode,
+    available_places,
+    decisions,
+    run_episode,
+    stopping_curve,
+    touched_belief,
+)
 from classify.policies.knowledge import (
     LANDMARKS,
     Forecast,
+    PlaceKnowledge,
     Places,
     PlaceSample,
     TouchKnowledge,
     fit_knowledge,
+    fit_place_knowledge,
+    place_keys,
+    place_touches,
     signatures,
 )
 from classify.policies.policy import (
@@ -33,7 +44,11 @@ __all__ = [
     "PlaceSample",
     "Forecast",
     "TouchKnowledge",
+    "PlaceKnowledge",
     "fit_knowledge",
+    "fit_place_knowledge",
+    "place_keys",
+    "place_touches",
     "TouchState",
     "TouchPolicy",
     "RandomPolicy",
@@ -44,6 +59,7 @@ __all__ = [
     "Episode",
     "available_places",
     "run_episode",
+    "touched_belief",
     "decisions",
     "stopping_curve",
 ]

@@ -3,8 +3,10 @@
 The runner (:func:`run_episode`) holds the test instance's imprints at every
 place and the label; the policy sees only a
 :class:`~classify.policies.policy.TouchState`.  After each touch the belief
-is the product of the calibrated posteriors of the touches so far, as the
-fusion multiplies them (``classify.recognizers.fusion``); the decision after
+is the product of the single-touch posteriors of the touches so far: the
+calibrated posteriors of a place-free classifier, as the fusion multiplies
+them (``classify.recognizers.fusion``), or the tempered place-aware
+likelihoods of ``PlaceKnowledge``; the decision after
 k touches is its most probable class, ties broken by the episode's tie
 stream.  :func:`stopping_curve` applies a stopping rule afterwards: stop when
 the top class's belief reaches p, or after the last touch.
@@ -19,7 +21,7 @@ import numpy as np
 from classify.policies.knowledge import Places, PlaceSample, TouchKnowledge
 from classify.policies.policy import TouchPolicy, TouchState
 
-__all__ = ["Episode", "available_places", "run_episode", "decisions", "stopping_curve"]
+__all__ = ["Episode", "available_places", "touched_belief", "run_episode", "decisions", "stopping_curve"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -59,6 +61,18 @@ def available_places(places: Places, touched, min_spacing: float) -> np.ndarray:
     return ok
 
 
+def touched_belief(belief: np.ndarray, felt: np.ndarray) -> np.ndarray:
+    """The belief after one more touch: ``belief`` times that touch's single-touch posterior ``felt``, normalized.
+
+    Examples
+    --------
+    >>> touched_belief(np.array([0.5, 0.5]), np.array([0.9, 0.1])).round(2).tolist()
+    [0.9, 0.1]
+    """
+    belief = belief * np.maximum(felt, 1e-300)
+    return belief / belief.sum()
+
+
 def run_episode(
     policy: TouchPolicy,
     sample: PlaceSample,
@@ -76,7 +90,7 @@ def run_episode(
     policy : TouchPolicy
     sample : PlaceSample
         The test instance: its places and the imprints of ``session`` at each.
-    knowledge : TouchKnowledge
+    knowledge : TouchKnowledge or PlaceKnowledge
         Fitted on training instances only.
     touches : int
         At most this many touches (fewer when no place is left).
@@ -99,7 +113,9 @@ def run_episode(
     places = sample.places
     forecast = knowledge.forecast(places)
     if felt is None:
-        felt = knowledge.posterior(sample.imprints[session])  # what each place would feel; the policy never sees it
+        felt = knowledge.posterior(
+            sample.imprints[session], places
+        )  # what each place would feel; never seen by the policy
     belief = np.full(knowledge.n_classes, 1.0 / knowledge.n_classes)
     touched, beliefs, seconds = [], [], []
     for _ in range(touches):
@@ -115,8 +131,7 @@ def run_episode(
         if not (0 <= p < len(places) and available[p]):
             raise ValueError(f"policy {type(policy).__name__} chose place {p}, which is not available")
         touched.append(p)
-        belief = belief * np.maximum(felt[p], 1e-300)
-        belief = belief / belief.sum()
+        belief = touched_belief(belief, felt[p])
         beliefs.append(belief)
     C = knowledge.n_classes
     return Episode(

@@ -33,14 +33,25 @@ ball's pool starts anywhere), which is what a touch can tell apart anyway.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
-__all__ = ["LANDMARKS", "Places", "PlaceSample", "Forecast", "TouchKnowledge", "signatures", "fit_knowledge"]
+from meshsal.points.places import LANDMARKS
 
-#: The first candidate places (the pool's start, found again on every instance) every place is located against.
-LANDMARKS = 8
+__all__ = [
+    "LANDMARKS",
+    "Places",
+    "PlaceSample",
+    "Forecast",
+    "TouchKnowledge",
+    "PlaceKnowledge",
+    "signatures",
+    "place_keys",
+    "fit_knowledge",
+    "fit_place_knowledge",
+    "place_touches",
+]
 
 
 @dataclass(frozen=True, eq=False)
@@ -71,10 +82,17 @@ class Places:
 
 @dataclass(frozen=True, eq=False)
 class PlaceSample:
-    """An instance's :class:`Places` and the imprints its sessions give there, (sessions, P, rows, cols) float32."""
+    """An instance's :class:`Places` and the imprints its sessions give there, (sessions, P, rows, cols) float32.
+
+    ``codebook`` (P, draws, d) float32, on a training instance of a run with
+    the place-aware recognizer: the polar descriptors of many simulated
+    touches at each touchable place (``tactile.touch_codebook``; zeros at
+    places no pad can touch).  It is stored apart from the rest.
+    """
 
     places: Places
     imprints: np.ndarray
+    codebook: np.ndarray | None = None
 
     def to_arrays(self) -> dict:
         p = self.places
@@ -94,12 +112,17 @@ class PlaceSample:
             a["imprints"],
         )
 
+    @property
+    def landmarks(self) -> np.ndarray:
+        """(LANDMARKS, 3) the instance's first pool places, which locate any point on it (``signatures``)."""
+        return self.places.positions[:LANDMARKS]
+
 
 def signatures(places: Places) -> np.ndarray:
     """Where each place lies on its shape, whatever the pose and size: (P, LANDMARKS) float64.
 
-    A place's distances to the first :data:`LANDMARKS` places (the start of
-    the shape-determined pool), over the distance between the first two.
+    ``meshsal.points.places.signatures`` of the places against their own first
+    :data:`LANDMARKS` (the start of the shape-determined pool).
 
     Examples
     --------
@@ -108,10 +131,9 @@ def signatures(places: Places) -> np.ndarray:
     >>> signatures(line).round(3).tolist()[2]
     [0.5, 1.118, 0.0]
     """
-    X = np.asarray(places.positions, dtype=np.float64)
-    d = np.linalg.norm(X[:, None, :] - X[None, :LANDMARKS, :], axis=2)
-    scale = d[1, 0] if len(X) > 1 else 0.0
-    return d / scale if scale > 0 else d
+    from meshsal.points.places import signatures as located
+
+    return located(places.positions, places.positions[:LANDMARKS])
 
 
 @dataclass(frozen=True, eq=False)
@@ -169,8 +191,9 @@ class TouchKnowledge:
     def n_classes(self) -> int:
         return len(self.names)
 
-    def posterior(self, imprints: np.ndarray) -> np.ndarray:
-        """(k, C) calibrated posteriors of single touches' imprints (k, rows, cols)."""
+    def posterior(self, imprints: np.ndarray, places: Places | None = None) -> np.ndarray:
+        """(k, C) calibrated posteriors of single touches' imprints (k, rows, cols); where they were taken
+        (``places``) is not used: this knowledge is place-free."""
         from classify.recognizers.fusion import calibrate
         from classify.recognizers.touches import posteriors
         from tactile.features import describe
@@ -203,7 +226,7 @@ class TouchKnowledge:
         return Forecast(out, weight)
 
 
-def fit_knowledge(training: dict, recognizer) -> TouchKnowledge:
+def fit_knowledge(training: dict, recognizer) -> TouchKnowledge | PlaceKnowledge:
     """Touch knowledge from training instances' place samples.
 
     Parameters
@@ -211,11 +234,12 @@ def fit_knowledge(training: dict, recognizer) -> TouchKnowledge:
     training : dict (object name, instance index) -> PlaceSample
         Training instances only (index >= 1); every session of every place is a training touch.
     recognizer : classify.recognizers.touches.Recognizer
-        The single-touch classifier (selection is not applied: every place counts).
+        The single-touch classifier (selection is not applied: every place counts).  The place-aware
+        recognizer ("place") gives a :class:`PlaceKnowledge` from the samples' codebooks.
 
     Returns
     -------
-    TouchKnowledge, classes in the order of the sorted object names
+    TouchKnowledge or PlaceKnowledge, classes in the order of the sorted object names
     """
     from classify.recognizers.fusion import calibrate, fit_calibration
     from classify.recognizers.touches import point_groups, posteriors
@@ -226,6 +250,8 @@ def fit_knowledge(training: dict, recognizer) -> TouchKnowledge:
         raise ValueError(
             f"touch knowledge needs training instances (index >= 1) of at least two objects, got {sorted(training)}"
         )
+    if recognizer.classifier == "place":
+        return fit_place_knowledge(training, recognizer.params or {})
     keys = sorted(training, key=lambda k: (names.index(k[0]), k[1]))
     X, y, inst, vertex = [], [], [], []
     for name, j in keys:
@@ -277,3 +303,178 @@ def fit_knowledge(training: dict, recognizer) -> TouchKnowledge:
         calibration,
         recognizer.features,
     )
+
+
+def place_keys(signatures: np.ndarray) -> np.ndarray:
+    """(k,) int64 keys of points by where they lie: equal signatures (to 1e-7) share a key, so the touches of one
+    place of an object, on any of its instances and from any source, pool into one entry."""
+    import hashlib
+
+    rounded = np.round(np.asarray(signatures, np.float64), 7) + 0.0  # -0.0 and 0.0 alike
+    return np.array(
+        [
+            int.from_bytes(hashlib.blake2b(row.tobytes(), digest_size=8).digest(), "little", signed=True)
+            for row in rounded
+        ],
+        dtype=np.int64,
+    )
+
+
+def place_touches(samples: dict, names: tuple, points=None) -> tuple:
+    """Codebook touches of training instances as the place-aware recognizer takes them.
+
+    Parameters
+    ----------
+    samples : dict (object name, instance index) -> PlaceSample with a codebook
+    names : tuple of str, the classes in order
+    points : dict (object name, instance index) -> a fixed plan's training sample, optional
+        Its ``positions`` (k, 3) and ``codebook`` (k, draws, d): the plan's
+        points, located against the instance's landmarks, instead of the places.
+
+    Returns
+    -------
+    X (N, d), y (N,), signatures (N, LANDMARKS), instances (N,), keys (N,)
+    """
+    from meshsal.points.places import signatures as located
+
+    X, y, sig, inst, keys = [], [], [], [], []
+    for (name, j), sample in sorted(samples.items(), key=lambda kv: (names.index(kv[0][0]), kv[0][1])):
+        if sample.codebook is None:
+            raise ValueError(f"{name}, training instance {j}: no touch codebook (run with the place-aware recognizer)")
+        if points is None:
+            ok = sample.places.touchable
+            where = located(sample.places.positions[ok], sample.landmarks)
+            book = sample.codebook[ok]
+        else:
+            plan = points[name, j]
+            where = located(plan.positions, sample.landmarks)
+            book = plan.codebook
+        draws = book.shape[1]
+        X.append(book.reshape(-1, book.shape[2]))
+        y.append(np.full(book.shape[0] * draws, names.index(name)))
+        sig.append(np.repeat(where, draws, axis=0))
+        inst.append(np.full(book.shape[0] * draws, j))
+        keys.append(np.repeat(place_keys(where), draws))
+    return tuple(np.concatenate(a) for a in (X, y, sig, inst, keys))
+
+
+def _session_touches(samples: dict, names: tuple) -> tuple:
+    """Each training instance's session-0 touches at its touchable places (one device): descriptors, objects,
+    signatures, instances."""
+    from tactile.features import polar_fourier
+
+    X, y, sig, inst = [], [], [], []
+    for (name, j), sample in sorted(samples.items(), key=lambda kv: (names.index(kv[0][0]), kv[0][1])):
+        ok = sample.places.touchable
+        X.append(polar_fourier(sample.imprints[0][ok]))
+        y.append(np.full(ok.sum(), names.index(name)))
+        sig.append(signatures(sample.places)[ok])
+        inst.append(np.full(ok.sum(), j))
+    return tuple(np.concatenate(a) for a in (X, y, sig, inst))
+
+
+@dataclass(frozen=True, eq=False)
+class PlaceKnowledge:
+    """The place-aware recognizer's knowledge: each object's touch codebooks at its places, and the forecast.
+
+    A touch at a place of the test instance is scored, under each object,
+    against the codebook touches of the places with the nearest signatures
+    (``classify.recognizers.place.PlaceAware``); the belief multiplies those
+    tempered likelihoods.  Under the hypothesis "the object is j" the test
+    instance's places are first laid onto j's training places
+    (``meshsal.points.places.landmarks_in``), so that they are located
+    against j's own landmarks even when the instance's tessellation put its
+    landmarks elsewhere; every hypothesis is treated alike, and how well the
+    places fit is never evidence.  The forecast of a place under j is what
+    j's codebook touches at its matched places would make of the belief.
+
+    Attributes
+    ----------
+    names : tuple of str
+    model : classify.recognizers.place.PlaceAware, fitted on the training instances' codebooks
+    table : list of (E_j, S, C) float64, ``model.forecast_table()`` posteriors per object and entry
+    table_weights : list of (E_j, S) float64
+    references : tuple of (P_j, 3) float64, each object's training places (its first training instance's)
+    features : str, always "polar"
+    """
+
+    names: tuple
+    model: object
+    table: list
+    table_weights: list
+    references: tuple
+    features: str = "polar"
+    #: Matched entries a forecast draws on per object and place.
+    forecast_neighbours: int = 2
+    _landmarks: dict = field(default_factory=dict, repr=False)
+
+    @property
+    def n_classes(self) -> int:
+        return len(self.names)
+
+    def landmarks(self, places: Places) -> np.ndarray:
+        """(C, LANDMARKS, 3) each object's landmarks laid onto the instance of ``places`` (computed once per
+        instance)."""
+        from meshsal.points.places import landmarks_in
+
+        key = id(places)
+        found = self._landmarks.get(key)
+        if found is None or found[0] is not places:
+            if len(self._landmarks) > 64:
+                self._landmarks.clear()
+            found = (places, np.stack([landmarks_in(places.positions, ref) for ref in self.references]))
+            self._landmarks[key] = found
+        return found[1]
+
+    def signatures_at(self, positions, places: Places) -> np.ndarray:
+        """(k, C, LANDMARKS) where points of the instance of ``places`` lie on each object."""
+        from meshsal.points.places import signatures as located
+
+        lm = self.landmarks(places)
+        return np.stack([located(positions, lm[j]) for j in range(self.n_classes)], axis=1)
+
+    def posterior(self, imprints: np.ndarray, places: Places) -> np.ndarray:
+        """(k, C) single-touch posteriors of imprints (k, rows, cols) taken at the first k of ``places``."""
+        if len(imprints) == 0:
+            return np.zeros((0, self.n_classes))
+        return self.model.predict_proba(imprints, self.signatures_at(places.positions[: len(imprints)], places))
+
+    def posterior_at(self, imprints: np.ndarray, positions, places: Places) -> np.ndarray:
+        """(k, C) single-touch posteriors of imprints taken at ``positions`` (k, 3) on the instance of ``places``."""
+        if len(imprints) == 0:
+            return np.zeros((0, self.n_classes))
+        return self.model.predict_proba(imprints, self.signatures_at(positions, places))
+
+    def forecast(self, places: Places) -> Forecast:
+        """The :class:`Forecast` of an instance's candidate places, from the codebooks of the matched entries."""
+        C, P = self.n_classes, len(places)
+        G = self.signatures_at(places.positions, places)
+        K = self.forecast_neighbours
+        S = self.table[0].shape[1]
+        out = np.full((C, P, K * S, C), 1.0 / C)
+        weight = np.zeros((C, P, K * S))
+        for j in range(C):
+            idx, w = self.model.match(j, G[:, j])
+            k = min(K, idx.shape[1])
+            idx, w = idx[:, :k], w[:, :k] / w[:, :k].sum(axis=1, keepdims=True)
+            for a in range(k):
+                out[j, :, a * S : (a + 1) * S] = self.table[j][idx[:, a]]
+                weight[j, :, a * S : (a + 1) * S] = w[:, a, None] * self.table_weights[j][idx[:, a]]
+        return Forecast(out, weight)
+
+
+def fit_place_knowledge(training: dict, params: dict | None = None) -> PlaceKnowledge:
+    """:class:`PlaceKnowledge` from training instances' place samples with codebooks (``params`` for the
+    ``place`` recognizer, as ``classify.make`` takes them)."""
+    from classify.recognizers.classifiers import make
+
+    names = tuple(sorted({name for name, _ in training}))
+    X, y, sig, inst, keys = place_touches(training, names)
+    model = make("place", **(params or {}).get("place", {})).fit(
+        X, y, signatures=sig, instances=inst, places=keys, session=_session_touches(training, names)
+    )
+    table, weights = model.forecast_table()
+    references = tuple(
+        training[min((k for k in training if k[0] == name), key=lambda k: k[1])].places.positions for name in names
+    )
+    return PlaceKnowledge(names, model, table, weights, references)

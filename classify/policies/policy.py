@@ -2,7 +2,7 @@
 
 A policy sees a :class:`TouchState`: the test instance's candidate places
 (vision), the places touched so far and the imprints they gave, the belief
-(the calibrated posteriors of those touches multiplied, as the fusion
+(the single-touch posteriors of those touches multiplied, as the fusion
 multiplies them), which places may still be touched, the forecast of every
 place under every hypothesis, and the touch knowledge fitted on training
 instances.  It never sees the label, or an imprint of a place it has not
@@ -58,14 +58,15 @@ class TouchState:
     imprints : (k, rows, cols) float32
         What those touches felt.
     belief : (C,) float64
-        Calibrated posteriors of those touches multiplied and normalized
-        (uniform before the first touch), classes as ``knowledge.names``.
+        Single-touch posteriors of those touches (place-aware or calibrated)
+        multiplied and normalized (uniform before the first touch), classes as
+        ``knowledge.names``.
     available : (P,) bool
         Places that may be touched next: touchable, untouched and at least
         the minimum spacing from every touched place.
     forecast : Forecast
         ``knowledge.forecast(places)``.
-    knowledge : TouchKnowledge
+    knowledge : PlaceKnowledge or TouchKnowledge
         Fitted on training instances only.
     """
 
@@ -168,8 +169,9 @@ class InfoGainPolicy(TouchPolicy):
     """Greedy expected information gain: the available place whose touch is expected to leave the least entropy.
 
     Ties go to the earlier place.  The forecast is the per-object touch models
-    of :class:`~classify.policies.knowledge.TouchKnowledge`, scored with the
-    calibrated posteriors the fusion multiplies.
+    of :class:`~classify.policies.knowledge.PlaceKnowledge` (the codebooks of
+    the matched places) or :class:`~classify.policies.knowledge.TouchKnowledge`,
+    scored with the single-touch posteriors the belief multiplies.
     """
 
     def choose(self, state: TouchState, rng: np.random.Generator) -> int:

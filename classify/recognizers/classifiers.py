@@ -1,10 +1,11 @@
-"""The five recognizers of the paper, as scikit-learn estimators.
+"""The five recognizers of the paper, and the place-aware one, as scikit-learn estimators.
 
-``make(name, **params)`` builds one by name (``NAMES``).  All of them take
-imprints as 256-vectors (16x16 flattened row-major, as in the paper) and
-also accept the (N, 16, 16) stack of an ``ImprintSet`` directly, flattening
-it; they all have fit / predict / predict_proba / get_params, so they can be
-cloned, grid-searched and cross-validated like any scikit-learn classifier.
+``make(name, **params)`` builds one by name (``NAMES``).  The paper's five
+(``PAPER_NAMES``) take imprints as 256-vectors (16x16 flattened row-major,
+as in the paper) and also accept the (N, 16, 16) stack of an ``ImprintSet``
+directly, flattening it; all of them have fit / predict / predict_proba /
+get_params, so they can be cloned, grid-searched and cross-validated like
+any scikit-learn classifier.
 
 ====================  ==========================================================
 ``knn``               k-nearest neighbours, k chosen by an inner stratified
@@ -16,6 +17,9 @@ cloned, grid-searched and cross-validated like any scikit-learn classifier.
 ``deep``              feed-forward network, two hidden layers (128, 64), ReLU,
                       Adam on mini-batches of 32, early stopping on a 10 %
                       validation split, seeded
+``place``             the place-aware likelihood (``classify.recognizers.place``):
+                      it also needs where each touch was taken, so it runs
+                      in the instance protocol and the touch policies only
 ====================  ==========================================================
 """
 
@@ -34,11 +38,13 @@ from sklearn.utils.validation import check_is_fitted
 
 from classify.recognizers.evolutionary_svm import EvolutionarySVM, as_matrix
 from classify.recognizers.folds import GroupFolds
+from classify.recognizers.place import PlaceAware
 from meshsal.util.registry import Registry
 
 __all__ = [
     "CLASSIFIERS",
     "NAMES",
+    "PAPER_NAMES",
     "make",
     "as_matrix",
     "KNN",
@@ -389,7 +395,7 @@ def _posterior(neighbour_codes, class_dist, scale):
     return (votes + _SOFT * soft) / (k + _SOFT)
 
 
-#: The five recognizers of the paper: class and default parameters.
+#: The recognizers: the five of the paper, then the place-aware one; class and default parameters.
 CLASSIFIERS = Registry("classifier")
 CLASSIFIERS.register("knn", (KNN, {}), "k-nearest neighbours, k tuned on grouped inner folds")
 CLASSIFIERS.register("naive_bayes", (NaiveBayes, {}), "Gaussian naive Bayes")
@@ -402,6 +408,13 @@ CLASSIFIERS.register(
         {"hidden_layer_sizes": (128, 64), "early_stopping": True, "batch_size": 32, "max_iter": 500, "random_state": 0},
     ),
     "two-layer network",
+)
+#: The paper's five, which recognize single imprints wherever they were taken (Table 1).
+PAPER_NAMES = CLASSIFIERS.names()
+CLASSIFIERS.register(
+    "place",
+    (PlaceAware, {}),
+    "place-aware likelihood of touch codebooks (instance protocol and policies only)",
 )
 NAMES = CLASSIFIERS.names()
 
@@ -422,7 +435,7 @@ def make(name: str, **params):
     >>> make("svm")
     Traceback (most recent call last):
     ...
-    ValueError: unknown classifier 'svm'; choose from knn, naive_bayes, decision_tree, evolutionary_svm, deep
+    ValueError: unknown classifier 'svm'; choose from knn, naive_bayes, decision_tree, evolutionary_svm, deep, place
     """
     cls, defaults = CLASSIFIERS.get(name)
     estimator = cls(**defaults)

@@ -3,8 +3,8 @@
 :class:`StratifiedGroupKFold` places each group (an instance's point, its
 re-touches) in the fold that keeps the class proportions most even.
 scikit-learn scores the candidate folds one at a time in Python, with a
-``np.std`` and a ``np.isclose`` per fold and group: a third of the demo's
-recognition time went there (10 folds for the deep network's validation
+``np.std`` and a ``np.isclose`` per fold and group, which on the demo costs
+a third of the recognition time (10 folds for the deep network's validation
 split, hundreds of groups).  :class:`GroupFolds` scores all candidate folds in
 one array operation and compares in plain floats; the folds are the same,
 split for split (``tests/test_folds.py`` checks it against scikit-learn's).

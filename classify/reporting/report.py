@@ -100,7 +100,10 @@ def _index(cells):
 
 
 def table_markdown(cells, method: str, protocol: str, classifiers, object_sets, touches: int = 1) -> str:
-    """The Table 1 layout: rows classifiers, columns (objects x no selection / selection).
+    """The Table 1 layout: rows classifiers (those measured for this method and protocol), columns (objects x no
+    selection / selection).
+
+    Missing cells print as ``-``.
 
     Parameters
     ----------
@@ -109,8 +112,6 @@ def table_markdown(cells, method: str, protocol: str, classifiers, object_sets, 
     classifiers : row order
     object_sets : sequence of object counts (e.g. ``(4, 6)``)
     touches : which touch count to show (1: single touch)
-
-    Missing cells print as ``-``.
     """
     index = _index(cells)
     header = ["classifier"]
@@ -118,6 +119,8 @@ def table_markdown(cells, method: str, protocol: str, classifiers, object_sets, 
         header += [f"{n} objects, no selection", f"{n} objects, selection"]
     lines = ["| " + " | ".join(header) + " |", "|" + "|".join(["---"] + [":---:"] * (len(header) - 1)) + "|"]
     for name in classifiers:
+        if not any(key[:3] == (method, protocol, name) for key in index):
+            continue
         row = [name]
         for n in object_sets:
             for selection in (False, True):
@@ -130,9 +133,11 @@ def table_markdown(cells, method: str, protocol: str, classifiers, object_sets, 
 def touches_markdown(
     cells, method: str, protocol: str, classifiers, n_objects: int, selection: bool, touches=(1, 2, 3, 5, 10, 15)
 ) -> str:
-    """Recognition after k touches: rows classifiers, columns k (mean [95 % interval], percent)."""
+    """Recognition after k touches: rows classifiers (those measured in this setting), columns k (mean [95 %
+    interval], percent)."""
     index = _index(cells)
     ks = [k for k in touches if any((method, protocol, c, n_objects, selection, k) in index for c in classifiers)]
+    classifiers = [c for c in classifiers if any((method, protocol, c, n_objects, selection, k) in index for k in ks)]
     lines = [
         "| classifier | " + " | ".join(f"{k} touch{'es' if k > 1 else ''}" for k in ks) + " |",
         "|---|" + "|".join([":---:"] * len(ks)) + "|",
@@ -290,8 +295,53 @@ def _put(img, text, org, scale=0.45, color=(0, 0, 0), thickness=1, anchor="left"
     cv2.putText(img, text, (int(x), int(y + h // 2)), _FONT, scale, color, thickness, cv2.LINE_AA)
 
 
+#: Above this many classes a confusion panel lists the largest confusions instead of drawing the grid.
+GRID_CLASSES = 24
+
+
+def top_confusions(counts, names, k: int = 20) -> list[tuple[str, str, int, float]]:
+    """The ``k`` largest off-diagonal cells: (true, predicted, count, share of the true class's touches).
+
+    Examples
+    --------
+    >>> top_confusions(np.array([[8, 2, 0], [1, 9, 0], [0, 5, 5]]), ["a", "b", "c"], k=2)
+    [('c', 'b', 5, 0.5), ('a', 'b', 2, 0.2)]
+    """
+    M = np.asarray(counts, dtype=np.int64)
+    off = M.copy()
+    np.fill_diagonal(off, 0)
+    rows = M.sum(axis=1)
+    flat = np.lexsort((np.arange(off.size), -off.ravel()))[:k]
+    return [
+        (names[i], names[j], int(off[i, j]), float(off[i, j] / rows[i]) if rows[i] else 0.0)
+        for i, j in (divmod(int(f), M.shape[1]) for f in flat)
+        if off[i, j] > 0
+    ]
+
+
+def _confusion_list(matrix, names, title, k: int = 20, line=22):
+    """A panel for many classes: the overall rate and the ``k`` largest confusions as lines of text."""
+    M = np.asarray(matrix)
+    rows = top_confusions(M, list(names), k)
+    img = np.full((70 + line * max(len(rows), 1), 640, 3), 255, np.uint8)
+    _put(img, title, (8, 12), 0.5)
+    right = np.trace(M) / max(M.sum(), 1)
+    _put(
+        img,
+        f"{len(names)} classes: {100 * right:.1f} % right; the largest confusions (true -> predicted):",
+        (8, 36),
+        0.42,
+        (90, 90, 90),
+    )
+    for r, (a, b, count, share) in enumerate(rows):
+        _put(img, f"{a} -> {b}: {count} ({100 * share:.0f} % of {a}'s)", (16, 62 + r * line), 0.42)
+    return img
+
+
 def _confusion_panel(matrix, names, title, cell=44):
     n = len(names)
+    if n > GRID_CLASSES:
+        return _confusion_list(matrix, names, title)
     label_w = max(cv2.getTextSize(s, _FONT, 0.45, 1)[0][0] for s in names) + 16
     top = 56
     img = np.full((top + n * cell + 30, label_w + n * cell + 16, 3), 255, np.uint8)
@@ -322,7 +372,8 @@ def _confusion_panel(matrix, names, title, cell=44):
 
 
 def confusion_image(panels) -> np.ndarray:
-    """Confusion matrices side by side, each row-normalized (percent of the true class).
+    """Confusion matrices side by side, each row-normalized (percent of the true class); above
+    :data:`GRID_CLASSES` classes, each panel lists the largest confusions instead (:func:`top_confusions`).
 
     Parameters
     ----------

@@ -29,6 +29,7 @@ __all__ = [
     "ConfusionMatrix",
     "StoppingCell",
     "ExperimentResult",
+    "MissingCell",
     "format_tables",
     "write_outputs",
 ]
@@ -153,16 +154,54 @@ class ExperimentResult:
     stopping_rates: dict = field(default_factory=dict)
 
     def cell(self, method, protocol, classifier, n_objects, selection, touches=1) -> Cell:
-        """The cell of these coordinates (KeyError when it was not measured)."""
-        return _find(self.cells, (method, protocol, classifier, n_objects, selection, touches))
+        """The cell of these coordinates (:class:`MissingCell`, a KeyError listing what was measured, if none)."""
+        return _find(self.cells, (method, protocol, classifier, n_objects, selection, touches), "cell")
 
     def comparison(self, method, protocol, classifier, n_objects, selection, touches=1) -> Comparison:
-        """The paired comparison of ``method`` with the baseline at these coordinates (KeyError if none)."""
-        return _find(self.comparisons, (method, protocol, classifier, n_objects, selection, touches))
+        """The paired comparison of ``method`` with the baseline at these coordinates.
+
+        Raises
+        ------
+        MissingCell
+            A KeyError naming the coordinates asked for and listing, for each, the values measured.
+        """
+        return _find(self.comparisons, (method, protocol, classifier, n_objects, selection, touches), "comparison")
 
     def table(self, method, protocol, touches=1) -> str:
         """The Table 1 layout as Markdown."""
         return report.table_markdown(self.cells, method, protocol, self.classifiers, self.object_sets, touches)
+
+    @classmethod
+    def from_json(cls, document: dict) -> ExperimentResult:
+        """The result a ``results.json`` holds (:meth:`to_json`'s inverse, as far as the tables need)."""
+
+        def key(d):
+            return tuple(d[c] for c in _COORDINATES)
+
+        confusions = tuple(
+            ConfusionMatrix(**{**c, "object_names": tuple(c["object_names"]), "counts": np.asarray(c["counts"])})
+            for c in document.get("confusions", [])
+        )
+        return cls(
+            cells=tuple(Cell(**c) for c in document["cells"]),
+            comparisons=tuple(Comparison(**c) for c in document.get("comparisons", [])),
+            confusions=confusions,
+            object_names=tuple(document["object_names"]),
+            object_sets=tuple(document["object_sets"]),
+            classifiers=tuple(document["classifiers"]),
+            settings=document.get("settings", {}),
+            selection_kept=document.get("selection_kept", {}),
+            timings=document.get("timings_s", {}),
+            rates={key(r): np.asarray(r["replicate_by_object"]) for r in document.get("rates", [])},
+            stopping=tuple(StoppingCell(**s) for s in document.get("stopping", [])),
+            stopping_rates={
+                (s["method"], s["protocol"], s["classifier"], s["n_objects"]): (
+                    np.asarray(s["correct"]),
+                    np.asarray(s["touches"]),
+                )
+                for s in document.get("stopping_by_object", [])
+            },
+        )
 
     def to_json(self) -> dict:
         return {
@@ -205,11 +244,30 @@ class ExperimentResult:
         }
 
 
-def _find(records, key):
+_COORDINATES = ("method", "protocol", "classifier", "n_objects", "selection", "touches")
+
+
+class MissingCell(KeyError):
+    """No cell or comparison was measured at the coordinates asked for; the message lists what was."""
+
+    def __str__(self) -> str:
+        return str(self.args[0])
+
+
+def _find(records, key, kind: str):
     for r in records:
-        if (r.method, r.protocol, r.classifier, r.n_objects, r.selection, r.touches) == key:
+        if tuple(getattr(r, c) for c in _COORDINATES) == key:
             return r
-    raise KeyError(key)
+    asked = ", ".join(f"{c}={v!r}" for c, v in zip(_COORDINATES, key))
+    if not records:
+        why = " (comparisons need several methods: each is compared with the baseline)" if kind == "comparison" else ""
+        raise MissingCell(f"no {kind} at {asked}: this result has none{why}")
+    measured = []
+    for i, c in enumerate(_COORDINATES):
+        values = sorted({getattr(r, c) for r in records}, key=repr)
+        missing = "" if key[i] in values else f" (not {key[i]!r})"
+        measured.append(f"{c} {', '.join(map(repr, values))}{missing}")
+    raise MissingCell(f"no {kind} at {asked}; measured: {'; '.join(measured)}")
 
 
 def _title(protocol):
@@ -242,24 +300,27 @@ def format_tables(result: ExperimentResult, title="Table 1 layout") -> str:
                         f"{'with' if selection else 'no'} selection: recognition (%) after k touches\n\n"
                         + report.touches_markdown(result.cells, method, protocol, result.classifiers, n, selection)
                     )
-    clf = "knn" if "knn" in result.classifiers else result.classifiers[0]
+    # The place-free classifier the README's tables use, and the place-aware recognizer beside it.
+    shown = [c for c in ("knn", "place") if c in result.classifiers] or [result.classifiers[0]]
     if result.comparisons:
         baseline = result.comparisons[0].baseline
-        for protocol in [p for p in protocols if p != "sequential"]:
-            table = report.comparison_markdown(result.cells, result.comparisons, protocol, clf, n, False)
-            if table:
-                policies = " and touch policies" if protocol == "instance" and "sequential" in protocols else ""
-                blocks.append(
-                    f"### Point methods{policies} against {baseline}, {_title(protocol)}, {clf}, {n} "
-                    f"objects, no selection: rate (%) and paired difference (points) [95 % interval], "
-                    f"Wilcoxon p\n\n" + table
-                )
-    if result.stopping:
-        blocks.append(
-            f"### Stopping rule: stop when the top object's calibrated posterior reaches p; {clf}, {n} "
-            f"objects, no selection: accuracy (%) / mean touches used [95 % intervals in "
-            f"stopping.csv]\n\n" + report.stopping_markdown(result.stopping, clf, n)
-        )
+        for clf in shown:
+            for protocol in [p for p in protocols if p != "sequential"]:
+                table = report.comparison_markdown(result.cells, result.comparisons, protocol, clf, n, False)
+                if table:
+                    policies = " and touch policies" if protocol == "instance" and "sequential" in protocols else ""
+                    blocks.append(
+                        f"### Point methods{policies} against {baseline}, {_title(protocol)}, {clf}, {n} "
+                        f"objects, no selection: rate (%) and paired difference (points) [95 % interval], "
+                        f"Wilcoxon p\n\n" + table
+                    )
+    for clf in shown if result.stopping else ():
+        if any((s.classifier, s.n_objects) == (clf, n) for s in result.stopping):
+            blocks.append(
+                f"### Stopping rule: stop when the top object's posterior reaches p; {clf}, {n} "
+                f"objects, no selection: accuracy (%) / mean touches used [95 % intervals in "
+                f"stopping.csv]\n\n" + report.stopping_markdown(result.stopping, clf, n)
+            )
     notes = [
         c
         for c in result.cells

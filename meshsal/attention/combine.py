@@ -11,9 +11,10 @@ import cv2
 import numpy as np
 
 from meshsal.attention.dkl import dkl, dkl_stack
+from meshsal.attention.images import ImageStack
 from meshsal.attention.itti import color, color_stack, intensity, intensity_stack, orientation, orientation_stack
-from meshsal.attention.local import contrast, entropy
-from meshsal.attention.pyramid import _stack_to_max, normalize_maps, scale_to_max
+from meshsal.attention.local import contrast, contrast_stack, entropy, entropy_stack
+from meshsal.attention.pyramid import _stack_to_max, normalize_maps
 from meshsal.attention.symmetry import symmetry, symmetry_stack
 from meshsal.util.registry import Registry
 
@@ -48,18 +49,20 @@ CHANNEL_REGISTRY.register("contrast", contrast, "local contrast")
 CHANNELS = CHANNEL_REGISTRY.names()
 IMAGE_CHANNELS = tuple(e.name for e in CHANNEL_REGISTRY if e.value is not None)
 
-# Channel functions that also run on a stack of images (n, H, W, 3) -> (n, H, W), bit for bit image by image:
-# their center-surround pyramids are normalized for the whole stack at once.
+# Channel functions that also run on an ImageStack -> (n, H, W), bit for bit image by image (see
+# image_channels_stack).
 _STACKED = {
     intensity: intensity_stack,
     color: color_stack,
     orientation: orientation_stack,
     dkl: dkl_stack,
     symmetry: symmetry_stack,
+    entropy: entropy_stack,
+    contrast: contrast_stack,
 }
 # Views a thread takes at once in saliency_views: enough to share the pyramids' per-call costs, few enough
-# that two threads share 72 views evenly.  Tried on 72 views (1, 4, 6, 9, 12, 18 and 36; one thread at
-# 128 px, two at 256 px, two runs): 18 and 36 were the fastest, within the machine's noise of each other.
+# that two threads share 72 views evenly.  Of 1, 4, 6, 9, 12, 18 and 36 on 72 views (one thread at 128 px,
+# two at 256 px), 18 and 36 are the fastest, within the machine's noise of each other.
 _VIEWS_PER_STACK = 18
 
 
@@ -105,9 +108,10 @@ def image_channels(img: np.ndarray, names: Sequence[str] = IMAGE_CHANNELS) -> di
 def image_channels_stack(imgs, names: Sequence[str] = IMAGE_CHANNELS) -> dict[str, np.ndarray]:
     """:func:`image_channels` of a stack of images, bit for bit image by image.
 
-    The center-surround channels (intensity, color, orientation, DKL,
-    symmetry) run on the whole stack at once; the others, and channels
-    registered from outside, image by image.
+    The images are checked once, each grey level and pyramid several
+    channels read is computed once, and the center-surround pyramids are
+    normalized for the whole stack at once; channels registered from
+    outside run image by image.
 
     Parameters
     ----------
@@ -127,11 +131,12 @@ def image_channels_stack(imgs, names: Sequence[str] = IMAGE_CHANNELS) -> dict[st
     """
     if not len(imgs):
         raise ValueError("image_channels_stack needs at least one image")
+    functions = {name: channel_function(name) for name in names}
+    stack = ImageStack.of(imgs, ", ".join(names))
     out = {}
-    for name in names:
-        fn = channel_function(name)
+    for name, fn in functions.items():
         stacked = _STACKED.get(fn)
-        out[name] = stacked(imgs) if stacked is not None else np.stack([fn(img) for img in imgs])
+        out[name] = stacked(stack) if stacked is not None else np.stack([fn(img) for img in stack.rgb])
     return out
 
 
@@ -147,9 +152,8 @@ def curvature(view, vertex_saliency: np.ndarray) -> np.ndarray:
     Parameters
     ----------
     view : View
-        Uses ``view.vertex_ids`` (H, W, 3) int (-1 on background) and ``view.bary`` (H, W, 3).
-    vertex_saliency : (n,) float
-        E.g. ``meshsal.mesh_saliency(mesh)``.
+        Uses ``view.face_id`` (H, W) int (-1 on background), ``view.faces`` and ``view.bary`` (H, W, 3).
+    vertex_saliency : (n,) float, e.g. ``meshsal.mesh_saliency(mesh)``
 
     Returns
     -------
@@ -157,24 +161,25 @@ def curvature(view, vertex_saliency: np.ndarray) -> np.ndarray:
 
     Examples
     --------
-    >>> from types import SimpleNamespace
-    >>> v = SimpleNamespace(vertex_ids=np.array([[[0, 1, 2], [-1, -1, -1]]]),
+    >>> from types import SimpleNamespace  # what curvature reads of a View
+    >>> v = SimpleNamespace(face_id=np.array([[0, -1]]), faces=np.array([[0, 1, 2]]),
     ...                     bary=np.array([[[0.5, 0.5, 0.0], [0, 0, 0]]]))
     >>> curvature(v, np.array([0.0, 1.0, 2.0])).tolist()
     [[0.25, 0.0]]
     """
     values = np.asarray(vertex_saliency, dtype=np.float64)
-    vertex_ids = np.asarray(view.vertex_ids)
     if values.ndim != 1:
         raise ValueError(f"vertex_saliency must be a 1-D array with one value per vertex, got shape {values.shape}")
     if not np.isfinite(values).all():
         raise ValueError("vertex_saliency contains NaN or infinite values")
-    # Pixels by flat index: indexing the (H, W, 3) arrays by a mask took most of the channel's time.
-    pixels = np.flatnonzero(vertex_ids[..., 0] >= 0)
-    corners = vertex_ids.reshape(-1, 3)[pixels]
+    # Pixels by flat index (indexing by a mask would take most of the channel's time), and the corners of the
+    # faces the object's pixels see, not the whole image's.
+    face_id = np.asarray(view.face_id).reshape(-1)
+    pixels = np.flatnonzero(face_id >= 0)
+    corners = np.take(view.faces, face_id[pixels], axis=0)
     if pixels.size and int(corners.max()) >= values.size:
         raise ValueError(f"vertex_saliency has {values.size} values but the view shows vertex {int(corners.max())}")
-    out = np.zeros(vertex_ids.shape[:2], np.float32)
+    out = np.zeros(np.shape(view.face_id), np.float32)
     if values.size == 0:
         return out
     lo, span = float(values.min()), float(np.ptp(values))
@@ -327,27 +332,32 @@ def combine_maps(
         if shape != inside.shape:
             raise ValueError(f"channel {name!r} has shape {shape}, the mask {inside.shape}")
     gains = [w[name] for name in names]
-    # The channels cut to the silhouette, each scaled to its maximum, all in one array.
-    cuts = np.zeros((len(names), h, wd), np.float32)
+    # Every cut map is zero off the silhouette: work on its pixels only, each channel scaled to its maximum.
+    cuts = np.empty((len(names), pixels.size), np.float32)
     for k, name in enumerate(names):
-        np.copyto(cuts[k], channels[name], where=inside, casting="unsafe")
+        cuts[k] = np.asarray(channels[name]).reshape(-1)[pixels]
     _stack_to_max(cuts)
-    flat = cuts.reshape(len(names), -1)
     if floor is not None and pixels.size:
         # Not rescaled (see ``floor``).
-        cuts -= _percentiles(flat[:, pixels], floor)[:, None, None]
+        cuts -= _percentiles(cuts, floor)[:, None]
         np.maximum(cuts, np.float32(0.0), out=cuts)
     if normalize:
         # N(.) of every channel that responds, in one pass.
-        live = np.flatnonzero(flat.any(axis=1))
+        live = np.flatnonzero(cuts.any(axis=1))
         if live.size:
-            shrunk = np.stack([cv2.resize(cuts[k], small, interpolation=cv2.INTER_AREA) for k in live])
-            for k, amplitude in zip(live, normalize_maps(shrunk).reshape(len(live), -1).max(axis=1)):
+            image = np.zeros(h * wd, np.float32)
+            shrunk = []
+            for k in live:
+                image[pixels] = cuts[k]
+                shrunk.append(cv2.resize(image.reshape(h, wd), small, interpolation=cv2.INTER_AREA))
+            for k, amplitude in zip(live, normalize_maps(np.stack(shrunk)).reshape(len(live), -1).max(axis=1)):
                 gains[k] *= float(amplitude)
-    total = np.zeros(inside.shape, np.float32)
+    total = np.zeros(pixels.size, np.float32)
     for cut, gain in zip(cuts, gains):
         total += np.float32(gain) * cut
-    return scale_to_max(total)
+    out = np.zeros(h * wd, np.float32)
+    out[pixels] = _stack_to_max(total[None])[0]
+    return out.reshape(h, wd)
 
 
 def plateau_fraction(saliency_map: np.ndarray, mask: np.ndarray, erode: int | None = None) -> float:
@@ -438,7 +448,7 @@ def saliency_views(
     The mesh saliency is computed once.  Each thread takes up to 18 views
     of one size at once (:func:`image_channels_stack`): per view, the
     center-surround pyramids' hundreds of calls on small maps, each of which
-    held Python's lock and handed it over between threads, become a share of
+    holds Python's lock and hands it over between threads, become a share of
     a few calls on the stack.
 
     Parameters
@@ -446,10 +456,8 @@ def saliency_views(
     views : sequence of View
     mesh : Mesh
     weights, vertex_saliency, normalize : as in :func:`saliency`
-    threads : int, optional
-        Worker threads (default: the CPU count).
-    quiet : bool
-        No progress bar on stderr.
+    threads : int, optional, worker threads (default: the CPU count)
+    quiet : bool, no progress bar on stderr
 
     Returns
     -------

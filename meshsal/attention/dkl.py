@@ -16,7 +16,8 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-from meshsal.attention.pyramid import check_image, conspicuity_maps
+from meshsal.attention.images import ImageStack
+from meshsal.attention.pyramid import conspicuity_maps
 
 __all__ = ["RGB_TO_LMS", "srgb_to_linear", "rgb_to_lms", "dkl_axes", "dkl", "dkl_stack"]
 
@@ -61,11 +62,11 @@ def rgb_to_lms(img: np.ndarray) -> np.ndarray:
 
 
 def dkl_axes(img: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """The chromatic DKL axes of an sRGB image.
+    """The chromatic DKL axes of an sRGB image (..., 3), pixel by pixel.
 
     Returns
     -------
-    l_minus_m, s_minus_lum : (H, W) float32 each; zero for every gray.
+    l_minus_m, s_minus_lum : (...) float32 each, e.g. (H, W); zero for every gray.
 
     Examples
     --------
@@ -92,5 +93,6 @@ def dkl(img: np.ndarray) -> np.ndarray:
 
 
 def dkl_stack(imgs) -> np.ndarray:
-    """:func:`dkl` of each image of a stack (n, H, W, 3), bit for bit: (n, H, W) float32."""
-    return conspicuity_maps(np.stack([np.stack(dkl_axes(check_image(img, "dkl"))) for img in imgs]))
+    """:func:`dkl` of each image of a stack (n, H, W, 3) or :class:`ImageStack`, bit for bit: (n, H, W) float32."""
+    # Image by image: the full-size arithmetic stays in cache.
+    return conspicuity_maps(np.stack([np.stack(dkl_axes(img)) for img in ImageStack.of(imgs, "dkl").rgb]))

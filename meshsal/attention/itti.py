@@ -10,7 +10,8 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-from meshsal.attention.pyramid import check_image, conspicuity_maps, gaussian_pyramid, upsample
+from meshsal.attention.images import ImageStack, window_crop
+from meshsal.attention.pyramid import conspicuity_maps, conspicuity_of_pyramid, upsample_stack
 
 __all__ = [
     "intensity",
@@ -35,14 +36,8 @@ _GABOR_SIGMA = 2.0
 _GABOR_PERIOD = 4.0
 _GABOR_ASPECT = 0.5
 
-_MEAN = np.full((1, 3), 1.0 / 3.0, np.float32)
 # Rows giving Itti's broadly tuned R, G, B from r, g, b (before rectification).
 _RGB_TUNED = np.array([[1.0, -0.5, -0.5], [-0.5, 1.0, -0.5], [-0.5, -0.5, 1.0]], np.float32)
-
-
-def _intensity(img: np.ndarray) -> np.ndarray:
-    # cv2.transform is two orders of magnitude faster than ndarray.mean(axis=2).
-    return cv2.transform(img, _MEAN)
 
 
 def intensity(img: np.ndarray) -> np.ndarray:
@@ -67,8 +62,9 @@ def intensity(img: np.ndarray) -> np.ndarray:
 
 
 def intensity_stack(imgs) -> np.ndarray:
-    """:func:`intensity` of each image of a stack (n, H, W, 3), bit for bit: (n, H, W) float32."""
-    return conspicuity_maps(np.stack([_intensity(check_image(img, "intensity")) for img in imgs])[:, None])
+    """:func:`intensity` of each image of a stack (n, H, W, 3) or :class:`ImageStack`, bit for bit: (n, H, W) float32."""
+    stack = ImageStack.of(imgs, "intensity")
+    return conspicuity_of_pyramid(stack.intensity_pyramid, 1, stack.shape)
 
 
 def opponency(img: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -83,18 +79,30 @@ def opponency(img: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     -------
     RG = R - G, BY = B - Y : (H, W) float32 each
     """
-    inten = _intensity(img)
+    rg, by = _opponencies(ImageStack.of([img], "opponency"))[0]
+    return rg, by
+
+
+def _opponencies(stack: ImageStack) -> np.ndarray:
+    """:func:`opponency` of each image of a stack: (n, 2, H, W) float32, RG and BY."""
+    inten = stack.intensity
     # Hue normalization by I commutes with the rectified, degree-1 tuned
     # channels, so it is applied to the two differences only.
     scale = 1.0 / np.maximum(inten, np.float32(1e-6))
-    scale[inten <= 0.1 * float(inten.max())] = 0.0
-    # cv2.extractChannel, unlike cv2.split, is nearly free.
-    tuned = np.maximum(cv2.transform(img, _RGB_TUNED), np.float32(0.0))
-    red, green, blue = (cv2.extractChannel(tuned, k) for k in range(3))
-    r, g, b = (cv2.extractChannel(img, k) for k in range(3))
-    # (r + g)/2 - |r - g|/2 = min(r, g)
-    yellow = np.maximum(np.minimum(r, g) - b, np.float32(0.0))
-    return (red - green) * scale, (blue - yellow) * scale
+    tenth = (0.1 * inten.reshape(len(inten), -1).max(axis=1).astype(np.float64)).astype(np.float32)
+    scale[inten <= tenth[:, None, None]] = 0.0
+    out = np.empty((len(inten), 2, *stack.shape), np.float32)
+    # Image by image: the full-size arithmetic stays in cache.
+    for img, weight, (rg, by) in zip(stack.rgb, scale, out):
+        tuned = np.maximum(cv2.transform(img, _RGB_TUNED), np.float32(0.0))
+        # cv2.extractChannel, unlike cv2.split, is nearly free.
+        red, green, blue = (cv2.extractChannel(tuned, k) for k in range(3))
+        r, g, b = (cv2.extractChannel(img, k) for k in range(3))
+        # (r + g)/2 - |r - g|/2 = min(r, g)
+        yellow = np.maximum(np.minimum(r, g) - b, np.float32(0.0))
+        np.multiply(red - green, weight, out=rg)
+        np.multiply(blue - yellow, weight, out=by)
+    return out
 
 
 def color(img: np.ndarray) -> np.ndarray:
@@ -116,8 +124,8 @@ def color(img: np.ndarray) -> np.ndarray:
 
 
 def color_stack(imgs) -> np.ndarray:
-    """:func:`color` of each image of a stack (n, H, W, 3), bit for bit: (n, H, W) float32."""
-    return conspicuity_maps(np.stack([np.stack(opponency(check_image(img, "color"))) for img in imgs]))
+    """:func:`color` of each image of a stack (n, H, W, 3) or :class:`ImageStack`, bit for bit: (n, H, W) float32."""
+    return conspicuity_maps(_opponencies(ImageStack.of(imgs, "color")))
 
 
 def _gabor_pair(theta_deg: float) -> tuple[np.ndarray, np.ndarray]:
@@ -162,6 +170,43 @@ def gabor_energy(level: np.ndarray, theta_deg: float) -> np.ndarray:
     return np.sqrt(e, out=e)
 
 
+def _gabor_energies(level: np.ndarray) -> np.ndarray:
+    """:func:`gabor_energy` of one level (h, w) at the four orientations, (4, h, w) float32, the same bits.
+
+    A filter that reads only zeros gives +0: the filters run on the
+    :func:`~meshsal.attention.images.window_crop` of the non-zero pixels.
+    """
+    energy = np.zeros((len(ORIENTATIONS_DEG), *level.shape), np.float32)
+    box = window_crop(level, _GABOR_SIZE // 2)
+    if box is not None:
+        read, changed, inner = box
+        crop = np.ascontiguousarray(level[read])
+        for k, theta in enumerate(ORIENTATIONS_DEG):
+            energy[(k, *changed)] = gabor_energy(crop, theta)[inner]
+    return energy
+
+
+def _upsample_box(maps: np.ndarray, factor: int, shape: tuple[int, int]) -> np.ndarray:
+    """:func:`~meshsal.attention.pyramid.upsample_stack` of maps (n, h, w) that are zero off a box, the same bits.
+
+    Bilinear interpolation of zeros gives +0: only the box and a row and a
+    column of zeros around it (the neighbours its edges are interpolated
+    with) are interpolated, and placed where they go.
+    """
+    n, h, w = maps.shape
+    out = np.zeros((n, *shape), np.float32)
+    rows, cols = np.flatnonzero(maps.any(axis=(0, 2))), np.flatnonzero(maps.any(axis=(0, 1)))
+    if not rows.size:
+        return out
+    (r0, r1), (c0, c1) = [
+        (max(lo - 1, 0), min(hi + 2, extent)) for lo, hi, extent in ((rows[0], rows[-1], h), (cols[0], cols[-1], w))
+    ]
+    box = (slice(r0 * factor, min(r1 * factor, shape[0])), slice(c0 * factor, min(c1 * factor, shape[1])))
+    size = (box[0].stop - box[0].start, box[1].stop - box[1].start)
+    out[:, box[0], box[1]] = upsample_stack(np.ascontiguousarray(maps[:, r0:r1, c0:c1]), factor, size)
+    return out
+
+
 # Orientation energy is measured at the three finest levels, where the filters match
 # bars 2-8 px wide, and compared across space by the usual center-surround pyramid.
 _ENERGY_LEVELS = (0, 1, 2)
@@ -185,17 +230,26 @@ def orientation_energy(img: np.ndarray) -> np.ndarray:
     -------
     (4, H, W) float32, non-negative, one map per angle of ``ORIENTATIONS_DEG``
     """
-    gray = _intensity(check_image(img, "orientation"))
-    h, w = gray.shape
-    base = gaussian_pyramid(gray, max(_ENERGY_LEVELS) + 1)
-    energy = np.zeros((len(ORIENTATIONS_DEG), h, w), np.float32)
-    for k, theta in enumerate(ORIENTATIONS_DEG):
-        for level in range(len(base)):
-            e = gabor_energy(base[level], theta)
-            energy[k] += upsample(e, 2**level, (h, w)) if level else e
-    total = energy.sum(axis=0)
-    floor = np.float32(1e-6 * max(float(total.max()), 1e-30))
-    return energy * (energy / np.maximum(total, floor))
+    return _orientation_energies(ImageStack.of([img], "orientation"))[0]
+
+
+def _orientation_energies(stack: ImageStack) -> np.ndarray:
+    """:func:`orientation_energy` of each image of a stack, (n, 4, H, W) float32, on intensity's own pyramid.
+
+    Image by image: the full-size arithmetic stays in cache.
+    """
+    n, (h, w) = len(stack.rgb), stack.shape
+    out = np.empty((n, len(ORIENTATIONS_DEG), h, w), np.float32)
+    levels = stack.intensity_pyramid[: max(_ENERGY_LEVELS) + 1]
+    for k, energy in enumerate(out):
+        energy[:] = 0.0
+        for level, maps in enumerate(levels):
+            e = _gabor_energies(maps[k])
+            energy += _upsample_box(e, 2**level, (h, w)) if level else e
+        total = energy.sum(axis=0)
+        floor = np.float32(1e-6 * max(float(total.max()), 1e-30))
+        energy *= energy / np.maximum(total, floor)
+    return out
 
 
 def orientation(img: np.ndarray) -> np.ndarray:
@@ -228,5 +282,5 @@ def orientation(img: np.ndarray) -> np.ndarray:
 
 
 def orientation_stack(imgs) -> np.ndarray:
-    """:func:`orientation` of each image of a stack (n, H, W, 3), bit for bit: (n, H, W) float32."""
-    return conspicuity_maps(np.stack([orientation_energy(img) for img in imgs]))
+    """:func:`orientation` of each image of a stack (n, H, W, 3) or :class:`ImageStack`, bit for bit: (n, H, W) float32."""
+    return conspicuity_maps(_orientation_energies(ImageStack.of(imgs, "orientation")))

@@ -11,18 +11,24 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-from meshsal.attention.pyramid import check_image, scale_to_max
+from meshsal.attention.images import LUMA, ImageStack, grey, window_crop
+from meshsal.attention.pyramid import _stack_to_max
 
-__all__ = ["entropy", "contrast", "local_entropy", "local_variance", "luma", "default_contrast_window"]
-
-# Rec. 709 weights, one row for cv2.transform.
-_LUMA = np.array([[0.2126, 0.7152, 0.0722]], dtype=np.float32)
-_MEAN = np.full((1, 3), 1.0 / 3.0, np.float32)
+__all__ = [
+    "entropy",
+    "entropy_stack",
+    "contrast",
+    "contrast_stack",
+    "local_entropy",
+    "local_variance",
+    "luma",
+    "default_contrast_window",
+]
 
 
 def luma(img: np.ndarray) -> np.ndarray:
     """Rec. 709 luma of an RGB image, (H, W) float32."""
-    return cv2.transform(np.ascontiguousarray(img, np.float32), _LUMA)
+    return grey(img, LUMA)
 
 
 def local_entropy(gray: np.ndarray, size: int = 9, bins: int = 16) -> np.ndarray:
@@ -51,9 +57,20 @@ def local_entropy(gray: np.ndarray, size: int = 9, bins: int = 16) -> np.ndarray
         raise ValueError(f"entropy window must be an odd positive size, got {size}")
     if bins < 2:
         raise ValueError(f"entropy needs at least 2 histogram bins, got {bins}")
-    gray = np.asarray(gray, np.float32)
+    q = np.minimum((np.asarray(gray, np.float32) * bins).astype(np.int32), bins - 1)
+    # Every window of bin 0 alone (a view's black background, its darkest pixels) has one entropy: the
+    # windows are counted on the window_crop of the other bins only.
+    out = np.full(q.shape, _window_entropy(np.zeros((size, size), np.int32), size, bins)[0, 0], np.float32)
+    box = window_crop(q, size // 2)
+    if box is not None:
+        read, changed, inner = box
+        out[changed] = _window_entropy(np.ascontiguousarray(q[read]), size, bins)[inner]
+    return out
+
+
+def _window_entropy(q: np.ndarray, size: int, bins: int) -> np.ndarray:
+    """:func:`local_entropy` of the bin indices ``q`` (h, w) int32 in [0, bins)."""
     n = size * size
-    q = np.minimum((gray * bins).astype(np.int32), bins - 1)
     # H = log2 n - (1/n) sum_b c_b log2 c_b over the bin counts c_b of the window.
     clog = np.zeros(q.shape, np.float32)
     if n <= 255:
@@ -93,13 +110,17 @@ def entropy(img: np.ndarray, size: int = 9, bins: int = 16, median: int = 3) -> 
     -------
     (H, W) float32 in [0, 1], divided by its maximum.
     """
-    img = check_image(img, "entropy")
+    return entropy_stack([img], size, bins, median)[0]
+
+
+def entropy_stack(imgs, size: int = 9, bins: int = 16, median: int = 3) -> np.ndarray:
+    """:func:`entropy` of each image of a stack (n, H, W, 3) or :class:`ImageStack`, bit for bit: (n, H, W) float32."""
     if median not in (1, 3, 5):
         raise ValueError(f"entropy median aperture must be 1, 3 or 5, got {median}")
-    gray = cv2.transform(img, _MEAN)
-    if median > 1:
-        gray = cv2.medianBlur(gray, median)
-    return scale_to_max(local_entropy(gray, size, bins))
+    grays = ImageStack.of(imgs, "entropy").intensity
+    return _stack_to_max(
+        np.stack([local_entropy(cv2.medianBlur(g, median) if median > 1 else g, size, bins) for g in grays])
+    )
 
 
 def local_variance(gray: np.ndarray, window: int) -> np.ndarray:
@@ -145,9 +166,14 @@ def contrast(img: np.ndarray, window: int | None = None) -> np.ndarray:
     >>> bool(m[32, 8] > 0.9 and m[32, 56] == 0.0)
     True
     """
-    img = check_image(img, "contrast")
+    return contrast_stack([img], window)[0]
+
+
+def contrast_stack(imgs, window: int | None = None) -> np.ndarray:
+    """:func:`contrast` of each image of a stack (n, H, W, 3) or :class:`ImageStack`, bit for bit: (n, H, W) float32."""
+    stack = ImageStack.of(imgs, "contrast")
     if window is None:
-        window = default_contrast_window(img.shape)
+        window = default_contrast_window(stack.shape)
     if isinstance(window, bool) or not isinstance(window, (int, np.integer)) or window < 1:
         raise ValueError(f"contrast window must be a positive integer number of pixels, got {window!r}")
-    return scale_to_max(local_variance(luma(img), int(window)))
+    return _stack_to_max(np.stack([local_variance(g, int(window)) for g in stack.luma]))

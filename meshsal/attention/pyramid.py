@@ -13,7 +13,9 @@ Koch (2001) compare with their iterative difference-of-Gaussians competition;
 the latter is available as ``normalize_map(m, "iterative")``
 (see :func:`normalize_map` for why it is not the default).
 
-Coarse levels are brought back up with the pyramid's own geometry
+Every operation is written once, for a stack of maps (n, h, w) that
+one call takes through it, bit for bit map by map: a single map is a
+stack of one.  Coarse levels are brought back up with the pyramid's own geometry
 (:func:`upsample`): ``cv2.pyrDown`` puts coarse pixel ``i`` on fine pixel
 ``2 i``, and resizing as if pixel centres were aligned would shift a scale-4
 map by 7.5 input pixels.
@@ -40,18 +42,19 @@ __all__ = [
     "CENTERS",
     "DELTAS",
     "gaussian_pyramid",
+    "gaussian_pyramid_stack",
     "normalize_map",
     "normalize_maps",
     "across_scale_sum",
     "conspicuity_map",
     "conspicuity_maps",
-    "conspicuity_from_pyramids",
+    "conspicuity_of_pyramid",
     "scale_pairs",
     "center_surround_map",
     "to_unit",
     "upsample",
+    "upsample_stack",
     "scale_to_max",
-    "check_image",
 ]
 
 CENTERS = (2, 3, 4)
@@ -72,12 +75,11 @@ _SEQUENTIAL_SUM = 8
 # Maps whose value range is below this are flat: nothing to normalize.
 _FLAT = 1e-6
 _3X3 = np.ones((3, 3), np.uint8)
-# Upsampled maps of at least this many pixels, by at least this factor (a conspicuity map back to the view's
-# size), are interpolated in two separable passes; OpenCV's warp is as fast or faster on the others.
+# Upsampling by a power of two takes two separable passes, one call for a whole stack, where they beat
+# OpenCV's warp map by map: stacks of at least 4 maps, or 128 x 128 pixels and more by a factor of 8 or more.
+_SEPARABLE_MAPS = 4
 _SEPARABLE_PIXELS = 128 * 128
 _SEPARABLE_FACTOR = 8
-# A stack of at least this many maps takes the separable passes whatever their size: one call, not one per map.
-_SEPARABLE_MAPS = 4
 
 
 def gaussian_pyramid(img: np.ndarray, levels: int = _LEVELS) -> list[np.ndarray]:
@@ -85,12 +87,8 @@ def gaussian_pyramid(img: np.ndarray, levels: int = _LEVELS) -> list[np.ndarray]
 
     Parameters
     ----------
-    img : (H, W) or (H, W, C) array
-        Level 0 (converted to float32).
-    levels : int
-        Wanted number of levels.  Fewer are returned when the image runs out:
-        a level is added only while the previous level's shorter side is at
-        least 2 pixels.
+    img : (H, W) or (H, W, C) array, level 0 (converted to float32)
+    levels : int, wanted number of levels; a level is added only while the previous one's shorter side is >= 2
 
     Returns
     -------
@@ -101,12 +99,25 @@ def gaussian_pyramid(img: np.ndarray, levels: int = _LEVELS) -> list[np.ndarray]
     >>> [p.shape for p in gaussian_pyramid(np.zeros((64, 48), np.float32), 4)]
     [(64, 48), (32, 24), (16, 12), (8, 6)]
     """
+    return [level[0] for level in gaussian_pyramid_stack(np.asarray(img)[None], levels)]
+
+
+def gaussian_pyramid_stack(maps: np.ndarray, levels: int = _LEVELS) -> list[np.ndarray]:
+    """:func:`gaussian_pyramid` of each map of a stack (n, H, W[, C]), level by level: a list of (n, h_k, w_k[, C]).
+
+    ``cv2.pyrDown`` map by map: one call on maps laid out as channels rounds otherwise.
+    """
     if levels < 1:
         raise ValueError(f"gaussian_pyramid needs at least one level, got {levels}")
-    pyramid = [np.ascontiguousarray(img, dtype=np.float32)]
-    while len(pyramid) < levels and min(pyramid[-1].shape[:2]) >= 2:
-        pyramid.append(cv2.pyrDown(pyramid[-1]))
+    pyramid = [np.ascontiguousarray(maps, dtype=np.float32)]
+    while len(pyramid) < levels and min(pyramid[-1].shape[1:3]) >= 2:
+        pyramid.append(_pyr_down_each(pyramid[-1]))
     return pyramid
+
+
+def _pyr_down_each(maps: np.ndarray) -> np.ndarray:
+    """``cv2.pyrDown`` of each map of a stack."""
+    return np.stack([cv2.pyrDown(m) for m in maps])
 
 
 def _gaussian(m: np.ndarray, sigma: float) -> np.ndarray:
@@ -122,15 +133,7 @@ def upsample(m: np.ndarray, factor: int, shape: tuple[int, int]) -> np.ndarray:
     pixel ``i`` sits at input pixel ``i * 2**k``; upsampling with that same map
     keeps features in place instead of drifting by up to ``2**k / 2`` pixels.
 
-    Parameters
-    ----------
-    m : (h, w) float32
-    factor : int, e.g. ``2**k``
-    shape : (H, W) output shape
-
-    Returns
-    -------
-    (H, W) float32
+    ``m`` (h, w) float32 by ``factor`` (e.g. ``2**k``) to ``shape`` (H, W): (H, W) float32.
 
     Examples
     --------
@@ -138,7 +141,7 @@ def upsample(m: np.ndarray, factor: int, shape: tuple[int, int]) -> np.ndarray:
     [[0.0, 0.5, 1.0, 1.0]]
     """
     if m.ndim == 2 and m.dtype == np.float32:
-        return _upsample_stack(m[None], factor, shape)[0]
+        return upsample_stack(m[None], factor, shape)[0]
     return _warp_upsample(m, int(factor), shape)
 
 
@@ -168,9 +171,8 @@ def _step_differences(m: np.ndarray, axis: int) -> np.ndarray:
 
 
 def _separable_upsample(m: np.ndarray, factor: int, shape: tuple[int, int]) -> np.ndarray:
-    """:func:`upsample` of a map or a stack of maps (..., h, w) by a power-of-two ``factor``, bit for bit
-    what :func:`_warp_upsample` gives each map with the pinned kernels, 1.4 to 2 times as fast for a
-    factor of 16 to a 256 x 256 view, and one call for a whole stack.
+    """:func:`upsample` of a stack of maps (..., h, w) by a power-of-two ``factor`` in one call, bit for bit
+    what :func:`_warp_upsample` gives each map with the pinned kernels.
 
     The sample positions ``i / factor`` are exact in float32 and repeat with
     period ``factor``, so bilinear interpolation splits into a pass along
@@ -193,20 +195,14 @@ def _separable_upsample(m: np.ndarray, factor: int, shape: tuple[int, int]) -> n
     return out.reshape(*lead, h * factor, -1)[..., : shape[0], :]
 
 
-def _upsample_stack(maps: np.ndarray, factor: int, shape: tuple[int, int]) -> np.ndarray:
-    """:func:`upsample` of each map of a stack (n, h, w) float32: (n, H, W) float32.
-
-    Large power-of-two factors take the separable passes for the whole stack
-    at once (the same bits as OpenCV's warp with the pinned kernels) when it
-    holds several maps or as many pixels as :func:`upsample` asks of one; the
-    rest are warped map by map.
-    """
+def upsample_stack(maps: np.ndarray, factor: int, shape: tuple[int, int]) -> np.ndarray:
+    """:func:`upsample` of each map of a stack (n, h, w) float32: (n, H, W) float32, bit for bit map by map."""
     factor = int(factor)
     n, h, w = maps.shape
     if (
-        factor >= _SEPARABLE_FACTOR
+        factor >= 2
         and factor & (factor - 1) == 0
-        and (n >= _SEPARABLE_MAPS or n * shape[0] * shape[1] >= _SEPARABLE_PIXELS)
+        and (n >= _SEPARABLE_MAPS or (factor >= _SEPARABLE_FACTOR and n * shape[0] * shape[1] >= _SEPARABLE_PIXELS))
         and h * factor >= shape[0]
         and w * factor >= shape[1]
     ):
@@ -217,75 +213,25 @@ def _upsample_stack(maps: np.ndarray, factor: int, shape: tuple[int, int]) -> np
     return out
 
 
-def _range(m: np.ndarray) -> tuple[float, float]:
-    """``(min, max)`` of a float32 array as floats, (0, 0) when empty."""
-    if not m.size:
-        return 0.0, 0.0
-    if m.ndim == 2:
-        # One pass instead of two, and a fraction of NumPy's call overhead on the small maps of a pyramid.
-        lo, hi, _, _ = cv2.minMaxLoc(m)
-        return lo, hi
-    return float(m.min()), float(m.max())
-
-
 def to_unit(m: np.ndarray) -> np.ndarray:
     """Min-max scale a map to [0, 1] as float32; a flat map becomes zeros."""
     m = np.asarray(m, dtype=np.float32)
-    lo, hi = _range(m)
-    span = hi - lo
-    if not span > _FLAT:
-        return np.zeros(m.shape, np.float32)
-    return (m - lo) * np.float32(1.0 / span)
+    return _to_unit_stack(m.reshape(1, -1)).reshape(m.shape)
 
 
 def scale_to_max(m: np.ndarray) -> np.ndarray:
     """Divide a non-negative map by its maximum (float32, [0, 1]); a zero map stays zero."""
-    m = np.asarray(m, dtype=np.float32)
-    top = _range(m)[1]
-    if not top > _FLAT:
-        return np.zeros(m.shape, np.float32)
-    return m * np.float32(1.0 / top)
+    m = np.array(m, dtype=np.float32)
+    return _stack_to_max(m.reshape(1, -1)).reshape(m.shape)
 
 
 def _stack_to_max(maps: np.ndarray) -> np.ndarray:
-    """:func:`scale_to_max` of each map of a stack (n, h, w) float32, in place; returns ``maps``."""
-    top = maps.reshape(len(maps), -1).max(axis=1).astype(np.float64)
-    maps *= np.divide(1.0, top, out=np.zeros_like(top), where=top > _FLAT).astype(np.float32)[:, None, None]
+    """:func:`scale_to_max` of each map of a stack (n, ...) float32, in place; returns ``maps``."""
+    top = maps.reshape(len(maps), -1).max(axis=1, initial=0.0).astype(np.float64)
+    scale = np.divide(1.0, top, out=np.zeros_like(top), where=top > _FLAT).astype(np.float32)
+    maps *= scale.reshape((-1,) + (1,) * (maps.ndim - 1))
+    maps[top <= _FLAT] = 0.0
     return maps
-
-
-def check_image(img, name: str = "img") -> np.ndarray:
-    """Validate an RGB image for the attention channels and return it as float32.
-
-    Parameters
-    ----------
-    img : (H, W, 3) floating array with values in [0, 1]
-    name : str
-        The caller's name, used in the error message.
-
-    Raises
-    ------
-    ValueError
-        Wrong shape, non-floating dtype (e.g. uint8: divide by 255 first),
-        NaN/inf, or values outside [0, 1].
-    """
-    arr = np.asarray(img)
-    if arr.ndim != 3 or arr.shape[2] != 3:
-        raise ValueError(f"{name}: expected an (H, W, 3) RGB image, got shape {arr.shape}")
-    if arr.shape[0] < 1 or arr.shape[1] < 1:
-        raise ValueError(f"{name}: image is empty, shape {arr.shape}")
-    if not np.issubdtype(arr.dtype, np.floating):
-        raise ValueError(
-            f"{name}: expected a float image with values in [0, 1], got dtype {arr.dtype}"
-            " (convert uint8 images with img.astype(np.float32) / 255)"
-        )
-    arr = np.ascontiguousarray(arr, dtype=np.float32)
-    lo, hi = float(arr.min()), float(arr.max())
-    if not (np.isfinite(lo) and np.isfinite(hi)):
-        raise ValueError(f"{name}: image contains NaN or infinite values")
-    if lo < -1e-6 or hi > 1.0 + 1e-6:
-        raise ValueError(f"{name}: image values must lie in [0, 1], got range [{lo:.4g}, {hi:.4g}]")
-    return arr
 
 
 def normalize_map(m: np.ndarray, method: str = "maxima", iterations: int = 3) -> np.ndarray:
@@ -300,26 +246,22 @@ def normalize_map(m: np.ndarray, method: str = "maxima", iterations: int = 3) ->
     m : (h, w) array
     method : {"maxima", "iterative"}
         ``"maxima"`` (default; Itti, Koch & Niebur 1998, also the first form
-        in Itti & Koch 2001): multiply by ``(1 - mean)**2``, where ``mean`` is
-        the average of the rival local maxima: 3x3 local maxima above 10% of
-        the range, except those within 2 pixels of the global maximum (its
-        own plateau).  A map with one peak keeps it; a map with many equal
-        peaks is crushed.
+        in Itti & Koch 2001): multiply by ``(1 - mean)**2``, ``mean`` the
+        average of the rival peaks: 3x3 local maxima above 10% of the range,
+        but those within 2 pixels of the global maximum (its own plateau).
         ``"iterative"``: Itti & Koch (2001), ``iterations`` rounds of
-        ``M <- |M + M * DoG - C_inh|_{>=0}``, where DoG is the difference of an
+        ``M <- |M + M * DoG - C_inh|_{>=0}``, DoG the difference of an
         excitatory Gaussian (sigma 2% of the map width, gain 0.5**2) and an
-        inhibitory one (sigma 25%, gain 1.5**2), and C_inh = 0.02.  Peaks that
-        stand alone grow, crowded or uniform regions die out.  On our 16 x 16
-        scale-4 maps it kept the bar ends of orientation search displays
+        inhibitory one (sigma 25%, gain 1.5**2), C_inh = 0.02.  On our 16 x 16
+        scale-4 maps it keeps the bar ends of orientation search displays
         alive, so it is not the default.
     iterations : int
         Rounds of the iterative variant.
 
     Returns
     -------
-    (h, w) float32, non-negative, at most 1 for "maxima"; not rescaled
-    afterwards, since the surviving amplitude is what ranks maps when they
-    are summed.
+    (h, w) float32, non-negative, at most 1 for "maxima"; not rescaled: the
+    surviving amplitude is what ranks maps when they are summed.
 
     Examples
     --------
@@ -348,25 +290,19 @@ def normalize_map(m: np.ndarray, method: str = "maxima", iterations: int = 3) ->
     raise ValueError(f"normalize_map method must be 'iterative' or 'maxima', got {method!r}")
 
 
-def _unit_scales(maps: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Per map of a stack (n, h, w) float32: its minimum, the float32 factor that takes its range to
-    [0, 1] as :func:`to_unit` computes it (from the float64 range), and whether it is not flat."""
-    flat = maps.reshape(maps.shape[0], -1)
-    lo, hi = flat.min(axis=1), flat.max(axis=1)
-    span = hi.astype(np.float64) - lo.astype(np.float64)
-    live = span > _FLAT
-    scale = np.zeros(maps.shape[0], np.float32)
-    scale[live] = (1.0 / span[live]).astype(np.float32)
-    return lo, scale, live
-
-
 def _to_unit_stack(maps: np.ndarray) -> np.ndarray:
-    """:func:`to_unit` of each map of a stack (n, h, w) float32."""
-    lo, scale, live = _unit_scales(maps)
-    out = maps - lo[:, None, None]
-    out *= scale[:, None, None]
-    if not live.all():
-        out[~live] = 0.0
+    """:func:`to_unit` of each map of a stack (n, ...) float32: one over the float64 range, rounded to float32."""
+    flat = maps.reshape(len(maps), -1)
+    if not flat.shape[1]:
+        return np.zeros(maps.shape, np.float32)
+    lo = flat.min(axis=1)
+    span = flat.max(axis=1).astype(np.float64) - lo.astype(np.float64)
+    live = span > _FLAT
+    scale = np.divide(1.0, span, out=np.zeros_like(span), where=live).astype(np.float32)
+    shape = (-1,) + (1,) * (maps.ndim - 1)
+    out = maps - lo.reshape(shape)
+    out *= scale.reshape(shape)
+    out[~live] = 0.0
     return out
 
 
@@ -385,18 +321,10 @@ def _dilate_3x3(maps: np.ndarray) -> np.ndarray:
 
 
 def normalize_maps(maps: np.ndarray) -> np.ndarray:
-    """Itti's N(.) ("maxima", see :func:`normalize_map`) of each map of a stack, bit for bit map by map.
+    """Itti's N(.) ("maxima", see :func:`normalize_map`) of each map of a stack (n, h, w): (n, h, w) float32.
 
     One pass over the whole stack: N(.) runs some seventy times per view, on
     maps of a few hundred pixels, where each call's overhead counted.
-
-    Parameters
-    ----------
-    maps : (n, h, w) array
-
-    Returns
-    -------
-    (n, h, w) float32
 
     Examples
     --------
@@ -410,9 +338,7 @@ def normalize_maps(maps: np.ndarray) -> np.ndarray:
     n, h, w = maps.shape
     if not maps.size:
         return np.zeros(maps.shape, np.float32)
-    lo, scale, live = _unit_scales(maps)
-    m = maps - lo[:, None, None]
-    m *= scale[:, None, None]
+    m = _to_unit_stack(maps)
     # A flat map is all zeros now: no peaks.
     peaks = m == _dilate_3x3(m)
     peaks &= m > _PEAK_FLOOR
@@ -443,22 +369,7 @@ def normalize_maps(maps: np.ndarray) -> np.ndarray:
     # The mean as ndarray.mean() takes it: the float32 sum divided in float64, rounded to float32.
     means = (sums.astype(np.float64) / np.maximum(counts, 1)).astype(np.float32).astype(np.float64)
     m *= ((1.0 - means) ** 2).astype(np.float32)[:, None, None]
-    if not live.all():
-        m[~live] = 0.0
     return m
-
-
-def _pyr_down_each(maps: np.ndarray) -> np.ndarray:
-    """``cv2.pyrDown`` of each map of a stack (n, h, w), one call per map (a multi-channel call rounds otherwise)."""
-    return np.stack([cv2.pyrDown(m) for m in maps])
-
-
-def _pyramid_stack(maps: np.ndarray, levels: int = _LEVELS) -> list[np.ndarray]:
-    """:func:`gaussian_pyramid` of each map of a stack (n, H, W), level by level: a list of (n, h_k, w_k)."""
-    pyramid = [np.ascontiguousarray(maps, dtype=np.float32)]
-    while len(pyramid) < levels and min(pyramid[-1].shape[1:]) >= 2:
-        pyramid.append(_pyr_down_each(pyramid[-1]))
-    return pyramid
 
 
 def scale_pairs(levels: int) -> list[tuple[int, int]]:
@@ -491,7 +402,7 @@ def _across_scale(pyramid: Sequence[np.ndarray]) -> np.ndarray:
     total = np.zeros(pyramid[top].shape, np.float32)
     for c, s in pairs:
         center = pyramid[c]
-        surround = _upsample_stack(pyramid[s], 2 ** (s - c), center.shape[1:])
+        surround = upsample_stack(pyramid[s], 2 ** (s - c), center.shape[1:])
         # |F(c) - F(s)| rounds as cv2.absdiff does: one float32 difference, then its magnitude.
         fmap = normalize_maps(np.abs(center - surround))
         for _ in range(top - c):
@@ -501,30 +412,23 @@ def _across_scale(pyramid: Sequence[np.ndarray]) -> np.ndarray:
 
 
 def across_scale_sum(pyramid: Sequence[np.ndarray]) -> np.ndarray:
-    """Sum of N(|F(c) - F(s)|) over the center-surround pairs, at the center scale 4.
+    """Sum of N(|F(c) - F(s)|) over the center-surround pairs of a :func:`gaussian_pyramid`, (h, w) float32.
 
-    Parameters
-    ----------
-    pyramid : list of (h_k, w_k) float32, from :func:`gaussian_pyramid`
-
-    Returns
-    -------
-    (h, w) float32 at the resolution of the coarsest center scale used
-    (scale 4 for images of 256 pixels; see :func:`scale_pairs`); a (1, 1)
-    zero map if the pyramid has a single level.
+    At the resolution of the coarsest center scale used (scale 4 for images
+    of 256 pixels; see :func:`scale_pairs`); a (1, 1) zero map for a single level.
     """
     return _across_scale([np.asarray(level, np.float32)[None] for level in pyramid])[0]
 
 
-def _conspicuity(pyramid: Sequence[np.ndarray], features: int, shape: tuple[int, int]) -> np.ndarray:
-    """Conspicuity maps (n, H, W) from the pyramid (levels (n * features, h_k, w_k)) of n images' features."""
+def conspicuity_of_pyramid(pyramid: Sequence[np.ndarray], features: int, shape: tuple[int, int]) -> np.ndarray:
+    """:func:`conspicuity_maps` of n images' features from their ready pyramid, levels (n * features, h_k, w_k)."""
     small = normalize_maps(_across_scale(pyramid))
     small = small.reshape(-1, features, *small.shape[1:])
     total = small[:, 0]
     for k in range(1, features):
         total = total + small[:, k]
     top = max((c for c, _ in scale_pairs(len(pyramid))), default=0)
-    return _to_unit_stack(_upsample_stack(normalize_maps(total), 2**top, shape))
+    return _to_unit_stack(upsample_stack(normalize_maps(total), 2**top, shape))
 
 
 def conspicuity_maps(features: np.ndarray, shape: tuple[int, int] | None = None) -> np.ndarray:
@@ -532,11 +436,8 @@ def conspicuity_maps(features: np.ndarray, shape: tuple[int, int] | None = None)
 
     Parameters
     ----------
-    features : (n, k, H, W) float
-        ``k`` feature images of each of ``n`` images (e.g. the four
-        orientation energies of 18 views).
-    shape : (H, W), optional
-        Output size; the features' size by default.
+    features : (n, k, H, W) float, ``k`` feature images of each of ``n`` images (e.g. 4 orientation energies)
+    shape : (H, W), optional output size; the features' size by default
 
     Returns
     -------
@@ -553,50 +454,20 @@ def conspicuity_maps(features: np.ndarray, shape: tuple[int, int] | None = None)
     if features.ndim != 4 or not features.shape[1]:
         raise ValueError(f"conspicuity_maps expects features (n, k, H, W) with k >= 1, got shape {features.shape}")
     n, k, h, w = features.shape
-    pyramid = _pyramid_stack(features.reshape(n * k, h, w))
-    return _conspicuity(pyramid, k, shape or (h, w))
+    pyramid = gaussian_pyramid_stack(features.reshape(n * k, h, w))
+    return conspicuity_of_pyramid(pyramid, k, shape or (h, w))
 
 
 def conspicuity_map(features: Sequence[np.ndarray], shape: tuple[int, int] | None = None) -> np.ndarray:
-    """Itti's conspicuity map of one channel made of several features.
+    """Itti's conspicuity map of one channel made of several (H, W) feature images: (H, W) float32 in [0, 1].
 
     ``to_unit(resize(N(sum_f N(across_scale_sum(pyramid(f))))))``: e.g. the
     red-green and blue-yellow opponencies of the color channel, or the four
-    Gabor orientations.
-
-    Parameters
-    ----------
-    features : sequence of (H, W) float32 feature images of one shape
-    shape : (H, W), optional
-        Output size; the features' size by default.
-
-    Returns
-    -------
-    (H, W) float32 in [0, 1]
+    Gabor orientations; ``shape`` as in :func:`conspicuity_maps`.
     """
-    if not len(features):
-        raise ValueError("conspicuity_map needs at least one feature image")
-    h, w = features[0].shape[:2]
-    for f in features:
-        if f.shape != (h, w):
-            raise ValueError(f"feature images differ in shape: {(h, w)} and {f.shape}")
+    if len({np.shape(f) for f in features}) != 1:
+        raise ValueError(f"conspicuity_map needs feature images of one shape, got {[np.shape(f) for f in features]}")
     return conspicuity_maps(np.stack(features)[None], shape)[0]
-
-
-def conspicuity_from_pyramids(pyramids: Sequence[Sequence[np.ndarray]], shape: tuple[int, int]) -> np.ndarray:
-    """:func:`conspicuity_map` on ready-made feature pyramids (e.g. Gabor pyramids).
-
-    Parameters
-    ----------
-    pyramids : sequence of pyramids (lists of (h_k, w_k) float32), all of one geometry
-    shape : (H, W) output size
-
-    Returns
-    -------
-    (H, W) float32 in [0, 1]
-    """
-    levels = [np.stack([np.asarray(p[k], np.float32) for p in pyramids]) for k in range(len(pyramids[0]))]
-    return _conspicuity(levels, len(pyramids), shape)[0]
 
 
 def center_surround_map(feature: np.ndarray) -> np.ndarray:
@@ -606,13 +477,7 @@ def center_surround_map(feature: np.ndarray) -> np.ndarray:
     ``d in {3, 4}``, each N(.)-normalized and summed at the resolution of
     scale 4, N(.) again, resized back to the input size and scaled to [0, 1].
 
-    Parameters
-    ----------
-    feature : (H, W) float array
-
-    Returns
-    -------
-    (H, W) float32 in [0, 1]
+    Takes an (H, W) float array, returns (H, W) float32 in [0, 1].
 
     Examples
     --------

@@ -39,9 +39,7 @@ for random texture, 0 for a flat image.
 
 Only vertical and horizontal axes are measured: they are the ones human
 observers detect best (Wenderoth 1994, Perception 23), and oblique
-orientations would double the cost of a view.  Oblique axes and rotation
-centres are found by Loy & Eklundh's feature constellations
-(:mod:`meshsal.attention.constellations`), the channel before this one.
+orientations would double the cost of a view.
 """
 
 from __future__ import annotations
@@ -50,8 +48,8 @@ import cv2
 import numpy as np
 from numpy.lib.stride_tricks import as_strided
 
-from meshsal.attention.local import luma
-from meshsal.attention.pyramid import check_image, conspicuity_maps, gaussian_pyramid, upsample
+from meshsal.attention.images import ImageStack
+from meshsal.attention.pyramid import conspicuity_maps, gaussian_pyramid_stack, upsample
 
 __all__ = ["symmetry", "symmetry_stack"]
 
@@ -102,7 +100,7 @@ def _sum_in_numpy_order(terms) -> np.ndarray:
 
     The same bits as stacking them on a last axis and calling ``.sum(-1)``
     (eight running sums combined as a tree, the rest added one by one),
-    without summing over a short last axis, which made the channel slow.
+    without summing over a short last axis, which makes the channel slow.
     """
     if len(terms) < 8:
         total = terms[0]
@@ -188,20 +186,24 @@ def _axis_evidence(b: np.ndarray) -> np.ndarray:
     return np.clip(np.maximum(on, np.maximum(between, between_left)), 0.0, 1.0)
 
 
-def _mirror_feature(gray: np.ndarray) -> np.ndarray:
-    """(H, W) float32 in [0, 1]: the strongest axis evidence (to the 4th power) over levels and orientations."""
-    h, w = gray.shape
-    pyramid = gaussian_pyramid(gray, max(_LEVELS) + 1)
-    feature = np.zeros((h, w), np.float32)
+def _mirror_features(grays: np.ndarray) -> np.ndarray:
+    """(n, H, W) float32 in [0, 1] of greys (n, H, W): the strongest axis evidence (to the 4th power) over
+    levels and orientations."""
+    n, h, w = grays.shape
+    pyramid = gaussian_pyramid_stack(grays, max(_LEVELS) + 1)
+    feature = np.zeros((n, h, w), np.float32)
     for level in _LEVELS:
         if level >= len(pyramid):
             break
-        g = pyramid[level]
-        b = g - cv2.GaussianBlur(g, (0, 0), _BAND, borderType=cv2.BORDER_REFLECT)
-        vertical = _axis_evidence(b)
-        horizontal = _axis_evidence(np.ascontiguousarray(b.T)).T
-        evidence = np.ascontiguousarray(np.maximum(vertical, horizontal) ** _POWER, dtype=np.float32)
-        np.maximum(feature, upsample(evidence, 2**level, (h, w)), out=feature)
+        evidence = np.empty(pyramid[level].shape, np.float32)
+        for g, out in zip(pyramid[level], evidence):
+            b = g - cv2.GaussianBlur(g, (0, 0), _BAND, borderType=cv2.BORDER_REFLECT)
+            vertical = _axis_evidence(b)
+            horizontal = _axis_evidence(np.ascontiguousarray(b.T)).T
+            out[:] = np.maximum(vertical, horizontal) ** _POWER
+        # Image by image: the full-size maximum stays in cache.
+        for up, out in zip(evidence, feature):
+            np.maximum(out, upsample(up, 2**level, (h, w)), out=out)
     return feature
 
 
@@ -245,8 +247,8 @@ def symmetry(img: np.ndarray) -> np.ndarray:
 
 
 def symmetry_stack(imgs) -> np.ndarray:
-    """:func:`symmetry` of each image of a stack (n, H, W, 3), bit for bit: (n, H, W) float32."""
-    features = np.stack([_mirror_feature(luma(check_image(img, "symmetry"))) for img in imgs])
+    """:func:`symmetry` of each image of a stack (n, H, W, 3) or :class:`ImageStack`, bit for bit: (n, H, W) float32."""
+    features = _mirror_features(ImageStack.of(imgs, "symmetry").luma)
     out = np.zeros(features.shape, np.float32)
     tops = features.reshape(len(features), -1).max(axis=1)
     some = np.flatnonzero(tops > 0.0)

@@ -1,5 +1,6 @@
 """Triangle meshes: the record (``record``), derived geometry (``geometry``), mesh files (``formats``
-scans them, ``io`` loads and writes them, ``texture`` reads their images), what loading repairs
+checks them for what pymeshlab misreads and reads OFF, ``io`` loads and writes them, ``texture`` reads
+their material libraries and images), what loading repairs
 (``repair``), sizing (``transform``), curvature and mesh saliency (``curvature``) and the Embree scene
 that every ray caster shares (``embree``)."""
 

@@ -1,16 +1,35 @@
-"""The four mesh file formats, scanned for what each file declares.
+"""The mesh file formats: what pymeshlab is not trusted with, checked before it reads a file; OFF, read here.
 
-pymeshlab loads the meshes (:mod:`meshsal.mesh.io`), but it silently drops
-faces that point at missing or non-finite vertices and can crash the
-interpreter on malformed input.  So every file is first scanned here, by
-format (OBJ with its MTL, PLY ASCII or binary, OFF, STL ASCII or binary):
-the counts it declares, its index ranges and finite coordinates are checked,
-and :func:`scan` returns what pymeshlab must then produce (:class:`Declared`).
-Anything that cannot be loaded in full raises :class:`meshsal.MeshError`
-naming the file and the problem.
+pymeshlab reads OBJ, PLY and STL files (:mod:`meshsal.mesh.io`): its reading,
+polygons triangulated, colours and texture coordinates included, is the
+one the toolkit uses.  :func:`check` refuses, before pymeshlab sees the
+file, only what pymeshlab 2025.7 misreads or does not survive, each
+measured:
 
-Over 500 lines because it is one concept, the scanner, four times: one
-short section per format, each read beside the others' when a check changes.
+* a face index out of range: in an OBJ, one past the last vertex is kept
+  out of range, two past is dropped silently, far past crashes the
+  interpreter (SIGSEGV); in a PLY polygon it crashes too (pymeshlab checks
+  only a triangle's);
+* a PLY header line it cannot parse (``element vertex`` without its count:
+  SIGSEGV), or a header that declares more elements than the file's bytes
+  can hold: pymeshlab allocates what a PLY or OFF header declares
+  (``std::bad_alloc`` for 10^12 vertices) and loops over what a binary STL
+  declares (10^9 facets in 134 bytes: still running after minutes);
+* a bad or non-finite coordinate: pymeshlab reads ``v 0 0 zero`` as a
+  vertex and drops a non-finite one silently, with every face on it (STL
+  included: :mod:`meshsal.mesh.io` compares the vertices it read with the
+  count the file declares);
+* binary bytes in an ASCII STL, which pymeshlab would take for a binary
+  STL of whatever facet count its bytes 80-84 say.
+
+pymeshlab also decodes an OBJ's texture images whatever their size (a
+424 kB PNG of 20000 x 20000 pixels: 496 MB), so it is given the OBJ
+without its material library, and :mod:`meshsal.mesh.texture` reads the
+library and the image the faces use, within caps.
+
+OFF files are read here (:func:`read_off`), not by pymeshlab: it refuses
+comments at the end of a line, which the format allows, and crashes on a
+face index out of range.
 """
 
 from __future__ import annotations
@@ -22,41 +41,34 @@ from pathlib import Path
 import numpy as np
 
 from meshsal.mesh.record import MeshError
+from meshsal.mesh.texture import material_textures
 
-__all__ = ["SUPPORTED_EXTENSIONS", "Declared", "scan", "read_ply", "fail"]
+__all__ = ["SUPPORTED_EXTENSIONS", "Declared", "check", "read_off", "fail"]
 
 SUPPORTED_EXTENSIONS = (".obj", ".off", ".ply", ".stl")
-
-#: A material library larger than this is not read (its textures are left out, with a note): MTL files
-#: hold a few lines per material, so anything near this size is not one.
-MAX_MATERIAL_BYTES = 16 * 2**20
 
 
 @dataclass
 class Declared:
-    """What a file declares, from our own scan, to check pymeshlab against."""
+    """What a file says of itself, to check pymeshlab's reading against.
+
+    ``n_vertices`` and ``n_faces`` count the file's own records (vertex
+    lines, a header's element counts, facets), not triangles: pymeshlab
+    triangulates polygons and drops faces that repeat a vertex.
+    """
 
     n_vertices: int
-    n_triangles: int  # pymeshlab should make: fan split, triangles repeating a vertex left out
-    n_repeated: int = 0  # faces pymeshlab drops for repeating a vertex
+    n_faces: int
     has_colors: bool = False
+    vertex_properties: tuple = ()  # PLY: the vertex element's property names
     textures: list = field(default_factory=list)  # OBJ: texture images the faces use
+    libraries: bool = False  # OBJ: it names a material library
     notes: list = field(default_factory=list)  # warnings about the file itself
 
 
 def fail(path, problem: str):
     """Raise :class:`MeshError` naming the file and the problem."""
     raise MeshError(f"{path}: {problem}")
-
-
-# ---------------------------------------------------------------------------
-# OBJ
-
-_OBJ_IGNORED = {
-    "vn", "vp", "o", "g", "s", "l", "p", "usemap", "maplib", "cstype", "deg", "bmat", "step",
-    "curv", "curv2", "surf", "parm", "trim", "hole", "scrv", "sp", "end", "con", "mg", "bevel",
-    "c_interp", "d_interp", "lod", "shadow_obj", "trace_obj", "ctech", "stech", "call", "csh",
-}  # fmt: skip
 
 
 def _text(path, data: bytes, kind: str) -> str:
@@ -68,97 +80,17 @@ def _text(path, data: bytes, kind: str) -> str:
         return data.decode("latin-1")
 
 
-def _obj_indices(path, tokens, sizes, lines, defined, what: str) -> np.ndarray:
-    """Resolve OBJ face indices (1-based, negative = relative) to 0-based, checking range.
-
-    ``tokens`` holds one index string per face corner, ``defined`` how many
-    elements each face's line could refer to; ``sizes`` and ``lines`` give
-    each face's corner count and line number.
-    """
-    first = np.cumsum(sizes) - sizes
-    try:
-        index = np.array(tokens).astype(np.int64)
-    except (ValueError, OverflowError):
-        bad = next((j for j, t in enumerate(tokens) if not re.fullmatch(r"[-+]?\d{1,18}", t)), 0)
-        face = np.searchsorted(first, bad, side="right") - 1
-        fail(path, f"unparseable content: line {lines[face]}: bad {what} index {tokens[bad]!r}")
-    count = np.repeat(np.asarray(defined, dtype=np.int64), sizes)
-    resolved = np.where(index > 0, index, count + index + 1)
-    bad = np.flatnonzero((index == 0) | (resolved < 1) | (resolved > count))
-    if bad.size:
-        j = bad[0]
-        face = np.searchsorted(first, j, side="right") - 1
-        fail(
-            path,
-            f"line {lines[face]}: face {what} index {index[j]} out of range ({count[j]} {what}s defined so far)",
-        )
-    return resolved - 1
-
-
-def _scan_obj(path: Path, data: bytes) -> Declared:
-    text = _text(path, data, "OBJ").replace("\\\r\n", " ").replace("\\\n", " ")
-    nvt = n_colored = 0
-    coords, coord_lines, extras = [], [], []
-    corners, sizes, face_lines, face_nv, face_nvt = [], [], [], [], []
-    libraries, materials_used = [], []
-    material = None
-    for lineno, line in enumerate(text.splitlines(), 1):
-        parts = line.split()
-        if not parts or parts[0].startswith("#"):
-            continue
-        key = parts[0]
-        if key == "v":
-            if len(parts) not in (4, 5, 7):
-                fail(path, f"unparseable content: line {lineno}: a vertex needs 3 coordinates")
-            coords.append(parts[1:4])
-            coord_lines.append(lineno)
-            extras += parts[4:]
-            n_colored += len(parts) == 7
-        elif key == "vt":
-            nvt += 1
-        elif key == "f":
-            if len(parts) < 4:
-                fail(path, f"unparseable content: line {lineno}: a face needs at least 3 vertices")
-            corners += parts[1:]
-            sizes.append(len(parts) - 1)
-            face_lines.append(lineno)
-            face_nv.append(len(coords))
-            face_nvt.append(nvt)
-            if material is not None and material not in materials_used:
-                materials_used.append(material)
-        elif key == "mtllib":
-            libraries.append(line.split(None, 1)[1].strip() if len(parts) > 1 else "")
-        elif key == "usemtl":
-            material = line.split(None, 1)[1].strip() if len(parts) > 1 else ""
-        elif key not in _OBJ_IGNORED:
-            fail(path, f"unparseable content: line {lineno}: unknown statement {key[:20]!r}")
+def _finite_coordinates(path, coords, where) -> np.ndarray:
+    """Three numbers per vertex, (n, 3) float64, or a MeshError naming the first bad one's ``where``."""
     try:
         xyz = np.array(coords, dtype=np.float64).reshape(-1, 3)
     except ValueError:
-        bad = next(i for i, c in enumerate(coords) if not _all_numbers(c))
-        fail(path, f"unparseable content: line {coord_lines[bad]}: bad number in vertex {coords[bad]}")
-    if not _all_numbers(extras):
-        fail(path, "unparseable content: bad number in a vertex color")
+        bad = next(i for i, c in enumerate(coords) if len(c) != 3 or not _all_numbers(c))
+        fail(path, f"unparseable content: {where(bad)}: a vertex needs 3 numbers, got {coords[bad]}")
     bad = np.flatnonzero(~np.isfinite(xyz).all(axis=1))
     if bad.size:
-        fail(path, f"line {coord_lines[bad[0]]}: vertex {bad[0] + 1} has non-finite coordinates")
-    n_tri = n_repeated = 0
-    if sizes:
-        # Corners are v, v/vt, v//vn or v/vt/vn; regular expressions split them all at C speed.
-        joined = " ".join(corners)
-        index = _obj_indices(path, re.sub(r"/\S*", "", joined).split(" "), sizes, face_lines, face_nv, "vertex")
-        if "/" in joined:
-            uv = np.array(re.findall(r"(?<!\S)[^\s/]*/?([^\s/]*)\S*", joined))
-            textured = np.flatnonzero(uv != "")
-            uv_sizes = np.bincount(np.searchsorted(np.cumsum(sizes), textured, side="right"), minlength=len(sizes))
-            _obj_indices(path, uv[textured].tolist(), uv_sizes, face_lines, face_nvt, "texture coordinate")
-        sizes = np.asarray(sizes)
-        polygons = np.split(index, np.cumsum(sizes)[:-1]) if (sizes > 3).any() else index.reshape(-1, 3)
-        n_tri, n_repeated = _faces_declared(path, polygons, len(xyz))
-    declared = Declared(len(xyz), n_tri, n_repeated, has_colors=len(xyz) > 0 and n_colored == len(xyz))
-    if materials_used:
-        _obj_textures(path, libraries, materials_used, declared)
-    return declared
+        fail(path, f"{where(bad[0])}: vertex {bad[0] + 1} has non-finite coordinates")
+    return xyz
 
 
 def _all_numbers(tokens) -> bool:
@@ -169,50 +101,77 @@ def _all_numbers(tokens) -> bool:
     return True
 
 
-def _mtl_map_kd(rest: list) -> str:
-    """The file name of a ``map_Kd`` statement, skipping its options (``-s 1 1 1``)."""
-    i = 0
-    while i < len(rest) - 1 and rest[i].startswith("-"):
-        i += 1
-        while i < len(rest) - 1 and (rest[i] in ("on", "off") or re.fullmatch(r"[-+.\deE]+", rest[i])):
-            i += 1
-    return " ".join(rest[i:])
+# ---------------------------------------------------------------------------
+# OBJ
 
 
-def _obj_textures(path: Path, libraries, materials_used, declared: Declared):
-    maps = {}
-    for name in libraries:
-        lib = path.parent / name
-        if not lib.is_file():
-            declared.notes.append(f"material library {name!r} not found")
+def _obj_indices(path, tokens: list, sizes: list, lines: list, defined, what: str) -> None:
+    """Check OBJ face indices (1-based, negative: relative) against ``defined`` elements, per face."""
+    first = np.cumsum(sizes) - sizes
+    try:
+        index = np.array(tokens).astype(np.int64)
+    except (ValueError, OverflowError):
+        bad = next((j for j, t in enumerate(tokens) if not re.fullmatch(r"[-+]?\d{1,18}", t)), 0)
+        face = np.searchsorted(first, bad, side="right") - 1
+        fail(path, f"unparseable content: line {lines[face]}: bad {what} index {tokens[bad]!r}")
+    count = np.repeat(np.broadcast_to(np.asarray(defined, dtype=np.int64), len(sizes)), sizes)
+    resolved = np.where(index > 0, index, count + index + 1)
+    bad = np.flatnonzero((index == 0) | (resolved < 1) | (resolved > count))
+    if bad.size:
+        j = bad[0]
+        face = np.searchsorted(first, j, side="right") - 1
+        fail(path, f"line {lines[face]}: face {what} index {index[j]} out of range ({count[j]} {what}s defined)")
+
+
+def _check_obj(path: Path, data: bytes) -> Declared:
+    text = _text(path, data, "OBJ").replace("\\\r\n", " ").replace("\\\n", " ")
+    n_uv = n_colored = 0
+    coords, coord_lines = [], []
+    corners, sizes, face_lines, face_nv = [], [], [], []
+    libraries, materials_used = [], []
+    material = None
+    for lineno, line in enumerate(text.splitlines(), 1):
+        parts = line.split()
+        if not parts:
             continue
-        try:
-            size = lib.stat().st_size
-            text = lib.read_bytes().decode("utf-8", errors="replace") if size <= MAX_MATERIAL_BYTES else None
-        except OSError as e:
-            declared.notes.append(f"material library {name!r} cannot be read ({e.strerror or e})")
-            continue
-        if text is None:
-            declared.notes.append(
-                f"material library {name!r} has {size} bytes, over the cap of "
-                f"{MAX_MATERIAL_BYTES}; loaded without its textures"
-            )
-            continue
-        current = None
-        for line in text.splitlines():
-            parts = line.split()
-            if len(parts) >= 2 and parts[0] == "newmtl":
-                current = " ".join(parts[1:])
-            elif len(parts) >= 2 and parts[0] == "map_Kd" and current is not None:
-                maps[current] = (lib.parent / _mtl_map_kd(parts[1:])).resolve()
-    for material in materials_used:
-        image = maps.get(material)
-        if image is not None and image not in declared.textures:
-            declared.textures.append(image)
+        key = parts[0]
+        if key == "v":
+            coords.append(parts[1:4])
+            coord_lines.append(lineno)
+            n_colored += len(parts) >= 7
+        elif key == "vt":
+            n_uv += 1
+        elif key == "f":
+            corners += parts[1:]
+            sizes.append(len(parts) - 1)
+            face_lines.append(lineno)
+            face_nv.append(len(coords))
+            if material is not None and material not in materials_used:
+                materials_used.append(material)
+        elif key == "mtllib":
+            libraries.append(line.split(None, 1)[1].strip() if len(parts) > 1 else "")
+        elif key == "usemtl":
+            material = line.split(None, 1)[1].strip() if len(parts) > 1 else ""
+    _finite_coordinates(path, coords, lambda i: f"line {coord_lines[i]}")
+    if sizes:
+        # Corners are v, v/vt, v//vn or v/vt/vn; regular expressions split them all at C speed.
+        joined = " ".join(corners)
+        _obj_indices(path, re.sub(r"/\S*", "", joined).split(" "), sizes, face_lines, face_nv, "vertex")
+        if "/" in joined:
+            # pymeshlab reads texture coordinates given after the faces that use them.
+            uv = np.array(re.findall(r"(?<!\S)[^\s/]*/?([^\s/]*)\S*", joined))
+            textured = np.flatnonzero(uv != "")
+            uv_sizes = np.bincount(np.searchsorted(np.cumsum(sizes), textured, side="right"), minlength=len(sizes))
+            _obj_indices(path, uv[textured].tolist(), uv_sizes, face_lines, n_uv, "texture coordinate")
+    n = len(coords)
+    declared = Declared(n, len(sizes), has_colors=n > 0 and n_colored == n, libraries=bool(libraries))
+    if materials_used:
+        declared.textures, declared.notes = material_textures(path, libraries, materials_used)
+    return declared
 
 
 # ---------------------------------------------------------------------------
-# PLY
+# PLY: the header's counts against the bytes that follow it, the faces' vertex indices
 
 _PLY_TYPES = {
     "char": "i1", "int8": "i1", "uchar": "u1", "uint8": "u1",
@@ -229,66 +188,79 @@ class _PlyElement:
     count: int
     props: list  # (name, dtype str, list-count dtype str or None)
 
+    def smallest(self, binary: bool) -> int:
+        """The fewest bytes a record can take: scalars and list counts (binary), a digit and a space each (ASCII)."""
+        if not binary:
+            return 2 * len(self.props)
+        return sum(np.dtype(count or kind).itemsize for _, kind, count in self.props)
+
 
 def _ply_header(path, data: bytes):
     if not re.match(rb"ply\r?\n", data):
         fail(path, "unparseable content: not a PLY file (it does not start with 'ply')")
     end = re.search(rb"\nend_header[ \t]*\r?\n", data)
     if end is None:
-        fail(path, "unparseable content: PLY header has no 'end_header' line")
-    header = data[: end.start()].decode("latin-1").splitlines()[1:]
+        fail(path, "unparseable content: PLY header has no 'end_header' line (truncated file?)")
     fmt, elements = None, []
-    for line in header:
+    for line in data[: end.start()].decode("latin-1").splitlines()[1:]:
         parts = line.split()
         if not parts or parts[0] in ("comment", "obj_info"):
             continue
         if parts[0] == "format" and len(parts) == 3 and parts[1] in _PLY_FORMATS:
             fmt = parts[1]
-        elif parts[0] == "element" and len(parts) == 3 and parts[2].isdigit():
+        elif parts[0] == "element" and len(parts) == 3 and parts[2].isascii() and parts[2].isdigit():
             elements.append(_PlyElement(parts[1], int(parts[2]), []))
-        elif parts[0] == "property" and elements:
-            if len(parts) == 3 and parts[1] in _PLY_TYPES:
-                elements[-1].props.append((parts[2], _PLY_TYPES[parts[1]], None))
-            elif (
-                len(parts) == 5
-                and parts[1] == "list"
-                and _PLY_TYPES.get(parts[2], "f")[0] in "iu"
-                and _PLY_TYPES.get(parts[3], "f")[0] in "iu"
-            ):
-                elements[-1].props.append((parts[4], _PLY_TYPES[parts[3]], _PLY_TYPES[parts[2]]))
-            else:
-                fail(path, f"unparseable content: bad PLY property line {line.strip()[:60]!r}")
+        elif parts[0] == "property" and elements and len(parts) == 3 and parts[1] in _PLY_TYPES:
+            elements[-1].props.append((parts[2], _PLY_TYPES[parts[1]], None))
+        elif (
+            parts[0] == "property"
+            and elements
+            and len(parts) == 5
+            and parts[1] == "list"
+            and _PLY_TYPES.get(parts[2], "f")[0] in "iu"
+            and parts[3] in _PLY_TYPES
+        ):
+            elements[-1].props.append((parts[4], _PLY_TYPES[parts[3]], _PLY_TYPES[parts[2]]))
         else:
+            # pymeshlab crashes (SIGSEGV) on some, such as an 'element' line without its count.
             fail(path, f"unparseable content: bad PLY header line {line.strip()[:60]!r}")
     if fmt is None:
         fail(path, "unparseable content: PLY header has no valid 'format' line")
+    body = len(data) - end.end()
+    need = sum(el.count * max(el.smallest(fmt != "ascii"), 1) for el in elements) - (fmt == "ascii")
+    if need > body:
+        # pymeshlab allocates what the header declares before it reads.
+        counts = ", ".join(f"{el.count:,} {el.name}" for el in elements)
+        fail(
+            path,
+            f"unparseable content: the PLY header declares {counts}, more than the {body:,} bytes after it can "
+            "hold (truncated or damaged file)",
+        )
     return fmt, elements, end.end()
 
 
 def _ply_binary_element(path, data, offset, el: _PlyElement, order: str):
     """Read one element's records; returns ({prop: array or list of arrays}, new offset)."""
-    lists = [p for p in el.props if p[2] is not None]
-    if len(lists) <= 1:
-        # Fast path: every list has the length of the first record's list.
-        fields, lead = [], 0
-        for name, kind, count_kind in el.props:
-            if count_kind is None:
-                fields.append((name, order + kind))
-                continue
-            lead_size = np.dtype(fields).itemsize
-            if offset + lead_size + np.dtype(count_kind).itemsize > len(data):
-                break
-            lead = int(np.frombuffer(data, order + count_kind, 1, offset + lead_size)[0])
-            if not 0 <= lead <= len(data):
-                break
-            fields += [("__count__", order + count_kind), (name, order + kind, (lead,))]
-        else:
-            dtype = np.dtype(fields)
-            if offset + el.count * dtype.itemsize <= len(data):
-                records = np.frombuffer(data, dtype, el.count, offset)
-                if not lists or np.all(records["__count__"] == lead):
-                    out = {name: records[name] for name, _, _ in el.props}
-                    return out, offset + el.count * dtype.itemsize
+    # Fast path: every record's lists have the lengths of the first record's (a mesh of triangles).
+    fields, lengths = [], []
+    for name, kind, count_kind in el.props:
+        if count_kind is None:
+            fields.append((name, order + kind))
+            continue
+        at = offset + np.dtype(fields).itemsize
+        if at + np.dtype(count_kind).itemsize > len(data):
+            break
+        length = int(np.frombuffer(data, order + count_kind, 1, at)[0])
+        if not 0 <= length <= len(data):
+            break
+        fields += [(f"count {name}", order + count_kind), (name, order + kind, (length,))]
+        lengths.append((f"count {name}", length))
+    else:
+        dtype = np.dtype(fields)
+        if offset + el.count * dtype.itemsize <= len(data):
+            records = np.frombuffer(data, dtype, el.count, offset)
+            if all(np.all(records[count] == length) for count, length in lengths):
+                return {name: records[name] for name, _, _ in el.props}, offset + el.count * dtype.itemsize
     out = {name: [] for name, _, _ in el.props}
     try:
         for _ in range(el.count):
@@ -331,7 +303,7 @@ def _ply_ascii_element(path, tokens, pos, el: _PlyElement):
                     n = int(tokens[pos])
                     if n < 0 or pos + 1 + n > len(tokens):
                         raise IndexError
-                    out[name].append(np.array(tokens[pos + 1 : pos + 1 + n], dtype=np.int64))
+                    out[name].append(np.array(tokens[pos + 1 : pos + 1 + n], dtype=np.float64))
                     pos += 1 + n
     except IndexError:
         fail(path, f"unparseable content: PLY data ends inside element {el.name!r} (truncated file?)")
@@ -340,8 +312,8 @@ def _ply_ascii_element(path, tokens, pos, el: _PlyElement):
     return {k: (v if el.props[i][2] else np.array(v)) for i, (k, v) in enumerate(out.items())}, pos
 
 
-def read_ply(path, data: bytes) -> dict:
-    """All elements of a PLY file: {element: {property: values}}."""
+def _read_ply(path, data: bytes) -> dict:
+    """Every element's values: {element: {property: values}}."""
     fmt, elements, offset = _ply_header(path, data)
     out = {}
     if fmt == "ascii":
@@ -355,85 +327,93 @@ def read_ply(path, data: bytes) -> dict:
     return out
 
 
-def _polygon_triangles(corners) -> int:
-    """Triangles pymeshlab keeps of a polygon: it splits it as a fan from the
-    first corner and drops the triangles that repeat a vertex."""
-    a = corners[0]
-    return sum(a != b and b != c and a != c for b, c in zip(corners[1:-1], corners[2:]))
-
-
-def _faces_declared(path, faces, n_vertices: int) -> tuple[int, int]:
-    """Check polygon index lists; returns (triangles pymeshlab should make, faces it should drop)."""
-    if isinstance(faces, np.ndarray) and faces.ndim == 2:
-        k = faces.shape[1]
-        if faces.shape[0] and k < 3:
-            fail(path, "unparseable content: a face needs at least 3 vertices")
-        flat = faces.astype(np.int64)
-        bad = np.flatnonzero(((flat < 0) | (flat >= n_vertices)).any(axis=1))
-        if bad.size:
-            fail(
-                path,
-                f"face {bad[0]} has vertex index {faces[bad[0]].tolist()} out of range "
-                f"(the file has {n_vertices} vertices)",
-            )
-        ordered = np.sort(flat, axis=1)
-        repeats = np.flatnonzero((ordered[:, 1:] == ordered[:, :-1]).any(axis=1))
-        triangles = [_polygon_triangles(flat[i].tolist()) for i in repeats]
-        n_tri = (faces.shape[0] - repeats.size) * (k - 2) + sum(triangles)
-        return n_tri, triangles.count(0)
-    n_tri = dropped = 0
-    for i, f in enumerate(faces):
-        f = np.asarray(f, dtype=np.int64)
-        if f.size < 3:
-            fail(path, f"unparseable content: face {i} has fewer than 3 vertices")
-        if f.min() < 0 or f.max() >= n_vertices:
-            fail(path, f"face {i} has vertex index out of range (the file has {n_vertices} vertices)")
-        triangles = _polygon_triangles(f.tolist())
-        n_tri += triangles
-        dropped += triangles == 0
-    return n_tri, dropped
-
-
-def _check_finite(path, xyz: np.ndarray):
-    bad = np.flatnonzero(~np.isfinite(xyz).all(axis=1))
-    if bad.size:
-        fail(path, f"{bad.size} vertices have non-finite coordinates (first: vertex {bad[0]})")
-
-
-def _scan_ply(path: Path, data: bytes) -> Declared:
-    ply = read_ply(path, data)
-    vertex = ply.get("vertex")
-    if vertex is None or not all(c in vertex for c in "xyz"):
-        fail(path, "unparseable content: PLY file has no vertex element with x, y, z")
-    xyz = np.column_stack([np.asarray(vertex[c], dtype=np.float64) for c in "xyz"]).reshape(-1, 3)
-    _check_finite(path, xyz)
-    n_tri = repeated = 0
-    face = ply.get("face")
-    if face is not None and face:
-        key = "vertex_indices" if "vertex_indices" in face else "vertex_index"
-        if key not in face:
-            fail(path, "unparseable content: PLY face element has no vertex_indices list")
-        n_tri, repeated = _faces_declared(path, face[key], len(xyz))
+def _check_ply(path: Path, data: bytes) -> Declared:
+    ply = _read_ply(path, data)
+    vertex = ply.get("vertex", {})
+    n_vertices = len(next(iter(vertex.values()), ()))
+    if all(c in vertex for c in "xyz"):
+        xyz = np.column_stack([np.asarray(vertex[c], dtype=np.float64) for c in "xyz"])
+        _finite_coordinates(path, xyz, lambda i: "PLY vertex data")
+    face = ply.get("face", {})
+    indices = face.get("vertex_indices", face.get("vertex_index"))
+    if indices is not None and len(indices):
+        # pymeshlab checks a triangle's indices, but a polygon's out of range crash it (SIGSEGV).
+        if isinstance(indices, np.ndarray):
+            bad = np.flatnonzero(((indices < 0) | (indices >= n_vertices)).any(axis=1))
+        else:
+            bad = [i for i, f in enumerate(indices) if len(f) and (f.min() < 0 or f.max() >= n_vertices)]
+        if len(bad):
+            fail(path, f"face {bad[0]} has a vertex index out of range (the file has {n_vertices} vertices)")
     colors = any(c in vertex for c in ("red", "diffuse_red"))
-    return Declared(len(xyz), n_tri, repeated, has_colors=colors)
+    return Declared(n_vertices, len(indices) if indices is not None else 0, colors, tuple(vertex))
 
 
 # ---------------------------------------------------------------------------
-# OFF
+# STL
 
-_OFF_HEADER = re.compile(r"(ST)?(C)?(N)?(4)?OFF")
+_STL_RECORD = np.dtype([("normal", "<f4", (3,)), ("corners", "<f4", (3, 3)), ("attr", "<u2")])
 
 
-def _scan_off(path: Path, data: bytes) -> Declared:
+def _check_stl(path: Path, data: bytes) -> Declared:
+    if len(data) >= 84:
+        n = int.from_bytes(data[80:84], "little")
+        if len(data) == 84 + _STL_RECORD.itemsize * n:
+            return Declared(3 * n, n)
+    if data.lstrip()[:5].lower() != b"solid":
+        size = f"{len(data)} bytes"
+        if len(data) >= 84:
+            size += f", but a binary STL of {n} facets has {84 + _STL_RECORD.itemsize * n}"
+        fail(path, f"unparseable content: neither ASCII STL (no 'solid' header) nor binary STL ({size}; truncated?)")
+    if not data.isascii():
+        fail(path, "unparseable content: non-ASCII bytes in an ASCII STL (or a binary STL of the wrong size)")
+    facets = len(re.findall(rb"(?i)\bendfacet\b", data))  # every solid's: a file may hold several
+    return Declared(3 * facets, facets)
+
+
+# ---------------------------------------------------------------------------
+# OFF, read here
+
+_OFF_HEADER = re.compile(r"(ST)?(C)?(N)?(4)?(n)?OFF")
+
+
+def read_off(path, data: bytes):
+    """The vertices, triangles and vertex colours of an OFF file.
+
+    Comments (``#`` to the end of a line) and blank lines may stand
+    anywhere.  Polygons are split into fans from their first corner; the
+    triangles of a fan that repeat a vertex are left out (a triangle
+    written as a quad with a repeated corner is one triangle).  Vertex
+    colours (``COFF``) are integers 0-255 or, with a decimal point, floats
+    0-1; normals and texture coordinates are skipped.
+
+    Returns
+    -------
+    V : (n, 3) float64
+    F : (m, 3) int64
+    C : (n, 3) float32 in [0, 1], or None
+    n_faces : int
+        The faces the file holds, before triangulation.
+
+    Raises
+    ------
+    MeshError
+        Unparseable content, a face index out of range or non-finite
+        coordinates, naming the file and the line's problem.
+
+    Examples
+    --------
+    >>> V, F, C, n = read_off("sq.off", b"OFF # a square\\n4 1 0\\n0 0 0\\n1 0 0\\n1 1 0 # corner\\n0 1 0\\n4 0 1 2 3\\n")
+    >>> F.tolist(), C, n
+    ([[0, 1, 2], [0, 2, 3]], None, 1)
+    """
     text = _text(path, data, "OFF")
     lines = [ln.split("#", 1)[0].split() for ln in text.splitlines()]
     lines = [ln for ln in lines if ln]
-    if not lines or not _OFF_HEADER.fullmatch(lines[0][0]):
-        first = lines[0][0][:20] if lines else ""
-        fail(path, f"unparseable content: an OFF file starts with 'OFF', not {first!r}")
-    header = _OFF_HEADER.fullmatch(lines[0][0])
-    if header.group(4):
-        fail(path, "unparseable content: 4D OFF files are not supported")
+    header = _OFF_HEADER.fullmatch(lines[0][0]) if lines else None
+    if header is None:
+        fail(path, f"unparseable content: an OFF file starts with 'OFF', not {(lines[0][0] if lines else '')[:20]!r}")
+    if header.group(4) or header.group(5):
+        fail(path, "unparseable content: only 3D OFF files are supported (not 4OFF or nOFF)")
     counts, body = (lines[0][1:], lines[1:]) if len(lines[0]) > 1 else ((lines[1:2] or [[]])[0], lines[2:])
     try:
         nv, nf = int(counts[0]), int(counts[1])
@@ -441,90 +421,58 @@ def _scan_off(path: Path, data: bytes) -> Declared:
         fail(path, "unparseable content: OFF header has no 'vertices faces edges' counts")
     if nv < 0 or nf < 0 or len(body) < nv + nf:
         fail(
-            path,
-            f"unparseable content: OFF file declares {nv} vertices and {nf} faces but has only {len(body)} data lines",
+            path, f"unparseable content: OFF file declares {nv} vertices and {nf} faces but has {len(body)} data lines"
         )
-    # Coordinates, then normals (N), texture coordinates (ST), maybe a color.
+    # Coordinates, then normals (N), texture coordinates (ST), then maybe a colour.
     width = 3 + 3 * bool(header.group(3)) + 2 * bool(header.group(1))
-    widths = {len(ln) for ln in body[:nv]}
-    if nv and (len(widths) > 1 or widths.pop() - width not in (0, 3, 4)):
+    rows = body[:nv]
+    widths = {len(ln) for ln in rows}
+    if nv and (len(widths) > 1 or min(widths) - width not in (0, 3, 4)):
         fail(path, f"unparseable content: OFF vertex lines must all hold {width} numbers, plus an optional color")
+    V = _finite_coordinates(path, [ln[:3] for ln in rows], lambda i: f"vertex line {i + 1}")
+    C = None
+    if header.group(2) and nv and min(widths) > width:
+        tokens = [ln[width : width + 3] for ln in rows]
+        C = np.array(tokens, dtype=np.float64)
+        if not any("." in t or "e" in t.lower() for row in tokens for t in row):
+            C = C / 255.0
+        C = np.clip(C, 0.0, 1.0).astype(np.float32)
+    triangles = []
+    for i, ln in enumerate(body[nv : nv + nf]):
+        corners = _off_face(ln)
+        if corners is None:
+            fail(path, f"unparseable content: bad face line {' '.join(ln)[:60]!r} in OFF data")
+        if min(corners) < 0 or max(corners) >= nv:
+            fail(path, f"face {i} has vertex index out of range (the file has {nv} vertices)")
+        a = corners[0]
+        triangles += [(a, b, c) for b, c in zip(corners[1:-1], corners[2:]) if a != b and b != c and a != c]
+    return V, np.array(triangles, dtype=np.int64).reshape(-1, 3), C, nf
+
+
+def _off_face(tokens: list) -> list | None:
+    """The corners of an OFF face line (``k i1 .. ik`` and maybe a colour), or None if it is not one."""
     try:
-        xyz = np.array([[float(t) for t in ln][:3] for ln in body[:nv]], dtype=np.float64).reshape(-1, 3)
-        faces = []
-        for ln in body[nv : nv + nf]:
-            k = int(ln[0])
-            if len(ln) - 1 - k not in (0, 1, 3, 4):
-                raise ValueError
-            faces.append([int(t) for t in ln[1 : 1 + k]])
-            for t in ln[1 + k :]:
-                float(t)  # a face color must be numeric
+        k = int(tokens[0])
+        corners = [int(t) for t in tokens[1 : 1 + k]]
     except ValueError:
-        fail(path, "unparseable content: bad vertex or face line in OFF data")
-    _check_finite(path, xyz)
-    n_tri, repeated = _faces_declared(path, faces, nv)
-    return Declared(nv, n_tri, repeated, has_colors=bool(header.group(2)))
+        return None
+    if k < 3 or len(tokens) - 1 - k not in (0, 1, 3, 4) or not _all_numbers(tokens[1 + k :]):
+        return None
+    return corners
 
 
-# ---------------------------------------------------------------------------
-# STL
-
-_STL_RECORD = np.dtype([("normal", "<f4", (3,)), ("corners", "<f4", (3, 3)), ("attr", "<u2")])
-# facet normal n n n outer loop vertex x y z (x3) endloop endfacet
-_STL_FACET_SIZE = 21
-_STL_FACET_WORDS = [
-    (0, b"facet"), (1, b"normal"), (5, b"outer"), (6, b"loop"), (7, b"vertex"),
-    (11, b"vertex"), (15, b"vertex"), (19, b"endloop"), (20, b"endfacet"),
-]  # fmt: skip
+_CHECKS = {".obj": _check_obj, ".ply": _check_ply, ".stl": _check_stl}
 
 
-def _scan_stl(path: Path, data: bytes) -> Declared:
-    if len(data) >= 84:
-        n = int.from_bytes(data[80:84], "little")
-        if len(data) == 84 + 50 * n:
-            corners = np.frombuffer(data, _STL_RECORD, n, 84)["corners"].reshape(-1, 3)
-            _check_finite(path, corners.astype(np.float64))
-            return Declared(3 * n, n)
-    if not data.lstrip()[:5].lower() == b"solid":
-        size = f"{len(data)} bytes"
-        if len(data) >= 84:
-            size += f", but a binary STL of {n} facets has {84 + 50 * n}"
-        fail(path, f"unparseable content: neither ASCII STL (no 'solid' header) nor binary STL ({size}; truncated?)")
-    if not data.isascii():
-        # pymeshlab would take it for binary and read garbage facets.
-        fail(path, "unparseable content: non-ASCII bytes in an ASCII STL (or a binary STL of the wrong size)")
-    tokens = data.lstrip().partition(b"\n")[2].split()  # after the 'solid name' line
-    i = 0
-    corners = []
-    while i < len(tokens) and tokens[i].lower() == b"facet":
-        facet = [t.lower() for t in tokens[i : i + _STL_FACET_SIZE]]
-        try:
-            if len(facet) < _STL_FACET_SIZE or any(facet[j] != word for j, word in _STL_FACET_WORDS):
-                raise ValueError
-            numbers = [float(t) for t in facet[2:5] + facet[8:11] + facet[12:15] + facet[16:19]]
-        except ValueError:
-            fail(path, f"unparseable content: ASCII STL facet {len(corners)} is malformed or cut short")
-        corners.append(numbers[3:])
-        i += _STL_FACET_SIZE
-    if i >= len(tokens) or tokens[i].lower() != b"endsolid":
-        fail(path, f"unparseable content: ASCII STL has no 'endsolid' after facet {len(corners)} (truncated?)")
-    with np.errstate(over="ignore"):
-        xyz = np.array(corners, dtype=np.float32).astype(np.float64).reshape(-1, 3)  # STL is single precision
-    n_facets = len(corners)
-    _check_finite(path, xyz)
-    return Declared(3 * n_facets, n_facets)
+def check(path: Path, data: bytes) -> Declared:
+    """Refuse what pymeshlab would misread in the file ``path`` with content ``data``; what the file declares.
 
-
-_SCANNERS = {".obj": _scan_obj, ".ply": _scan_ply, ".off": _scan_off, ".stl": _scan_stl}
-
-
-def scan(path: Path, data: bytes) -> Declared:
-    """What the file ``path`` with content ``data`` declares, checked; its extension picks the format.
+    Its extension picks the format (OBJ, PLY or STL; OFF files are read by :func:`read_off`).
 
     Raises
     ------
     MeshError
-        Unparseable content, a face index out of range, non-finite
-        coordinates; the message names the file.
+        A face index out of range, a bad or non-finite coordinate, a header
+        declaring more than the file holds; the message names the file.
     """
-    return _SCANNERS[path.suffix.lower()](path, data)
+    return _CHECKS[path.suffix.lower()](path, data)

@@ -11,6 +11,7 @@ __all__ = [
     "face_normals",
     "face_areas",
     "area_vectors",
+    "vertex_area_vectors",
     "vertex_normals",
     "normal_defined",
     "NORMAL_TOLERANCE",
@@ -65,8 +66,38 @@ def area_vectors(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
     return np.stack([uy * vz - uz * vy, uz * vx - ux * vz, ux * vy - uy * vx], axis=1)
 
 
+def vertex_area_vectors(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """Each vertex's area-weighted normal before normalizing: the sum of its faces' :func:`area_vectors`.
+
+    Its direction is the vertex's :func:`vertex_normals`; its length is at
+    most twice the area of the vertex's faces, less where they turn away
+    from each other.
+
+    Parameters
+    ----------
+    vertices, faces : (n, 3) float64 and (m, 3) int
+
+    Returns
+    -------
+    (n, 3) float64; zero at vertices no face uses.
+
+    Examples
+    --------
+    >>> V = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]], float)
+    >>> vertex_area_vectors(V, [[0, 1, 2], [0, 3, 1]]).tolist()  # two right triangles folded along the x axis
+    [[0.0, 1.0, 1.0], [0.0, 1.0, 1.0], [0.0, 0.0, 1.0], [0.0, 1.0, 0.0]]
+    """
+    F = np.asarray(faces, dtype=np.int64).reshape(-1, 3)
+    N = area_vectors(vertices, F)
+    corners, n = F.T.reshape(-1), len(vertices)
+    return np.stack([np.bincount(corners, weights=np.tile(N[:, d], 3), minlength=n) for d in range(3)], axis=1)
+
+
 def vertex_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
-    """Area-weighted unit vertex normals, (n, 3) float64; zero at isolated vertices."""
+    """Area-weighted unit vertex normals, (n, 3) float64; zero at isolated vertices.
+
+    The directions of :func:`vertex_area_vectors`, summed by libigl.
+    """
     import igl
 
     V = np.ascontiguousarray(vertices, dtype=np.float64)
@@ -108,9 +139,8 @@ def normal_defined(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
     if F.size == 0:
         return np.zeros(n, dtype=bool)
     N = area_vectors(V, F)
-    length = np.sqrt(np.einsum("ij,ij->i", N, N))
-    total = sum(np.bincount(F[:, k], length, minlength=n) for k in range(3))
-    summed = np.stack([sum(np.bincount(F[:, k], N[:, d], minlength=n) for k in range(3)) for d in range(3)], axis=1)
+    total = np.bincount(F.T.reshape(-1), np.tile(np.sqrt(np.einsum("ij,ij->i", N, N)), 3), minlength=n)
+    summed = vertex_area_vectors(V, F)
     return np.sqrt(np.einsum("ij,ij->i", summed, summed)) > NORMAL_TOLERANCE * total
 
 

@@ -1,28 +1,34 @@
 """Read triangle meshes from OBJ, PLY, OFF and STL files; write PLY.
 
-``load_mesh`` loads through pymeshlab, after :mod:`meshsal.mesh.formats` has
-checked the file against what it declares (vertex and face counts, index
-ranges, finite coordinates), and checks pymeshlab's result against that too.
-Then :mod:`meshsal.mesh.repair` finds and repairs what real meshes get wrong
-(duplicate, degenerate and double-sided faces, inconsistent orientation,
-non-manifold edges and vertices...) and the one :class:`MeshRepairWarning`
-names the file and every repair.  Anything that cannot be loaded in full,
-or repaired without changing the shape, raises :class:`meshsal.MeshError`
-naming the file and the problem, before any work.  Files over
-``MAX_MESH_BYTES`` are refused before they are read; textures over
-``MAX_TEXTURE_PIXELS`` are left out (:mod:`meshsal.mesh.texture`).
+``load_mesh`` reads OBJ, PLY and STL files with pymeshlab and OFF files
+with :func:`meshsal.mesh.formats.read_off`, after
+:func:`meshsal.mesh.formats.check` has refused what pymeshlab would misread
+or not survive; pymeshlab's result is checked against the vertices the file
+declares.  Then :mod:`meshsal.mesh.repair` finds and repairs what real
+meshes get wrong (duplicate, degenerate and double-sided faces, inconsistent
+orientation, non-manifold edges and vertices, parts facing inward...) and
+the one :class:`MeshRepairWarning` names the file and every repair.
+Anything that cannot be loaded in full, or repaired without changing the
+shape, raises :class:`meshsal.MeshError` naming the file and the problem,
+before any work.  Files over ``MAX_MESH_BYTES`` are refused before they are
+read; textures over ``MAX_TEXTURE_PIXELS`` are left out
+(:mod:`meshsal.mesh.texture`).
 """
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
+import os
+import shutil
+import tempfile
 import warnings
 from pathlib import Path
 
 import numpy as np
 
 from meshsal.mesh import Mesh
-from meshsal.mesh.formats import SUPPORTED_EXTENSIONS, Declared, fail, read_ply, scan
+from meshsal.mesh.formats import SUPPORTED_EXTENSIONS, Declared, check, fail, read_off
 from meshsal.mesh.repair import MeshRepairWarning, MeshReport, repair_arrays
 from meshsal.mesh.texture import MAX_TEXTURE_PIXELS, read_texture
 from meshsal.util.atomic import atomic_path
@@ -66,17 +72,89 @@ def _read_checked(path: Path, max_bytes: int | None) -> bytes:
     return data
 
 
-def _pymeshlab_load(path: Path):
+@contextlib.contextmanager
+def _without_materials(path: Path, declared: Declared):
+    """The path pymeshlab reads: for an OBJ naming a material library, a link to it alone in a new folder.
+
+    pymeshlab decodes the texture images a material library names, whatever
+    their size; without the library beside it, it reads the geometry and the
+    texture coordinates only, and :func:`_load_texture` reads the image within its cap.
+    """
+    if not declared.libraries:
+        yield path
+        return
+    with tempfile.TemporaryDirectory(prefix="visuotactile-obj-") as folder:
+        alone = Path(folder) / path.name
+        try:
+            os.symlink(path.resolve(), alone)
+        except OSError:  # no symbolic links here (Windows without the privilege): a copy
+            shutil.copyfile(path, alone)
+        yield alone
+
+
+# pymeshlab's words for a file that ends too soon.
+_TRUNCATED = ("Unexpected EOF", "Unexpected end of file")
+
+
+def _pymeshlab_load(path: Path, declared: Declared):
     from meshsal.util.meshlab import import_pymeshlab
 
     pymeshlab = import_pymeshlab()
     ms = pymeshlab.MeshSet()
     params = {"unify_vertices": False} if path.suffix.lower() == ".stl" else {}
-    try:
-        ms.load_new_mesh(str(path), **params)
-    except pymeshlab.PyMeshLabException as e:
-        fail(path, f"unparseable content (pymeshlab: {' '.join(str(e).split())})")
+    with _without_materials(path, declared) as readable:
+        try:
+            ms.load_new_mesh(str(readable), **params)
+        except pymeshlab.PyMeshLabException as e:
+            detail = " ".join(str(e).split("Error details:")[-1].split())
+            truncated = " (truncated file?)" if any(t in detail for t in _TRUNCATED) else ""
+            fail(path, f"unparseable content (pymeshlab: {detail}){truncated}")
+        except (MemoryError, RuntimeError, ValueError) as e:  # pymeshlab's std::bad_alloc, std::length_error
+            fail(path, f"pymeshlab could not read it ({type(e).__name__}: {e})")
+    pm = ms.current_mesh()
+    if pm.vertex_number() != declared.n_vertices:
+        fail(
+            path,
+            f"pymeshlab read {pm.vertex_number()} of the {declared.n_vertices} vertices the file holds: "
+            "the others have non-finite coordinates or are damaged",
+        )
     return ms  # the caller keeps the MeshSet alive: its meshes die with it
+
+
+def _no_faces(path: Path, n_vertices: int, n_faces: int):
+    if n_faces:
+        fail(path, "no non-degenerate face left (every face repeats a vertex)")
+    if n_vertices == 0:
+        fail(path, "unparseable content: no vertices and no faces found")
+    fail(path, f"no faces (a point cloud of {n_vertices} vertices)")
+
+
+def _read_arrays(path: Path, data: bytes, notes: list, max_texture_pixels: int | None):
+    """Vertices, triangles, vertex colours, per-corner uv and texture of the file, as read."""
+    if path.suffix.lower() == ".off":
+        V, F, C, n_faces = read_off(path, data)
+        if len(F) == 0:
+            _no_faces(path, len(V), n_faces)
+        return V, F, C, None, None
+    declared = check(path, data)
+    ms = _pymeshlab_load(path, declared)
+    pm = ms.current_mesh()
+    if pm.face_number() == 0:
+        _no_faces(path, pm.vertex_number(), declared.n_faces)
+    V = np.asarray(pm.vertex_matrix(), dtype=np.float64)
+    F = np.asarray(pm.face_matrix(), dtype=np.int64)
+    C = None
+    if declared.has_colors and pm.has_vertex_color():
+        C = np.asarray(pm.vertex_color_matrix(), dtype=np.float32)[:, :3]
+    notes += declared.notes
+    texture = UV = None
+    if declared.textures:
+        texture = _load_texture(declared, notes, max_texture_pixels)
+        if texture is not None and pm.has_wedge_tex_coord():
+            UV = np.asarray(pm.wedge_tex_coord_matrix(), dtype=np.float32).reshape(-1, 3, 2)
+        else:
+            texture = None
+    return V, F, C, UV, texture
 
 
 def _load_texture(declared: Declared, notes: list, max_pixels: int | None):
@@ -102,7 +180,9 @@ def load_mesh(
 ):
     """Load a triangle mesh from an OBJ, PLY, OFF or STL file, repaired.
 
-    Polygons are triangulated.  OBJ files bring their MTL texture image
+    OBJ, PLY and STL files are read by pymeshlab, which triangulates
+    polygons (ear cutting; a face that repeats a vertex is left out); OFF
+    files by :func:`meshsal.mesh.formats.read_off`.  OBJ files bring their MTL texture image
     (``uv`` per face corner and ``texture``) and ``v x y z r g b`` vertex
     colors; PLY and OFF files bring vertex colors.  The mesh is then
     repaired (:func:`meshsal.mesh.repair.repair_arrays`: duplicate vertices
@@ -140,8 +220,9 @@ def load_mesh(
         The message names the file and the problem: missing file, a
         directory, unknown extension, a file over ``max_bytes`` (its size
         and the cap), empty file, unparseable content, face index out of
-        range, non-finite coordinates, no faces (a point cloud), no
-        non-degenerate face left, or fewer faces loaded than the file holds.
+        range, non-finite coordinates, a header declaring more than the file
+        holds, no faces (a point cloud), no non-degenerate face left, or
+        fewer vertices read than the file holds.
 
     Examples
     --------
@@ -153,44 +234,10 @@ def load_mesh(
     ('quad', (4, 3), (2, 3), 1, 1)
     """
     path = Path(path)
-    data = _read_checked(path, max_bytes)
-    declared = scan(path, data)
-    if declared.n_triangles + declared.n_repeated == 0:
-        if declared.n_vertices == 0:
-            fail(path, "unparseable content: no vertices and no faces found")
-        fail(path, f"no faces (a point cloud of {declared.n_vertices} vertices)")
-    if declared.n_triangles == 0:
-        fail(path, "no non-degenerate face left (every face repeats a vertex)")
-    ms = _pymeshlab_load(path)
-    pm = ms.current_mesh()
-    if pm.vertex_number() != declared.n_vertices or pm.face_number() != declared.n_triangles:
-        fail(
-            path,
-            f"pymeshlab loaded {pm.vertex_number()} vertices and {pm.face_number()} triangles, "
-            f"but the file holds {declared.n_vertices} vertices and {declared.n_triangles} triangles "
-            "(non-planar or self-intersecting polygons?)",
-        )
-    V = np.asarray(pm.vertex_matrix(), dtype=np.float64)
-    F = np.asarray(pm.face_matrix(), dtype=np.int64)
-    C = None
-    if declared.has_colors and pm.has_vertex_color():
-        C = np.asarray(pm.vertex_color_matrix(), dtype=np.float32)[:, :3]
-    notes = list(declared.notes)
-    texture = UV = None
-    if declared.textures:
-        texture = _load_texture(declared, notes, max_texture_pixels)
-        if texture is not None and pm.has_wedge_tex_coord():
-            UV = np.asarray(pm.wedge_tex_coord_matrix(), dtype=np.float32).reshape(-1, 3, 2)
-        else:
-            texture = None
-    del ms, pm
+    notes = []
+    V, F, C, UV, texture = _read_arrays(path, _read_checked(path, max_bytes), notes, max_texture_pixels)
     V, F, C, UV, found = repair_arrays(V, F, C, UV, source=str(path))
-    found = dataclasses.replace(
-        found,
-        faces=found.faces + declared.n_repeated,
-        zero_area_faces=found.zero_area_faces + declared.n_repeated,
-        notes=tuple(notes),
-    )
+    found = dataclasses.replace(found, notes=tuple(notes))
     if found.noteworthy:
         warnings.warn(found.message(), MeshRepairWarning, stacklevel=2)
     mesh = Mesh(vertices=V, faces=F, vertex_colors=C, uv=UV, texture=texture, name=path.stem)
@@ -273,7 +320,8 @@ def load_vertex_quality(path) -> np.ndarray:
     data = _read_checked(path, MAX_MESH_BYTES)
     if path.suffix.lower() != ".ply":
         fail(path, "vertex quality is only stored in PLY files")
-    vertex = read_ply(path, data).get("vertex", {})
-    if "quality" not in vertex:
+    declared = check(path, data)
+    if "quality" not in declared.vertex_properties:
         fail(path, "has no per-vertex 'quality' property")
-    return np.asarray(vertex["quality"], dtype=np.float64).reshape(-1)
+    ms = _pymeshlab_load(path, declared)
+    return np.asarray(ms.current_mesh().vertex_scalar_array(), dtype=np.float64).reshape(-1)

@@ -30,6 +30,9 @@ and vertices               the faces at a vertex form several fans        faces 
 inward closed components   closed, negative enclosed volume               turned outward, unless the component lies
                                                                           inside another closed one (a cavity: libigl
                                                                           ``fast_winding_number``)
+inward open components     rays from the back escape the mesh more        turned outward (ray casting, as libigl's
+                           often than rays from the front                 ``reorient_facets_raycast``:
+                                                                          :mod:`meshsal.mesh.outward`)
 several components         faces joined by two-face edges                 kept, counted, closed ones counted
 open boundaries            edges with one face                            kept, counted (edges and loops)
 vertices without a normal  :func:`~meshsal.mesh.geometry.normal_defined`  kept, counted: never interest points
@@ -57,6 +60,7 @@ import numpy as np
 
 from meshsal.mesh import topology
 from meshsal.mesh.geometry import normal_defined
+from meshsal.mesh.outward import orient_outward
 from meshsal.mesh.record import Mesh, MeshError
 
 __all__ = ["MeshRepairWarning", "MeshReport", "repair_arrays", "repair_mesh", "ZERO_AREA", "SLIVER"]
@@ -108,6 +112,9 @@ class MeshReport:
         Copies the split made.
     outward_components : int
         Closed components turned outward.
+    outward_open_components : int
+        Open components turned outward (:mod:`meshsal.mesh.outward`: more of their back than of their front
+        is seen from outside).
     components, closed_components : int
         Connected components of the repaired mesh, and how many of them are closed.
     boundary_edges, boundary_loops : int
@@ -134,6 +141,7 @@ class MeshReport:
     nonmanifold_vertices: int = 0
     added_vertices: int = 0
     outward_components: int = 0
+    outward_open_components: int = 0
     components: int = 0
     closed_components: int = 0
     boundary_edges: int = 0
@@ -185,6 +193,8 @@ class MeshReport:
             )
         if self.outward_components:
             done.append(f"turned {self.outward_components} closed components outward")
+        if self.outward_open_components:
+            done.append(f"turned {self.outward_open_components} open components outward (ray casting)")
         return done
 
     def findings(self) -> list[str]:
@@ -290,7 +300,7 @@ def repair_arrays(vertices, faces, vertex_colors=None, uv=None, source: str = ""
     if split is not None:
         V, F, C, counts["nonmanifold_vertices"], counts["added_vertices"] = split
         edges = topology.Edges(F, len(V))
-    F, UV, components = topology.orient_outward(V, F, UV, edges)
+    F, UV, components = orient_outward(V, F, UV, edges)
     counts.update(components)
     counts["normalless_vertices"] = int(np.count_nonzero(~normal_defined(V, F)))
     return V, F, C, UV, MeshReport(**counts)

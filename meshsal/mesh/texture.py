@@ -1,4 +1,4 @@
-"""Texture images of meshes, read with a cap on their size in pixels.
+"""Texture images of meshes, read with a cap on their size in pixels, and the material libraries that name them.
 
 A texture is decoded whole into memory, three bytes a pixel, so a large or
 hostile image (a few kilobytes of PNG can declare a gigapixel) could exhaust
@@ -11,15 +11,19 @@ unreadable texture is reported, never raised: the mesh loads without it.
 
 from __future__ import annotations
 
+import re
 import struct
 from pathlib import Path
 
 import numpy as np
 
-__all__ = ["MAX_TEXTURE_PIXELS", "image_size", "read_texture"]
+__all__ = ["MAX_TEXTURE_PIXELS", "MAX_MATERIAL_BYTES", "image_size", "read_texture", "material_textures"]
 
 #: Largest texture read, in pixels: an 8192 x 8192 image (192 MiB as RGB bytes).
 MAX_TEXTURE_PIXELS = 8192 * 8192
+#: A material library larger than this is not read (its textures are left out, with a note): MTL files
+#: hold a few lines per material, so anything near this size is not one.
+MAX_MATERIAL_BYTES = 16 * 2**20
 
 # JPEG markers that start a frame (SOF0-15 but DHT, JPG and DAC) and hold the image size.
 _JPEG_FRAMES = set(range(0xC0, 0xD0)) - {0xC4, 0xC8, 0xCC}
@@ -114,3 +118,65 @@ def _too_large(path: Path, width: int, height: int, max_pixels: int) -> str:
         f"texture image {path.name!r} has {width} x {height} = {width * height:,} pixels, over the cap of "
         f"{max_pixels:,}; loaded without texture"
     )
+
+
+def _mtl_map_kd(rest: list) -> str:
+    """The file name of a ``map_Kd`` statement, skipping its options (``-s 1 1 1``)."""
+    i = 0
+    while i < len(rest) - 1 and rest[i].startswith("-"):
+        i += 1
+        while i < len(rest) - 1 and (rest[i] in ("on", "off") or re.fullmatch(r"[-+.\deE]+", rest[i])):
+            i += 1
+    return " ".join(rest[i:])
+
+
+def material_textures(obj_path, libraries, materials) -> tuple[list, list]:
+    """The texture images (``map_Kd``) of an OBJ's ``materials``, from its material ``libraries``.
+
+    Parameters
+    ----------
+    obj_path : pathlib.Path
+        The OBJ file: library names are relative to its folder, image names to their library's.
+    libraries : list of str
+        The names of its ``mtllib`` statements.
+    materials : list of str
+        The materials its faces use (``usemtl``), in order.
+
+    Returns
+    -------
+    images : list of pathlib.Path
+        The distinct images those materials name, in order.
+    notes : list of str
+        Libraries missing, unreadable or over :data:`MAX_MATERIAL_BYTES`.
+    """
+    maps, notes = {}, []
+    for name in libraries:
+        lib = Path(obj_path).parent / name
+        if not lib.is_file():
+            notes.append(f"material library {name!r} not found")
+            continue
+        try:
+            size = lib.stat().st_size
+            text = lib.read_bytes().decode("utf-8", errors="replace") if size <= MAX_MATERIAL_BYTES else None
+        except OSError as e:
+            notes.append(f"material library {name!r} cannot be read ({e.strerror or e})")
+            continue
+        if text is None:
+            notes.append(
+                f"material library {name!r} has {size} bytes, over the cap of "
+                f"{MAX_MATERIAL_BYTES}; loaded without its textures"
+            )
+            continue
+        current = None
+        for line in text.splitlines():
+            parts = line.split()
+            if len(parts) >= 2 and parts[0] == "newmtl":
+                current = " ".join(parts[1:])
+            elif len(parts) >= 2 and parts[0] == "map_Kd" and current is not None:
+                maps[current] = (lib.parent / _mtl_map_kd(parts[1:])).resolve()
+    images = []
+    for material in materials:
+        image = maps.get(material)
+        if image is not None and image not in images:
+            images.append(image)
+    return images, notes

@@ -1,4 +1,4 @@
-"""The connectivity of a triangle mesh: its edges, duplicate faces, orientation, fans and components.
+"""The connectivity of a triangle mesh: its edges, duplicate faces, orientation, fans and boundary loops.
 
 Plain functions on ``(vertices, faces)`` arrays that :mod:`meshsal.mesh.repair`
 runs in turn (its table says what each finds and does).  They change the
@@ -12,7 +12,15 @@ import numpy as np
 
 from meshsal.mesh.geometry import area_vectors, half_edges
 
-__all__ = ["Edges", "drop_duplicate_faces", "orient_patches", "radial_pairs", "split_fans", "orient_outward"]
+__all__ = [
+    "Edges",
+    "drop_duplicate_faces",
+    "orient_patches",
+    "radial_pairs",
+    "split_fans",
+    "boundary_loops",
+    "flip_faces",
+]
 
 
 class Edges:
@@ -163,7 +171,8 @@ def _occurrences(sorted_keys: np.ndarray, keys: np.ndarray) -> np.ndarray:
     return np.searchsorted(sorted_keys, keys, side="right") - np.searchsorted(sorted_keys, keys, side="left")
 
 
-def _flip(F, UV, which):
+def flip_faces(F, UV, which):
+    """Turn the faces ``which`` (indices or a mask): ``(a, b, c)`` becomes ``(a, c, b)``, their uv likewise."""
     F = F.copy()
     F[which] = F[which][:, [0, 2, 1]]
     if UV is not None:
@@ -201,7 +210,7 @@ def orient_patches(V: np.ndarray, F: np.ndarray, UV):
     flipped = np.bincount(patch, area * flip)
     total = np.bincount(patch, area)
     flip ^= (flipped > 0.5 * total)[patch]
-    F, UV = _flip(F, UV, flip)
+    F, UV = flip_faces(F, UV, flip)
     return F, UV, int(np.count_nonzero(flip))
 
 
@@ -322,10 +331,13 @@ def split_fans(V: np.ndarray, F: np.ndarray, C, edges: Edges):
     pairs = np.concatenate([edges.pairs[edges.consistent()], radial_pairs(V, F, edges)])
     n_fans, fan = _fans(pairs, F.size)
     if n_fans == n:
-        return None
-    fan_vertex = np.empty(n_fans, dtype=np.int64)
-    fan_vertex[fan] = F.reshape(-1)
-    F, source = _keep_order(fan.reshape(-1, 3), fan_vertex, n)
+        if not np.any(edges.counts > 2):
+            return None
+        source = np.arange(n)  # every vertex one fan, yet a face cut off at an edge reaches round both its ends
+    else:
+        fan_vertex = np.empty(n_fans, dtype=np.int64)
+        fan_vertex[fan] = F.reshape(-1)
+        F, source = _keep_order(fan.reshape(-1, 3), fan_vertex, n)
     if np.any(Edges(F, len(source)).counts > 2):
         # A face cut off at an edge but joined to the faces kept there around both its ends: libigl
         # stitches the mesh again from separate faces, merging only what stays manifold.
@@ -359,77 +371,7 @@ def _keep_order(F: np.ndarray, origin: np.ndarray, n: int) -> tuple[np.ndarray, 
     return index[F], np.concatenate([np.arange(n), origin[extra]])
 
 
-def orient_outward(V: np.ndarray, F: np.ndarray, UV, edges: Edges):
-    """Turn closed components that face inward outward; count components and boundaries.
-
-    Components are faces joined by two-face edges; one is closed when it
-    has no edge of one face or more than two and its faces agree along
-    every edge.  A closed component with a negative enclosed volume is
-    turned, unless all its vertices lie inside another closed component
-    (libigl's fast winding number above one half): a cavity faces into
-    the hole it bounds.
-
-    Returns
-    -------
-    F : (m, 3) int64
-    UV : (m, 3, 2) or None
-    stats : dict
-        ``outward_components``, ``components``, ``closed_components``,
-        ``boundary_edges``, ``boundary_loops``.
-
-    Examples
-    --------
-    >>> V = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]], float)
-    >>> F = np.array([[0, 1, 2], [0, 3, 1], [0, 2, 3], [1, 3, 2]])   # a tetrahedron facing in
-    >>> F2, _, stats = orient_outward(V, F, None, Edges(F, 4))
-    >>> F2.tolist(), stats["outward_components"], stats["closed_components"]
-    ([[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]], 1, 1)
-    """
-    from scipy.sparse import coo_matrix
-    from scipy.sparse.csgraph import connected_components
-
-    m = len(F)
-    f1, f2 = edges.pairs[:, 0] // 3, edges.pairs[:, 1] // 3
-    graph = coo_matrix((np.ones(f1.size, dtype=np.int8), (f1, f2)), shape=(m, m))
-    n_components, component = connected_components(graph, directed=True, connection="weak")
-    boundary = edges.boundary()
-    is_open = np.zeros(n_components, dtype=bool)
-    is_open[component[boundary // 3]] = True
-    is_open[component[edges.nonmanifold() // 3]] = True
-    is_open[component[edges.pairs[~edges.consistent(), 0] // 3]] = True
-    closed = ~is_open
-    # Six times the enclosed volume: the sum of a . ((b - a) x (c - a)) = det(a, b, c) over the faces.
-    volume = np.bincount(component, np.einsum("ij,ij->i", V[F[:, 0]], area_vectors(V, F)), minlength=n_components)
-    inward = closed & (volume < 0)
-    if inward.any() and np.count_nonzero(closed) > 1:
-        for k in np.flatnonzero(inward):
-            inward[k] = not _inside_another(V, F, component, closed, k)
-    if inward.any():
-        F, UV = _flip(F, UV, inward[component])
-    stats = {
-        "outward_components": int(np.count_nonzero(inward)),
-        "components": int(n_components),
-        "closed_components": int(np.count_nonzero(closed)),
-        "boundary_edges": int(boundary.size),
-        "boundary_loops": _loops(F, boundary, len(V)),
-    }
-    return F, UV, stats
-
-
-def _inside_another(V, F, component, closed, k) -> bool:
-    import igl
-
-    points = V[np.unique(F[component == k])]
-    for other in np.flatnonzero(closed):
-        if other == k:
-            continue
-        w = igl.fast_winding_number(V, np.ascontiguousarray(F[component == other]), points)
-        if np.all(np.abs(w) > 0.5):
-            return True
-    return False
-
-
-def _loops(F, boundary, n) -> int:
+def boundary_loops(F: np.ndarray, boundary: np.ndarray, n: int) -> int:
     """How many loops the boundary half-edges form."""
     if boundary.size == 0:
         return 0

@@ -8,12 +8,87 @@ always the source file's own coordinates.
 from __future__ import annotations
 
 import math
+import warnings
 
 import numpy as np
 
 from meshsal.mesh import Mesh, MeshError, Similarity, bounding_sphere
 
-__all__ = ["scale_to", "normalize", "principal_diagonal", "scale_to_principal", "to_millimetres"]
+__all__ = [
+    "scale_to",
+    "normalize",
+    "principal_diagonal",
+    "scale_to_principal",
+    "to_millimetres",
+    "UnitsWarning",
+    "check_pad_size",
+    "MAX_PAD_WIDTHS",
+]
+
+#: A mesh more pad widths across than this is felt as a flat patch wherever it is pressed (a 150 mm object
+#: in micrometres is 4,700 widths of a 32 mm pad; the toys and the YCB scans in millimetres, 2 to 8).
+MAX_PAD_WIDTHS = 1000.0
+
+
+class UnitsWarning(UserWarning):
+    """A mesh's size and a pad's width disagree: the mesh is most likely not in millimetres.
+
+    The message names the mesh, its size and the pad's width.
+    """
+
+
+def check_pad_size(mesh: Mesh, pad_width: float, pitch: float | None = None, stacklevel: int = 2) -> bool:
+    """Warn (:class:`UnitsWarning`) when a pad of ``pad_width`` would miss the mesh, cover it, or feel it flat.
+
+    Meshes are taken in millimetres, and so are the pad's width (32 mm by
+    default) and its taxels' ``pitch``.  A mesh in metres, loaded as it is, is
+    smaller than a taxel: its rays miss it and its imprints are all zero; a
+    mesh smaller than the pad is covered by it; one more than
+    :data:`MAX_PAD_WIDTHS` widths across is felt as a flat patch anywhere.
+
+    Parameters
+    ----------
+    mesh : Mesh
+    pad_width : float
+        The pad's width, in the mesh's units.
+    pitch : float, optional
+        The distance between the pad's taxels, in the mesh's units.
+
+    Returns
+    -------
+    bool
+        Whether the sizes agree (no warning).
+
+    Examples
+    --------
+    >>> import warnings
+    >>> bunny = Mesh(vertices=[[0, 0, 0], [0.15, 0, 0], [0, 0.12, 0]], faces=[[0, 1, 2]], name="bunny")
+    >>> with warnings.catch_warnings(record=True) as caught:
+    ...     warnings.simplefilter("always")
+    ...     check_pad_size(bunny, 32.0, pitch=2.0)
+    False
+    >>> print(caught[0].message)  # doctest: +ELLIPSIS
+    bunny: 0.192 units across (its bounding-box diagonal), and the pad 32 wide: the pad's taxels, 2 apart, miss it...
+    """
+    lo, hi = mesh.vertices.min(axis=0), mesh.vertices.max(axis=0)
+    size = float(np.linalg.norm(hi - lo))
+    if pitch is not None and size < pitch:
+        problem = f"the pad's taxels, {pitch:g} apart, miss it"
+    elif size <= pad_width:
+        problem = "the pad covers it whole"
+    elif size > MAX_PAD_WIDTHS * pad_width:
+        problem = "the pad feels a flat patch of it anywhere"
+    else:
+        return True
+    warnings.warn(
+        f"{mesh.name or 'mesh'}: {size:.3g} units across (its bounding-box diagonal), and the pad {pad_width:g} "
+        f"wide: {problem}. Sizes are taken in millimetres: scale the mesh first "
+        "(meshsal.scale_to_principal(mesh, 150.0), or meshsal.mesh.transform.to_millimetres with its units) "
+        "or give the pad's width in its units",
+        UnitsWarning,
+        stacklevel=stacklevel + 1,
+    )
+    return False
 
 
 def _label(mesh: Mesh) -> str:

@@ -14,6 +14,10 @@ size, centroid at the origin.
   seed; any other coloured mesh (vertex colours or a texture) has its hue
   turned about the grey axis and its brightness scaled; an uncoloured mesh
   stays uncoloured.
+
+:func:`retessellate` gives an instance another tessellation of the same
+surface (half the faces, or each face split in four): a test instance whose
+vertices are not those training touched, as a scan of a real object's would not be.
 """
 
 from __future__ import annotations
@@ -25,7 +29,19 @@ from scipy.spatial.transform import Rotation
 
 from meshsal.mesh import Mesh, Similarity
 
-__all__ = ["InstanceSpec", "random_rotation", "draw_instance", "make_instance", "recolor"]
+__all__ = [
+    "InstanceSpec",
+    "TESSELLATIONS",
+    "random_rotation",
+    "draw_instance",
+    "make_instance",
+    "recolor",
+    "retessellate",
+]
+
+
+#: Other tessellations of a surface (:func:`retessellate`).
+TESSELLATIONS = ("decimated", "subdivided")
 
 
 @dataclass(frozen=True, eq=False)
@@ -176,3 +192,57 @@ def make_instance(mesh: Mesh, spec: InstanceSpec) -> Mesh:
             mesh = mesh.replace(texture=recolor(mesh.texture, spec.hue_deg, spec.brightness))
     step = Similarity(spec.scale, np.zeros(3), spec.rotation)
     return mesh.replace(vertices=step.apply(mesh.vertices), transform=mesh.transform.then(step))
+
+
+def retessellate(mesh: Mesh, kind: str) -> Mesh:
+    """The same surface with other vertices: ``"decimated"`` (half the faces) or ``"subdivided"`` (each face in four).
+
+    Decimation collapses the shortest edges to their midpoints (libigl's
+    ``decimate``); a kept vertex keeps the colour of the vertex it came from,
+    and faces the collapses left without area are dropped
+    (``meshsal.mesh.repair.repair_mesh``).
+    Subdivision splits every face at its edges' midpoints (libigl's
+    ``upsample``), which leaves the surface exactly where it was; colours and
+    texture coordinates are interpolated.  A textured mesh cannot be
+    decimated (its texture coordinates belong to faces that collapse).
+
+    Parameters
+    ----------
+    mesh : Mesh
+    kind : one of :data:`TESSELLATIONS`
+
+    Returns
+    -------
+    Mesh, with the same name and transform
+
+    Examples
+    --------
+    >>> tetra = Mesh(vertices=[[0.0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]],
+    ...              faces=[[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]])
+    >>> retessellate(tetra, "subdivided").n_faces
+    16
+    """
+    import igl
+
+    if kind not in TESSELLATIONS:
+        raise ValueError(f"unknown tessellation {kind!r}; choose from {', '.join(TESSELLATIONS)}")
+    V, F = mesh.vertices, np.asarray(mesh.faces, np.int32)
+    if kind == "decimated":
+        if mesh.uv is not None:
+            raise ValueError(f"{mesh.name or 'mesh'}: a textured mesh cannot be decimated (use 'subdivided')")
+        from meshsal.mesh.repair import repair_mesh
+
+        U, G, _, born = igl.decimate(V, F, max(4, mesh.n_faces // 2))
+        colors = None if mesh.vertex_colors is None else mesh.vertex_colors[np.asarray(born, np.int64)]
+        return repair_mesh(mesh.replace(vertices=U, faces=G, vertex_colors=colors))[0]
+    columns = [V] if mesh.vertex_colors is None else [V, mesh.vertex_colors.astype(np.float64)]
+    both, G = igl.upsample(np.ascontiguousarray(np.hstack(columns)), F)
+    colors = None if mesh.vertex_colors is None else both[:, 3:]
+    uv = None
+    if mesh.uv is not None:
+        # libigl's upsample gives face (a, b, c) four children in a row: (a, ab, ca), (b, bc, ab), (ab, bc, ca), (bc, c, ca).
+        a, b, c = mesh.uv[:, 0], mesh.uv[:, 1], mesh.uv[:, 2]
+        ab, bc, ca = (a + b) / 2, (b + c) / 2, (c + a) / 2
+        uv = np.stack([np.stack(t, axis=1) for t in ((a, ab, ca), (b, bc, ab), (ab, bc, ca), (bc, c, ca))], axis=1)
+        uv = uv.reshape(-1, 3, 2)
+    return mesh.replace(vertices=both[:, :3], faces=G, vertex_colors=colors, uv=uv)

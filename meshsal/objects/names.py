@@ -1,10 +1,13 @@
 """Objects by name: the embedded sets (the toys, the YCB scans), single objects, mesh files.
 
 The command line and the experiment take objects as a list of strings, each
-a set name (``toys``, ``ycb``), an object's name (``cow``, ``power_drill``)
-or a mesh file, possibly comma-separated (``toys,ycb``).
+a set name (``toys``, ``ycb``), an object's name (``cow``, ``power_drill``),
+a mesh file, a folder (every mesh file under it) or a list file (``.txt``:
+one item per line, ``#`` comments), possibly comma-separated (``toys,ycb``).
 :func:`resolve_objects` turns such a list into :class:`ObjectRef` records
-without loading anything; :func:`load_ref` loads one.
+without loading anything; :func:`load_ref` loads one.  Two files with the
+same bytes are one object (:func:`distinct_files`): never two classes that
+nothing could tell apart.
 """
 
 from __future__ import annotations
@@ -15,7 +18,7 @@ from pathlib import Path
 from meshsal.mesh import Mesh
 from meshsal.objects import toys, ycb
 
-__all__ = ["OBJECT_SETS", "ObjectRef", "resolve_objects", "load_ref", "load_object"]
+__all__ = ["OBJECT_SETS", "ObjectRef", "resolve_objects", "distinct_files", "load_ref", "load_object"]
 
 OBJECT_SETS = {"toys": toys.NAMES, "ycb": ycb.NAMES}
 
@@ -44,6 +47,37 @@ class ObjectRef:
     units_mm: float | None = None
 
 
+def _folder(folder: Path) -> list[ObjectRef]:
+    """Every mesh file under ``folder`` (recursively, sorted by path), named by its stem, or by its path
+    below the folder where stems repeat."""
+    from meshsal.mesh.formats import SUPPORTED_EXTENSIONS
+
+    files = sorted(p for p in folder.rglob("*") if p.is_file() and p.suffix.lower() in SUPPORTED_EXTENSIONS)
+    if not files:
+        raise ValueError(f"{folder}: no mesh file ({', '.join(SUPPORTED_EXTENSIONS)}) under this folder")
+    stems = [p.stem for p in files]
+    return [
+        ObjectRef(
+            p.stem if stems.count(p.stem) == 1 else p.relative_to(folder).with_suffix("").as_posix(), "file", str(p)
+        )
+        for p in files
+    ]
+
+
+def _listed(path: Path) -> list[str]:
+    """The items of a list file: one per line, blank lines and ``#`` comments skipped, relative paths taken from
+    the list's folder."""
+    items = []
+    for line in path.read_text().splitlines():
+        item = line.split("#", 1)[0].strip()
+        if item:
+            local = path.parent / item
+            items.append(str(local) if not Path(item).is_absolute() and local.exists() else item)
+    if not items:
+        raise ValueError(f"{path}: the list names no object")
+    return items
+
+
 def _ref(item: str) -> ObjectRef:
     if Path(item).is_file():
         return ObjectRef(Path(item).stem, "file", str(item))
@@ -64,7 +98,8 @@ def resolve_objects(specs) -> tuple[ObjectRef, ...]:
     ----------
     specs : iterable of str
         Each may hold several items separated by commas.  An existing file
-        wins over a name.
+        wins over a name; a folder stands for every mesh file under it, a
+        ``.txt`` file for the items it lists.
 
     Returns
     -------
@@ -87,8 +122,13 @@ def resolve_objects(specs) -> tuple[ObjectRef, ...]:
         for item in (s.strip() for s in str(spec).split(",")):
             if not item:
                 continue
-            if item in OBJECT_SETS and not Path(item).is_file():
+            path = Path(item)
+            if item in OBJECT_SETS and not path.is_file():
                 refs.extend(_ref(name) for name in OBJECT_SETS[item])
+            elif path.is_dir():
+                refs.extend(_folder(path))
+            elif path.is_file() and path.suffix.lower() == ".txt":
+                refs.extend(resolve_objects(_listed(path)))
             else:
                 refs.append(_ref(item))
     if not refs:
@@ -98,6 +138,34 @@ def resolve_objects(specs) -> tuple[ObjectRef, ...]:
     if twice:
         raise ValueError(f"objects must have distinct names; given more than once: {', '.join(twice)}")
     return tuple(refs)
+
+
+def distinct_files(refs) -> tuple[tuple[ObjectRef, ...], dict]:
+    """The references without a file whose bytes an earlier one already has, and what was dropped.
+
+    Returns
+    -------
+    kept : tuple of ObjectRef, in the order given
+    same : dict name -> name of the earlier object with the same bytes
+
+    Examples
+    --------
+    >>> kept, same = distinct_files(resolve_objects(["cow", "cup"]))
+    >>> [r.name for r in kept], same
+    (['cow', 'cup'], {})
+    """
+    import hashlib
+
+    seen, kept, same = {}, [], {}
+    for ref in refs:
+        if ref.path is not None:
+            digest = hashlib.sha256(Path(ref.path).read_bytes()).hexdigest()
+            if digest in seen:
+                same[ref.name] = seen[digest]
+                continue
+            seen[digest] = ref.name
+        kept.append(ref)
+    return tuple(kept), same
 
 
 def load_ref(ref: ObjectRef, seed: int = 0) -> Mesh:

@@ -225,4 +225,5 @@ def attention_points(
         min_spacing=spacing,
         combination=combination,
         untouchable=lost,
+        frame=mesh.transform,
     )

@@ -12,6 +12,7 @@ experiment and the batch take it from the registry.
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -40,7 +41,8 @@ __all__ = [
     "interest_points",
 ]
 
-#: The attention methods and the combination each uses ("attention" takes the one asked for).
+#: The attention methods and the combination each uses (the deprecated ``PointOptions.combination`` still
+#: changes "attention"'s, unless the method of that combination is asked for too).
 ATTENTION_METHODS = {"attention": "equal", "attention_itti": "itti", "attention_learned": "learned"}
 
 
@@ -209,6 +211,17 @@ def points_by_method(
 
     options = (options or PointOptions()).replace(**changes)
     methods = list(dict.fromkeys(methods))
+    if options.combination != "equal" and options.combination in ATTENTION_METHODS.values():
+        own = next(m for m, c in ATTENTION_METHODS.items() if c == options.combination)
+        warnings.warn(
+            f"PointOptions.combination is deprecated and goes in 0.3: ask for the method {own!r} instead of "
+            f"'attention' with combination {options.combination!r}. Until then it applies to 'attention' unless "
+            f"{own!r} is asked for too (each method keeps its own combination)",
+            FutureWarning,
+            stacklevel=2,
+        )
+        if own in methods:
+            options = options.replace(combination="equal")
     chosen = {m: POINT_METHODS.get(m) for m in methods}
     rules = options.rules(mesh)
     for m, method in chosen.items():

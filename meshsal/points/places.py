@@ -8,6 +8,12 @@ samples from the vertex farthest from the vertices' mean, the learned
 method's candidates) and :func:`candidate_places` (that pool, then the
 strongest peaks of mesh saliency outside it, so that geometry's most
 distinctive places are always among the candidates).
+
+:func:`signatures` locates a point on its shape whatever the pose and size:
+its distances to the first :data:`LANDMARKS` pool places, which every
+instance finds again, over the distance between the first two.  Under the
+hypothesis "the object is j", a place of a test instance is the place of j
+with the nearest signature.
 """
 
 from __future__ import annotations
@@ -17,12 +23,24 @@ import numpy as np
 from meshsal.mesh import Mesh, normal_defined
 from meshsal.points.sampling import farthest_points, field_peaks
 
-__all__ = ["POOL_FACTOR", "PEAK_FACTOR", "candidate_pool", "candidate_places"]
+__all__ = [
+    "POOL_FACTOR",
+    "PEAK_FACTOR",
+    "LANDMARKS",
+    "candidate_pool",
+    "candidate_places",
+    "signatures",
+    "similarity_fit",
+    "register",
+    "landmarks_in",
+]
 
 #: Candidates per requested point in a pool.
 POOL_FACTOR = 20
 #: Mesh-saliency peaks per requested point added to the pool by :func:`candidate_places`.
 PEAK_FACTOR = 2
+#: The first pool places (found again on every instance) that :func:`signatures` locates points against.
+LANDMARKS = 8
 
 
 def candidate_pool(mesh: Mesh, n: int = 15) -> np.ndarray:
@@ -80,3 +98,141 @@ def candidate_places(
     peaks = field_peaks(np.asarray(vertex_saliency, dtype=np.float64), mesh.faces)
     peaks = peaks[normal_defined(mesh.vertices, mesh.faces)[peaks]]
     return np.concatenate([pool, peaks[~np.isin(peaks, pool)][: PEAK_FACTOR * int(n)]]).astype(np.int64)
+
+
+def signatures(positions, landmarks) -> np.ndarray:
+    """Where each point lies on its shape, whatever the pose and size: (k, L) float64.
+
+    A point's distances to the ``L`` landmarks (the first :data:`LANDMARKS`
+    places of the instance's :func:`candidate_pool`), over the distance between
+    the first two landmarks.  Invariant to rotation, translation and uniform
+    scale; a shape symmetric under a turn that keeps the landmarks gives its
+    symmetric points one signature, which is also all a touch can tell apart.
+
+    Parameters
+    ----------
+    positions : (k, 3) float64
+    landmarks : (L, 3) float64, in the same frame
+
+    Examples
+    --------
+    >>> X = np.array([[0.0, 0, 0], [10, 0, 0], [0, 5, 0]])
+    >>> signatures(X, X).round(3).tolist()[2]
+    [0.5, 1.118, 0.0]
+    >>> turned = X @ np.array([[0.0, 1, 0], [-1, 0, 0], [0, 0, 1]]) * 3 + 7     # turned, scaled, moved
+    >>> bool(np.allclose(signatures(turned, turned), signatures(X, X)))
+    True
+    """
+    X = np.asarray(positions, dtype=np.float64).reshape(-1, 3)
+    L = np.asarray(landmarks, dtype=np.float64).reshape(-1, 3)
+    d = np.linalg.norm(X[:, None, :] - L[None, :, :], axis=2)
+    scale = float(np.linalg.norm(L[1] - L[0])) if len(L) > 1 else 0.0
+    return d / scale if scale > 0 else d
+
+
+def similarity_fit(source, target) -> tuple[float, np.ndarray, np.ndarray]:
+    """The similarity ``target ≈ s R source + t`` of least squares over corresponding points (Umeyama's solution).
+
+    Parameters
+    ----------
+    source, target : (k, 3) float64, k >= 3 corresponding points; or (b, k, 3) for b fits at once
+
+    Returns
+    -------
+    s : float, R : (3, 3) float64 proper rotation, t : (3,) float64 (with a leading (b,) axis for b fits)
+
+    Examples
+    --------
+    >>> A = np.array([[0.0, 0, 0], [1, 0, 0], [0, 2, 0], [0, 0, 3]])
+    >>> turn = np.array([[0.0, -1, 0], [1, 0, 0], [0, 0, 1]])
+    >>> s, R, t = similarity_fit(A, 2.0 * A @ turn.T + 5.0)
+    >>> round(float(s), 6), bool(np.allclose(R, turn)), bool(np.allclose(t, 5.0))
+    (2.0, True, True)
+    """
+    A, B = np.asarray(source, np.float64), np.asarray(target, np.float64)
+    batch = A.ndim == 3
+    A, B = (A, B) if batch else (A[None], B[None])
+    ma, mb = A.mean(axis=1, keepdims=True), B.mean(axis=1, keepdims=True)
+    A0, B0 = A - ma, B - mb
+    U, S, Vt = np.linalg.svd(np.einsum("bki,bkj->bij", B0, A0) / A.shape[1])
+    sign = np.where(np.linalg.det(U @ Vt) < 0, -1.0, 1.0)
+    D = np.ones((len(A), 3))
+    D[:, 2] = sign
+    R = (U * D[:, None, :]) @ Vt
+    var = (A0**2).sum(axis=(1, 2)) / A.shape[1]
+    s = np.where(var > 0, (S * D).sum(axis=1) / np.where(var > 0, var, 1.0), 1.0)
+    t = mb[:, 0] - s[:, None] * np.einsum("bij,bj->bi", R, ma[:, 0])
+    return (s, R, t) if batch else (float(s[0]), R[0], t[0])
+
+
+def register(moving, fixed, rng=0, rounds: int = 200, keep: int = 5) -> tuple[float, np.ndarray, np.ndarray]:
+    """The similarity that lays the candidate places of one instance onto those of another of the same shape.
+
+    Both sets are places of :func:`candidate_places` (or any samples of the
+    surfaces that start with their own :data:`LANDMARKS`), in any pose and
+    size and from any tessellation.  Each moving place is first paired with
+    the fixed place of the nearest :func:`signatures`, compared on the
+    ``keep`` of their :data:`LANDMARKS` coordinates that agree best (a
+    landmark that another tessellation moved spoils only its own
+    coordinate); a seeded RANSAC over those pairs finds the similarity most
+    of them agree with, and a few rounds of trimmed closest-point fitting
+    refine it.  Where a shape is symmetric, one of its symmetric poses is
+    found: its symmetric places feel alike anyway.
+
+    Parameters
+    ----------
+    moving, fixed : (m, 3), (n, 3) float64, each starting with its landmarks
+    rng : numpy Generator or int, the RANSAC's draws
+    rounds : int, RANSAC samples
+    keep : int, signature coordinates compared per pair
+
+    Returns
+    -------
+    s, R, t : ``fixed ≈ s R moving + t``
+
+    Examples
+    --------
+    >>> pts = np.random.default_rng(0).normal(size=(60, 3)) * [40, 20, 10]
+    >>> turn = np.array([[0.0, 0, 1], [0, 1, 0], [-1, 0, 0]])
+    >>> s, R, t = register(pts, 1.5 * pts @ turn.T - 3.0)
+    >>> round(s, 6), bool(np.allclose(R, turn))
+    (1.5, True)
+    """
+    from scipy.spatial import cKDTree
+
+    M, F = np.asarray(moving, np.float64), np.asarray(fixed, np.float64)
+    rng = rng if isinstance(rng, np.random.Generator) else np.random.default_rng(rng)
+    L = min(LANDMARKS, len(M), len(F))
+    gm, gf = signatures(M, M[:L]), signatures(F, F[:L])
+    keep = min(keep, L)
+    d = np.partition(np.abs(gm[:, None, :] - gf[None, :, :]), keep - 1, axis=2)[:, :, :keep]
+    pair = np.argmin((d**2).sum(axis=2), axis=1)
+    scale = np.sqrt(((F - F.mean(axis=0)) ** 2).sum(axis=1).mean())
+    tol = 0.05 * scale
+    picks = np.argsort(rng.random((rounds, len(M))), axis=1)[:, :3]
+    S, R, T = similarity_fit(M[picks], F[pair[picks]])
+    moved = S[:, None, None] * np.einsum("bij,kj->bki", R, M) + T[:, None, :]
+    counts = (np.linalg.norm(moved - F[pair][None], axis=2) < tol).sum(axis=1)
+    b = int(np.argmax(counts))
+    s, R, t = float(S[b]), R[b], T[b]
+    inliers = np.linalg.norm(s * M @ R.T + t - F[pair], axis=1) < tol
+    if inliers.sum() >= 3:
+        s, R, t = similarity_fit(M[inliers], F[pair[inliers]])
+    tree = cKDTree(F)
+    for _ in range(10):
+        dist, nearest = tree.query(s * M @ R.T + t)
+        close = dist <= np.quantile(dist, 0.8)
+        s, R, t = similarity_fit(M[close], F[nearest[close]])
+    return float(s), R, t
+
+
+def landmarks_in(moving, fixed, rng=0) -> np.ndarray:
+    """The landmarks of ``fixed`` laid onto ``moving``'s frame by :func:`register`: (LANDMARKS, 3) float64.
+
+    Points of ``moving`` located against them (:func:`signatures`) are
+    located as the places of ``fixed`` are, even where another tessellation
+    gave ``moving`` landmarks of its own elsewhere.
+    """
+    s, R, t = register(moving, fixed, rng)
+    L = np.asarray(fixed, np.float64)[:LANDMARKS]
+    return ((L - t) @ R) / s

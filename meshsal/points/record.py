@@ -1,16 +1,19 @@
 """The record of chosen points, :class:`InterestPoints`, and its files: ``points.json``, ``points.csv`` and arrays.
 
-``points.json`` (format ``visuotactile.points``, version 1) holds every
-point's vertex, position, normal, score, votes and views, the mesh saliency
-and the settings, in the mesh file's own units and frame;
-:meth:`InterestPoints.load` reads it back and checks it.  Every writer of
-points goes through :meth:`InterestPoints.records` (JSON, CSV) or
-:meth:`InterestPoints.to_arrays` (archives such as a batch store's entries).
+``points.json`` (format ``visuotactile.points``, version 2) holds every
+point's id (from 0, as capture sessions and probe plans number them),
+vertex, position, normal, score, votes and views, the mesh saliency, the
+settings and the frame the points were chosen in, positions and normals in
+the mesh file's own units and frame; :meth:`InterestPoints.load` reads it
+back and checks it (version 1 files, whose ids count from 1, are read with
+ids from 0).  Every writer of points goes through
+:meth:`InterestPoints.records` (JSON, CSV) or :meth:`InterestPoints.to_arrays`
+(archives such as a batch store's entries).
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -19,12 +22,12 @@ from meshsal.mesh import Similarity
 __all__ = ["InterestPoints", "POINTS_FORMAT", "POINTS_VERSION"]
 
 POINTS_FORMAT = "visuotactile.points"
-POINTS_VERSION = 1
+POINTS_VERSION = 2
 
 
 @dataclass(frozen=True, eq=False)
 class InterestPoints:
-    """Points chosen on a mesh, best first, in the mesh's own units and frame.
+    """Points chosen on a mesh, best first, in the mesh's units and frame; ``frame`` leads back to its file's.
 
     Attributes
     ----------
@@ -56,6 +59,9 @@ class InterestPoints:
         How the attention channels were combined ("equal", "itti"); "" for the baselines.
     untouchable : int
         Candidates skipped because the pad could not touch them first (-1: not tested).
+    frame : meshsal.Similarity
+        The mesh's ``transform`` when the points were chosen: it maps them back to the mesh file's frame and
+        units, in which :meth:`save` and :meth:`save_csv` write them.
     """
 
     vertex_ids: np.ndarray
@@ -70,19 +76,21 @@ class InterestPoints:
     min_spacing: float
     combination: str = ""
     untouchable: int = -1
+    frame: Similarity = field(default_factory=Similarity)
 
     def __len__(self) -> int:
         return int(self.vertex_ids.size)
 
-    def save(self, path, frame=None, source: str = "", settings: dict | None = None) -> None:
+    def save(self, path, frame: Similarity | None = None, source: str = "", settings: dict | None = None) -> None:
         """Write the points as a versioned ``points.json``, in the mesh file's own frame, atomically.
 
         Parameters
         ----------
         path : str or os.PathLike
         frame : meshsal.Similarity, optional
-            The mesh's ``transform``: positions, normals and the spacing are
-            written mapped back to the file's frame and units.
+            Maps the points back to the file's frame and units (default
+            :attr:`frame`, the transform of the mesh they were chosen on);
+            written with them.
         source : str
             The mesh file (or object name) the points belong to.
         settings : dict, optional
@@ -91,20 +99,22 @@ class InterestPoints:
         Examples
         --------
         >>> import pathlib, tempfile
+        >>> from meshsal.mesh.transform import scale_to_principal
         >>> from meshsal.objects import toys
         >>> from meshsal.points import interest_points
-        >>> pts = interest_points(toys.make("cup"), n=3, method="uniform")
+        >>> cup = toys.make("cup")
+        >>> pts = interest_points(scale_to_principal(cup, 300.0), n=3, method="uniform")
         >>> path = pathlib.Path(tempfile.mkdtemp()) / "points.json"
-        >>> pts.save(path, source="cup")
+        >>> pts.save(path, source="cup")              # in the cup's own frame: its file's millimetres
         >>> again = InterestPoints.load(path)
-        >>> again.method, bool(np.allclose(again.positions, pts.positions))
-        ('uniform', True)
+        >>> again.method, again.ids.tolist(), bool(np.allclose(again.positions, pts.frame.to_source(pts.positions)))
+        ('uniform', [0, 1, 2], True)
         """
         import json
 
         from meshsal.util.atomic import write_text
 
-        frame = Similarity() if frame is None else frame
+        frame = self.frame if frame is None else frame
         document = {
             "format": POINTS_FORMAT,
             "version": POINTS_VERSION,
@@ -115,6 +125,12 @@ class InterestPoints:
             "min_spacing": float(frame.length_to_source(self.min_spacing)),
             "combination": self.combination,
             "untouchable": int(self.untouchable),
+            # scale * rotation @ p + offset maps a point of the file to the frame the points were chosen in.
+            "frame": {
+                "scale": float(frame.scale),
+                "rotation": np.asarray(frame.rotation, np.float64).tolist(),
+                "offset": np.asarray(frame.offset, np.float64).tolist(),
+            },
             "settings": settings or {},
             "points": self.records(frame),
             "vertex_saliency": np.asarray(self.vertex_saliency, np.float64).tolist(),
@@ -122,14 +138,14 @@ class InterestPoints:
         write_text(path, json.dumps(document, indent=1) + "\n")
 
     def records(self, frame: Similarity | None = None) -> list[dict]:
-        """One dict per point (``id`` from 1, ``vertex``, ``position``, ``normal``, ``score``, ``votes``,
-        ``views``), positions and normals mapped back through ``frame`` (the mesh's ``transform``)."""
-        frame = Similarity() if frame is None else frame
+        """One dict per point (``id`` from 0, ``vertex``, ``position``, ``normal``, ``score``, ``votes``,
+        ``views``), positions and normals mapped back through ``frame`` (default :attr:`frame`)."""
+        frame = self.frame if frame is None else frame
         positions = frame.to_source(self.positions)
         normals = frame.direction_to_source(self.normals)
         return [
             {
-                "id": k + 1,
+                "id": k,
                 "vertex": int(self.vertex_ids[k]),
                 "position": positions[k].tolist(),
                 "normal": normals[k].tolist(),
@@ -141,7 +157,8 @@ class InterestPoints:
         ]
 
     def save_csv(self, path, frame: Similarity | None = None) -> None:
-        """Write ``id,vertex,x,y,z,nx,ny,nz,score,votes``, one row per point, in ``frame``'s source, atomically."""
+        """Write ``id,vertex,x,y,z,nx,ny,nz,score,votes``, one row per point (ids from 0), in the file's frame
+        (``frame``, default :attr:`frame`), atomically."""
         from meshsal.util.atomic import write_text
 
         lines = ["id,vertex,x,y,z,nx,ny,nz,score,votes"]
@@ -158,6 +175,8 @@ class InterestPoints:
 
     def to_arrays(self) -> tuple[dict, dict]:
         """The points as NumPy arrays and a JSON-ready dict, for an archive (:meth:`from_arrays` reads them back).
+
+        They stay in the mesh's current frame: the archive keeps :attr:`frame` if it needs it.
 
         Returns
         -------
@@ -208,16 +227,18 @@ class InterestPoints:
     def load(cls, path) -> InterestPoints:
         """Points from a ``points.json``, in the file's frame and units (ValueError naming the file).
 
-        Files of this format's version 1 give every field back.  Older
-        files without a ``format`` key give positions, normals and ids only
-        (``vertex_ids`` -1, no scores, votes or saliency).
+        Files of this format give every field back, with ``ids`` (from 0).
+        Version 1 files numbered their points from 1: their ids are read
+        one less, so that every file numbers from 0.  Older files without a
+        ``format`` key give positions, normals and ids only (``vertex_ids``
+        -1, no scores, votes or saliency).
         """
         return _read_points(path)
 
 
 @dataclass(frozen=True, eq=False)
 class _LoadedPoints(InterestPoints):
-    """Points read from a file, with the ids the file gave them (1..k when written by ``save``)."""
+    """Points read from a file, with the ids the file gave them (0..k-1 when written by ``save``)."""
 
     ids: np.ndarray = None
 
@@ -240,6 +261,7 @@ def _read_points(path) -> InterestPoints:
     items = document["points"]
     if not items:
         raise ValueError(f"{path}: the 'points' list is empty")
+    first = 1 if version < 2 else 0  # version 1 and older files numbered their points from 1
     positions, normals, ids, vertices, scores, votes, views = [], [], [], [], [], [], []
     for k, item in enumerate(items):
         where = f"{path}: points[{k}]"
@@ -256,10 +278,10 @@ def _read_points(path) -> InterestPoints:
             out.append(vector)
         if np.linalg.norm(normals[-1]) < 1e-12:
             raise ValueError(f"{where}: 'normal' is zero")
-        point_id = item.get("id", k + 1)
+        point_id = item.get("id", k + first)
         if isinstance(point_id, bool) or not isinstance(point_id, int):
             raise ValueError(f"{where}: 'id' must be an integer, got {point_id!r}")
-        ids.append(point_id)
+        ids.append(point_id - first)
         vertices.append(int(item.get("vertex", -1)))
         scores.append(float(item.get("score", 0.0)))
         votes.append(int(item.get("votes", 0)))

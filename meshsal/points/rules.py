@@ -6,12 +6,13 @@ attended, the seed); :meth:`PointOptions.rules` resolves the lengths that
 default to the mesh's size and checks everything once, giving the
 :class:`Rules` every method obeys.
 
-``pad_width`` is the tactile pad's width in mesh units (default 32/150 of
-the bounding-box diagonal: the 32 mm of a 16 x 16 pad at 2 mm pitch on an
-object of 150 mm diagonal), and ``min_spacing`` defaults to half of it, so
-that neighbouring touches do not share most of their contact.  Every length
-is relative to the mesh's size, so translating or uniformly scaling a mesh
-leaves the chosen vertices unchanged.
+``pad_width`` is the tactile pad's width in mesh units, millimetres by
+default: 32 mm, a 16 x 16 pad at 2 mm pitch, as on the command line, which
+first scales a mesh to a 150 mm principal-frame box diagonal
+(``meshsal.scale_to_principal``).  ``min_spacing`` defaults to half of it,
+so that neighbouring touches do not share most of their contact.  A mesh
+whose size disagrees with the pad's (one in metres, loaded as it is) gets a
+:class:`~meshsal.mesh.transform.UnitsWarning` naming both sizes.
 """
 
 from __future__ import annotations
@@ -22,7 +23,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from meshsal.mesh import Mesh
-from meshsal.points.touch import default_pad_width
+from meshsal.mesh.transform import check_pad_size
+from meshsal.points.touch import PAD_WIDTH
 
 __all__ = ["COMBINATIONS", "PointOptions", "Rules", "default_min_spacing"]
 
@@ -31,9 +33,9 @@ __all__ = ["COMBINATIONS", "PointOptions", "Rules", "default_min_spacing"]
 COMBINATIONS = ("equal", "itti", "learned")
 
 
-def default_min_spacing(mesh: Mesh, pad_width: float | None = None) -> float:
-    """Half the pad's width (default :func:`meshsal.points.touch.default_pad_width`), in mesh units."""
-    return 0.5 * (default_pad_width(mesh) if pad_width is None else float(pad_width))
+def default_min_spacing(pad_width: float | None = None) -> float:
+    """Half the pad's width (default :data:`meshsal.points.touch.PAD_WIDTH`, 32 mm), in mesh units."""
+    return 0.5 * (PAD_WIDTH if pad_width is None else float(pad_width))
 
 
 @dataclass(frozen=True)
@@ -67,7 +69,7 @@ class PointOptions:
     min_spacing : float, optional
         No two points closer than this (mesh units); default half of ``pad_width``.
     pad_width : float, optional
-        The tactile pad's width, mesh units (default :func:`meshsal.points.touch.default_pad_width`).
+        The tactile pad's width, mesh units (default :data:`meshsal.points.touch.PAD_WIDTH`, 32 mm).
     threshold : float in [0, 1)
         Peak and salient-pixel threshold relative to each map's maximum.
     touch : bool
@@ -83,10 +85,14 @@ class PointOptions:
     quiet : bool
         No progress bar on stderr.
     combination : {"equal", "itti", "learned"}
-        "attention": the paper's equal-weight sum of the channels, each
-        channel weighted by Itti's N(.) as well, or ``weights`` learned from touches.
+        Deprecated (0.3 removes it): each attention method has its own
+        combination ("attention" the paper's equal-weight sum of the
+        channels, "attention_itti" each channel weighted by Itti's N(.) as
+        well, "attention_learned" weights learned from touches).  Until then
+        it changes "attention"'s, unless the method of that combination is
+        asked for too.
     weights : dict, optional
-        Channel weights of the attention model (the "learned" combination).
+        Channel weights of the "learned" combination, without a touch model.
     """
 
     n: int = 15
@@ -107,13 +113,14 @@ class PointOptions:
         return dataclasses.replace(self, **changes)
 
     def rules(self, mesh: Mesh) -> Rules:
-        """The rules on ``mesh``: lengths resolved against its size, every option checked.
+        """The rules on ``mesh``: every option checked, the pad's size against the mesh's
+        (:func:`~meshsal.mesh.transform.check_pad_size` warns when they disagree).
 
         Examples
         --------
         >>> from meshsal.mesh import Mesh
         >>> square = Mesh(vertices=[[0, 0, 0], [150, 0, 0], [0, 150, 0]], faces=[[0, 1, 2]])
-        >>> r = PointOptions(pad_width=32.0).rules(square)
+        >>> r = PointOptions().rules(square)
         >>> r.n, r.min_spacing, r.pad_width
         (15, 16.0, 32.0)
         """
@@ -126,10 +133,11 @@ class PointOptions:
             raise ValueError(f"threshold must lie in [0, 1), got {self.threshold}")
         if self.combination not in COMBINATIONS:
             raise ValueError(f"unknown combination {self.combination!r}; expected one of {COMBINATIONS}")
-        pad = default_pad_width(mesh) if self.pad_width is None else float(self.pad_width)
+        pad = PAD_WIDTH if self.pad_width is None else float(self.pad_width)
         if not (np.isfinite(pad) and pad > 0):
             raise ValueError(f"pad_width must be a positive length, got {self.pad_width}")
-        spacing = default_min_spacing(mesh, pad) if self.min_spacing is None else float(self.min_spacing)
+        check_pad_size(mesh, pad, stacklevel=3)
+        spacing = default_min_spacing(pad) if self.min_spacing is None else float(self.min_spacing)
         if not (np.isfinite(spacing) and spacing >= 0):
             raise ValueError(f"min_spacing must be a finite length >= 0, got {self.min_spacing}")
         return Rules(int(n), spacing, pad, float(self.threshold), bool(self.touch), self.touch_tolerance)

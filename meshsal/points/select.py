@@ -191,4 +191,5 @@ def choose_without_views(
         best_set=-1,
         min_spacing=rules.min_spacing,
         untouchable=lost,
+        frame=mesh.transform,
     )

@@ -29,17 +29,11 @@ import numpy as np
 from meshsal.mesh import Mesh
 from meshsal.mesh.geometry import tangent_frames
 
-__all__ = ["contact_gap", "touchable", "PadRays", "pad_rays", "pad_touches", "PAD_FRACTION", "default_pad_width"]
+__all__ = ["contact_gap", "touchable", "PadRays", "pad_rays", "pad_touches", "PAD_WIDTH"]
 
-#: The default pad width as a fraction of the mesh's bounding-box diagonal: the
-#: 32 mm of a 16 x 16 pad at 2 mm pitch on an object of 150 mm diagonal.
-PAD_FRACTION = 32.0 / 150.0
-
-
-def default_pad_width(mesh: Mesh) -> float:
-    """``PAD_FRACTION`` times the bounding-box diagonal, in mesh units."""
-    lo, hi = mesh.vertices.min(axis=0), mesh.vertices.max(axis=0)
-    return PAD_FRACTION * float(np.linalg.norm(hi - lo))
+#: The default pad width in millimetres: ``tactile.Sensor()``'s 16 x 16 taxels at 2 mm pitch, and the
+#: command line's ``--pad-mm``.
+PAD_WIDTH = 32.0
 
 
 # The touch test first traces every COARSE-th ray of the grid in each direction (29 of 441 at the

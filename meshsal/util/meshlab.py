@@ -10,13 +10,13 @@ write into the freed memory, and glibc may abort the finished process with
 
 Measured here:
 
-* This happened in 3 of 8 runs of the batch's work on 10 corpus meshes in a
+* It happens in 3 of 8 runs of the batch's work on 10 corpus meshes in a
   ``ThreadPoolExecutor``, and in 3 of 4 ``visuotactile batch`` runs on a
-  LocalCluster (after their results were written).
+  LocalCluster (after their results are written).
 * valgrind shows ``QThreadData::deref`` on a freed block in
   ``PluginManager::~PluginManager``.
-* With pymeshlab imported in the main thread, 0 of 8 runs aborted, and
-  valgrind was clean.
+* With pymeshlab imported in the main thread, 0 of 8 runs abort, and
+  valgrind is clean.
 
 So :func:`import_pymeshlab` imports it in the calling thread when that is
 the main thread. Otherwise it imports it in a daemon thread that never ends.

@@ -13,15 +13,15 @@ tables on every machine"):
   it.  Pinned to the build's baseline (SSE3 in the PyPI wheels) by
   ``OPENCV_CPU_DISABLE`` listing every feature above it that the CPU has (a
   feature it lacks would make OpenCV complain on stderr), and its Intel IPP
-  to IPP's SSE4.2 code, ``OPENCV_IPP=sse42`` (no change measured on AVX2).
+  to IPP's SSE4.2 code, ``OPENCV_IPP=sse42`` (on AVX2 the tables do not depend on it).
 * **Embree** traces with SSE2, AVX, AVX2 or AVX-512 kernels: renders and
   imprints change.  Embree 4 reads no environment variable and no
   configuration file, only the configuration string of the device it is
   created with, so ``meshsal.mesh.embree`` creates its device with
   ``$VISUOTACTILE_EMBREE_CONFIG``, which the pin sets to ``isa=sse2``.
 * **NumPy** dispatches its loops to AVX2 or AVX-512 code (on AVX-512 some
-  transcendental functions to Intel's SVML, which rounds differently).  No
-  change measured between its AVX2 loops and its baseline; pinned to the
+  transcendental functions to Intel's SVML, which rounds differently).  Its
+  AVX2 loops and its baseline give the same tables; it is pinned to the
   baseline with ``NPY_DISABLE_CPU_FEATURES`` all the same.
 
 Libraries read these variables when they load, so :func:`pin_kernels` must
@@ -49,6 +49,8 @@ __all__ = [
     "kernel_environment",
     "pin_kernels",
     "kernels",
+    "is_pinned",
+    "warn_if_unpinned",
     "main",
 ]
 
@@ -114,7 +116,8 @@ _OPENCV_GROUPS = (
     ),
 )
 #: NumPy's dispatch targets above its x86-64 baseline, by the first version that has them: grouped by x86-64
-#: level from 2.4, by feature before (a name NumPy does not dispatch is an ImportWarning, its baseline an error).
+#: level from 2.4, by feature in earlier versions (a name NumPy does not dispatch is an ImportWarning, its baseline
+#: an error).
 _NUMPY_TARGETS = {
     (2, 4): "X86_V3 X86_V4 AVX512_ICL AVX512_SPR",
     (2, 0): "SSSE3 SSE41 POPCNT SSE42 AVX F16C FMA3 AVX2 AVX512F AVX512CD AVX512_KNL AVX512_KNM AVX512_SKX "
@@ -275,6 +278,27 @@ def pin_kernels() -> dict[str, str]:
             stacklevel=2,
         )
     return {name: os.environ[name] for name in _READ_BY if name in os.environ}
+
+
+def is_pinned(environ=None) -> bool:
+    """True when this process's environment holds every pinning variable :func:`kernel_environment` asks for
+    (as under ``python -m meshsal.util.reproducible`` or the ``visuotactile`` command)."""
+    environ = os.environ if environ is None else environ
+    return all(environ.get(name) == value for name, value in kernel_environment(environ).items())
+
+
+def warn_if_unpinned(what: str) -> None:
+    """A :class:`KernelPinWarning` when ``what`` (e.g. "run_experiment") runs with the CPU's own kernels: its
+    numbers may then differ in their last digits from the pinned tables of the ``visuotactile`` command."""
+    if not is_pinned():
+        warnings.warn(
+            f"{what} runs with this CPU's own kernels, so its numbers may differ from the pinned tables of the "
+            f"visuotactile command and the documentation; run the script under `python -m meshsal.util.reproducible "
+            f"python SCRIPT`, or call meshsal.util.reproducible.pin_kernels() before importing numpy, scipy or cv2 "
+            f"({KERNELS_VARIABLE}=native silences this)",
+            KernelPinWarning,
+            stacklevel=3,
+        )
 
 
 def _simd_signature() -> str:

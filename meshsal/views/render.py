@@ -190,7 +190,7 @@ class _Images:
     """The output images of all views, one block per kind: each view's arrays are slices of them.
 
     Fresh memory costs a page fault per page touched, and large blocks get
-    huge pages: scattering one kind of output of 72 views took 18 ms into one
+    huge pages: scattering one kind of output of 72 views takes 18 ms into one
     block against 31 ms into 72 fresh arrays.
     """
 

@@ -1,0 +1,128 @@
+"""Benchmark: how the experiment's cost grows with the number of objects (target: time per object flat within 1.5x).
+
+For each count of corpus objects (``../shared/corpus/random-objects``, the
+first N files that load, sorted by name), one run of ``run_experiment`` with
+fixed settings: 2 replicates of the instance protocol, uniform and
+mesh-saliency points, kNN and the place-aware recognizer, polar features,
+``info_gain``, 5 points per instance, 64 px views, nothing cached.  Each run
+is a fresh process (so peak memory is its own), with two local workers.
+The table gives, per count, each stage's wall time, the whole run's wall
+and CPU time and its peak memory (this process and its workers), the time
+per object, and the recognition rate after 1 and 5 touches with its
+interval; a PNG plots time per object against the number of objects.
+Stages whose time per object grows with the objects are the ones to fix.
+
+    python -m meshsal.util.reproducible .venv/bin/python benchmarks/bench_scaling.py [--counts 16,64,256,1000]
+"""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+from benchlib import DEFAULT_MESHES, arguments, run
+
+CORPUS = DEFAULT_MESHES.parent / "corpus" / "random-objects"
+PNG = Path(__file__).resolve().parents[1] / "docs" / "benchmarks" / "bench_scaling.png"
+
+_ONE = """
+import json, resource, sys, time, warnings
+from classify.experiment import ExperimentConfig, Settings, run_experiment
+files = json.loads(sys.argv[1])
+config = ExperimentConfig(
+    methods=("mesh_saliency", "uniform"), protocols=("instance",), classifiers=("knn", "place"),
+    features="polar", policies=("info_gain",), replicates=2,
+    settings=Settings(n_points=5, view_size=64, seed=0),
+)
+with warnings.catch_warnings():
+    warnings.simplefilter("ignore")
+    result = run_experiment(files, config, cache_dir=None, quiet=True, skip_bad=True)
+n = len(result.object_names)
+rates = {}
+for method, protocol, clf in (("mesh_saliency", "instance", "knn"), ("mesh_saliency", "instance", "place"),
+                              ("info_gain", "sequential", "place")):
+    for k in (1, 5):
+        c = result.cell(method, protocol, clf, n, False, k)
+        rates[f"{method}/{clf}@{k}"] = [c.mean, c.ci_low, c.ci_high]
+peak = max(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss, resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss)
+print(json.dumps({"objects": n, "timings": result.timings, "peak_mb": peak / 1024, "rates": rates}))
+"""
+
+
+def _files(count: int) -> list[str]:
+    found = sorted(p for p in CORPUS.iterdir() if p.suffix.lower() in (".obj", ".ply", ".off", ".stl"))
+    # A file that does not load is left out (--skip-bad): the table counts the objects that ran.
+    return [str(p) for p in found[:count]]
+
+
+def main() -> int:
+    parser = arguments(__doc__, 1, meshes_dir=False)
+    parser.add_argument("--counts", default="16,64,256,1000", help="comma-separated object counts")
+    args = parser.parse_args()
+    counts = [int(c) for c in args.counts.split(",")]
+    if not CORPUS.is_dir():
+        print(f"bench_scaling: error: {CORPUS} not found", file=sys.stderr)
+        return 1
+    rows = []
+    for count in counts:
+        done = subprocess.run(
+            [sys.executable, "-c", _ONE, json.dumps(_files(count))], capture_output=True, text=True, check=False
+        )
+        if done.returncode != 0:
+            print(f"bench_scaling: {count} objects failed:\n{done.stderr[-2000:]}", file=sys.stderr)
+            return 1
+        rows.append(json.loads(done.stdout.strip().splitlines()[-1]))
+        print(f"{count} objects: {rows[-1]['timings']['total']:.0f} s", file=sys.stderr)
+    stages = [s for s in rows[0]["timings"] if s not in ("total", "cpu_total")]
+    print(
+        "| objects | "
+        + " | ".join(f"{s} (s)" for s in stages)
+        + " | wall (s) | CPU (s) | wall per object (s) | peak memory (MB) | "
+        + " | ".join(rows[0]["rates"])
+        + " |"
+    )
+    print("|---:|" + "---:|" * (len(stages) + 4) + ":---:|" * len(rows[0]["rates"]))
+    for r in rows:
+        t = r["timings"]
+        print(
+            f"| {r['objects']} | "
+            + " | ".join(f"{t.get(s, float('nan')):.1f}" for s in stages)
+            + f" | {t['total']:.0f} | {t.get('cpu_total', float('nan')):.0f} | {t['total'] / r['objects']:.2f} | "
+            f"{r['peak_mb']:.0f} | "
+            + " | ".join(f"{m:.1f} [{lo:.1f}, {hi:.1f}]" for m, lo, hi in r["rates"].values())
+            + " |"
+        )
+    per = [r["timings"]["total"] / r["objects"] for r in rows]
+    print(f"\ntime per object, largest over smallest: {max(per) / min(per):.2f}x (target <= 1.5x)")
+    _plot(rows, stages)
+    print(f"\n![time per object]({PNG.name})")
+    return 0
+
+
+def _plot(rows, stages) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    n = np.array([r["objects"] for r in rows])
+    fig, ax = plt.subplots(figsize=(6, 4))
+    ax.plot(n, [r["timings"]["total"] / r["objects"] for r in rows], "o-", label="whole run")
+    for s in stages:
+        ax.plot(n, [r["timings"].get(s, np.nan) / r["objects"] for r in rows], ".--", label=s)
+    ax.set_xscale("log")
+    ax.set_xlabel("objects")
+    ax.set_ylabel("wall seconds per object")
+    ax.legend(fontsize=7)
+    fig.tight_layout()
+    from meshsal.util.atomic import atomic_path
+
+    with atomic_path(PNG) as tmp:
+        fig.savefig(tmp, dpi=120)
+
+
+if __name__ == "__main__":
+    run("bench_scaling", "How the experiment's cost grows with the number of objects", main)

@@ -1,0 +1,496 @@
+"""The place-aware recognizer: what a touch at a known place should feel like under each object.
+
+A robot knows where it pressed.  Under the hypothesis "the object is i",
+that place is a known place of i, and a toolkit that holds i's training
+meshes can simulate many touches there (``tactile.touch_codebook``).  So the
+evidence of a touch is a likelihood, ``p(descriptor | object i, place)``,
+not a place-free classifier's posterior.
+
+:class:`PlaceAware` is a scikit-learn style estimator of that likelihood:
+
+* **Banks.**  Each object's training touches are grouped into entries, one
+  per trained place (a vertex of its training instances), each located by
+  its signature (``meshsal.points.places.signatures``: pose- and size-free).
+* **Soft match.**  A touch's place is matched, under hypothesis i, to i's
+  ``neighbours`` entries with the nearest signatures, weighted by a Gaussian
+  in signature distance of width ``match_width`` times the median spacing of
+  i's entries.  The weights sum to one under every hypothesis, so how well a
+  place matches is never evidence (that would be recognition by sight), and
+  the places of a symmetric shape share their weight.
+* **Density.**  A Gaussian kernel density over the entries' roll-invariant
+  polar descriptors (``tactile.features.polar_fourier``), standardized,
+  then whitened by the pooled spread of the touches of one place about
+  their place's mean (what a device, a roll and a placement error change),
+  so that the kernel weighs a difference by how much one place varies in
+  it: a touch near an edge can slide off it under placement error, so the
+  touches of one place need not form one blob, which a kernel density
+  follows and a Gaussian per place would not.
+* **Place-free term.**  Mixed in with weight ``w``: a kernel density over a
+  fixed subsample of all of i's touches, so that a wrong match cannot sink
+  the true object.
+* **Tempering.**  The log-likelihoods of several touches add, divided by a
+  temperature ``T``: the touches of one session share a device (gain map,
+  dead taxels), which the product of independent likelihoods would count as
+  new evidence at every touch.
+
+The bandwidth, ``w`` and ``T`` are chosen on a grid by leaving each
+training instance out in turn: a model of the other instances scores the
+held-out instance's session touches (one device for all its places), and the
+mean negative log-likelihood of the true object after 1, 2, 3 and 5 of them,
+fused, is minimized.  Nothing of a test instance enters the fit.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from sklearn.base import BaseEstimator, ClassifierMixin
+from sklearn.utils.validation import check_is_fitted
+
+__all__ = ["PlaceAware", "describe_touches"]
+
+_NEG = -np.inf
+#: Temperatures tried by default: 0.25 to 64, evenly on a log scale.
+_TEMPERATURES = tuple(float(t) for t in np.round(np.geomspace(0.25, 64.0, 17), 4))
+
+
+def _lse(a: np.ndarray, axis: int, keepdims: bool = False) -> np.ndarray:
+    """log(sum(exp(a))) along ``axis``, -inf where every term is -inf (a lean ``scipy.special.logsumexp``)."""
+    top = np.max(a, axis=axis, keepdims=True)
+    top = np.where(np.isfinite(top), top, 0.0)
+    with np.errstate(divide="ignore"):
+        out = np.log(np.exp(a - top).sum(axis=axis, keepdims=True)) + top
+    return out if keepdims else np.squeeze(out, axis=axis)
+
+
+def describe_touches(X) -> np.ndarray:
+    """Polar descriptors of imprints (N, rows, cols), or descriptors (N, d) as they are: (N, d) float64."""
+    X = np.asarray(X)
+    if X.ndim == 3:
+        from tactile.features import polar_fourier
+
+        return polar_fourier(X)
+    if X.ndim != 2:
+        raise ValueError(f"touches must be imprints (N, rows, cols) or descriptors (N, d), got shape {X.shape}")
+    return X.astype(np.float64)
+
+
+class _Bank:
+    """One object's entries: signatures (E, L), standardized samples (E, S, d), each sample's instance (E, S; -1
+    pads), and a place-free subsample (F, d) with its instances (F,)."""
+
+    def __init__(self, keys, signatures, samples, instances, free, free_instances, match_width):
+        from scipy.spatial import cKDTree
+
+        # Distances to an entry's samples are taken in float32: a fraction of the memory traffic, and far
+        # finer than the kernel's width.
+        self.keys, self.signatures, self.instances = keys, signatures, instances
+        self.samples = np.ascontiguousarray(samples, np.float32)
+        self.free, self.free_instances, self.match_width = free, free_instances, match_width
+        self.tree = cKDTree(signatures)
+        self.sq = np.einsum("esd,esd->es", self.samples, self.samples)
+        self.free_sq = np.einsum("fd,fd->f", free, free)
+
+
+def _entries(keys, Z, signatures, instances):
+    """Group one object's touches by place key: sorted keys, (E, L) signatures, (E, S, d) samples, (E, S)
+    instances (-1 pads)."""
+    order = np.lexsort((instances, keys))
+    keys, Z, signatures, instances = keys[order], Z[order], signatures[order], instances[order]
+    unique, start, count = np.unique(keys, return_index=True, return_counts=True)
+    S = int(count.max())
+    samples = np.zeros((unique.size, S, Z.shape[1]))
+    inst = np.full((unique.size, S), -1, np.int64)
+    for e, (a, c) in enumerate(zip(start, count)):
+        samples[e, :c] = Z[a : a + c]
+        inst[e, :c] = instances[a : a + c]
+    return unique, signatures[start], samples, inst
+
+
+def _spacing(signatures) -> float:
+    """Median distance from an entry's signature to its nearest other entry's."""
+    from scipy.spatial import cKDTree
+
+    if len(signatures) < 2:
+        return 1.0
+    d = cKDTree(signatures).query(signatures, k=2)[0][:, 1]
+    d = d[d > 0]
+    return float(np.median(d)) if d.size else 1.0
+
+
+class PlaceAware(ClassifierMixin, BaseEstimator):
+    """Place-aware likelihood of touches: a kernel density per object and place, matched by signature.
+
+    Parameters
+    ----------
+    bandwidths : tuple of float
+        Kernel widths tried, in units of the median distance between a
+        held-out touch and its place's training touches.
+    mixtures : tuple of float
+        Weights of the place-free term tried, in (0, 1).
+    temperatures : tuple of float
+        Temperatures tried (the log-likelihoods of the touches are summed, then divided by it).
+    neighbours : int
+        Entries a place is matched to under each hypothesis.
+    match_width : float
+        Width of the soft match, as a fraction of the median signature
+        distance between an object's neighbouring entries (it is not fitted:
+        a held-out training instance's places match the others' exactly).
+    free_samples : int
+        Touches per object in the place-free term (an even subsample).
+    fit_touches : tuple of int
+        Touch counts whose fused log-loss the fit minimizes.
+    fit_sets : int
+        Random touch sets per held-out instance and touch count.
+    fit_places : int
+        Held-out touches per instance the fit scores (spread over its places).
+    whiten : bool
+        Whiten the descriptors by the pooled within-place covariance (shrunk
+        a tenth towards its diagonal) instead of standardizing them only.
+    random_state : int
+        Seeds the touch sets of the fit.
+
+    Attributes
+    ----------
+    classes_ : (C,) int64
+    bandwidth_, mixture_, temperature_ : float
+        The fitted parameters (``bandwidth_`` in standardized descriptor units).
+    fit_loss_ : float
+        The fitted parameters' mean held-out log-loss.
+
+    Examples
+    --------
+    Two objects, one place each, telling them apart by what is felt there:
+
+    >>> rng = np.random.default_rng(0)
+    >>> X = np.r_[rng.normal(0, 1, (40, 3)), rng.normal(4, 1, (40, 3))]
+    >>> y, inst = np.repeat([0, 1], 40), np.tile(np.repeat([1, 2], 20), 2)
+    >>> sig, key = np.zeros((80, 2)), np.zeros(80, int)
+    >>> model = PlaceAware().fit(X, y, signatures=sig, instances=inst, places=key)
+    >>> model.predict(np.array([[0.2, 0.0, -0.1], [3.9, 4.2, 4.0]]), np.zeros((2, 2))).tolist()
+    [0, 1]
+    """
+
+    def __init__(
+        self,
+        bandwidths=(0.25, 0.35, 0.5, 0.7, 1.0, 1.4, 2.0, 2.8, 4.0),
+        mixtures=(0.003, 0.01, 0.03, 0.1, 0.3),
+        temperatures=_TEMPERATURES,
+        neighbours=4,
+        match_width=0.25,
+        free_samples=64,
+        fit_touches=(1, 2, 3, 5),
+        fit_sets=50,
+        fit_places=100,
+        whiten=True,
+        random_state=0,
+    ):
+        self.bandwidths = bandwidths
+        self.mixtures = mixtures
+        self.temperatures = temperatures
+        self.neighbours = neighbours
+        self.match_width = match_width
+        self.free_samples = free_samples
+        self.fit_touches = fit_touches
+        self.fit_sets = fit_sets
+        self.fit_places = fit_places
+        self.whiten = whiten
+        self.random_state = random_state
+
+    # -- fitting ---------------------------------------------------------------------------------
+
+    def fit(self, X, y, *, signatures, instances, places, session=None):
+        """Build the banks and choose the bandwidth, mixture and temperature by leaving instances out.
+
+        Parameters
+        ----------
+        X : (N, rows, cols) imprints or (N, d) descriptors
+            Training touches (a codebook: many per place and instance).
+        y : (N,) int, their objects
+        signatures : (N, L) float64, where each touch's place lies on its instance
+        instances : (N,) int, the training instance of each touch (at least two distinct)
+        places : (N,) int, the place key (e.g. vertex id): the touches of one object with one key are one entry
+        session : tuple (X, y, signatures, instances), optional
+            Touches of one acquisition session per training instance (one
+            device at all its places): what the held-out instance feels in the
+            fit.  Default: the first codebook touch of each of its places.
+
+        Returns
+        -------
+        self
+        """
+        Z0 = describe_touches(X)
+        y = np.asarray(y, np.int64)
+        sig = np.asarray(signatures, np.float64)
+        inst = np.asarray(instances, np.int64)
+        keys = np.asarray(places, np.int64)
+        n = len(y)
+        if not (len(Z0) == n == len(sig) == len(inst) == len(keys)):
+            raise ValueError(
+                f"X, y, signatures, instances and places must have one row per touch, got "
+                f"{len(Z0)}, {n}, {len(sig)}, {len(inst)}, {len(keys)}"
+            )
+        self.classes_ = np.unique(y)
+        if self.classes_.size < 2:
+            raise ValueError(f"the place-aware recognizer needs touches of at least two objects, got {self.classes_}")
+        if np.unique(inst).size < 2:
+            raise ValueError("the place-aware recognizer needs at least two training instances (it leaves one out)")
+        if not (0 < min(self.mixtures) and max(self.mixtures) < 1):
+            raise ValueError(f"mixtures must lie in (0, 1), got {self.mixtures}")
+        self.mean_ = Z0.mean(axis=0)
+        self.scale_ = np.maximum(Z0.std(axis=0), 1e-9 * max(float(Z0.std()), 1e-300))
+        self.whitening_ = np.eye(Z0.shape[1])
+        if self.whiten:
+            self.whitening_ = self._within_place_whitening((Z0 - self.mean_) / self.scale_, y, keys)
+        Z = self._standardized(Z0)
+        self.banks_ = []
+        for c in self.classes_:
+            mine = y == c
+            k, s, samples, sample_inst = _entries(keys[mine], Z[mine], sig[mine], inst[mine])
+            pick = np.unique(np.linspace(0, mine.sum() - 1, min(self.free_samples, mine.sum())).astype(np.int64))
+            order = np.lexsort((inst[mine], keys[mine]))[pick]
+            self.banks_.append(
+                _Bank(k, s, samples, sample_inst, Z[mine][order], inst[mine][order], self.match_width * _spacing(s))
+            )
+        if session is None:
+            first = np.unique(np.c_[y, inst, keys], axis=0, return_index=True)[1]
+            session = (Z0[first], y[first], sig[first], inst[first])
+        self._choose(session)
+        return self
+
+    def _standardized(self, D: np.ndarray) -> np.ndarray:
+        return ((D - self.mean_) / self.scale_) @ self.whitening_
+
+    @staticmethod
+    def _within_place_whitening(Z, y, keys) -> np.ndarray:
+        """(d, d) map that makes the touches of one place spread alike in every direction: the inverse square root
+        of the pooled covariance of the touches about their place's mean, shrunk towards its diagonal."""
+        _, group = np.unique(np.c_[y, keys], axis=0, return_inverse=True)
+        group = group.reshape(-1)
+        means = np.zeros((group.max() + 1, Z.shape[1]))
+        np.add.at(means, group, Z)
+        means /= np.bincount(group)[:, None]
+        R = Z - means[group]
+        W = R.T @ R / max(len(R) - group.max() - 1, 1)
+        W = 0.9 * W + 0.1 * np.diag(np.diag(W)) + 1e-6 * np.trace(W) / len(W) * np.eye(len(W))
+        vals, vecs = np.linalg.eigh(W)
+        return vecs @ np.diag(1.0 / np.sqrt(vals)) @ vecs.T
+
+    def _choose(self, session):
+        Xs, ys, sigs, insts = session
+        Zs = self._standardized(describe_touches(Xs))
+        ys = np.searchsorted(self.classes_, np.asarray(ys, np.int64))
+        sigs, insts = np.asarray(sigs, np.float64), np.asarray(insts, np.int64)
+        # At most fit_places touches of each held-out instance, spread over its places, score the grid.
+        keep = []
+        for c, t in sorted(set(zip(ys.tolist(), insts.tolist()))):
+            rows = np.flatnonzero((ys == c) & (insts == t))
+            keep.append(rows[np.unique(np.linspace(0, rows.size - 1, min(rows.size, self.fit_places)).astype(int))])
+        keep = np.sort(np.concatenate(keep))
+        Zs, ys, sigs, insts = Zs[keep], ys[keep], sigs[keep], insts[keep]
+        # The width unit: how far a held-out touch lies from its own place's training touches.
+        near = []
+        for c, bank in enumerate(self.banks_):
+            rows = np.flatnonzero(ys == c)
+            idx, _ = self._match(bank, sigs[rows])
+            d2 = self._sample_d2(bank, Zs[rows], idx[:, :1], insts[rows])
+            near.append(np.sqrt(d2[np.isfinite(d2)]))
+        near = np.concatenate(near)
+        unit = float(np.median(near)) if near.size else 1.0
+        widths = unit * np.asarray(self.bandwidths, np.float64)
+        # (widths, N, C) place and place-free log-likelihoods of every held-out touch.
+        place, free = self._log_terms(Zs, sigs, insts, widths)
+        rng = np.random.default_rng(self.random_state)
+        groups = [np.flatnonzero((ys == c) & (insts == t)) for c, t in sorted(set(zip(ys.tolist(), insts.tolist())))]
+        sets = [
+            (k, rows[np.argsort(rng.random((self.fit_sets, rows.size)), axis=1)[:, :k]], ys[rows[0]])
+            for k in self.fit_touches
+            for rows in groups
+            if rows.size >= k
+        ]
+        temps = np.asarray(self.temperatures, np.float64)
+        best = (np.inf, None)
+        for a, h in enumerate(widths):
+            for w in self.mixtures:
+                ll = np.logaddexp(np.log1p(-w) + place[a], np.log(w) + free[a])
+                loss = np.zeros(temps.size)
+                for k in self.fit_touches:
+                    chosen = [(rows, truth) for kk, rows, truth in sets if kk == k]
+                    if not chosen:
+                        continue
+                    total = np.concatenate([ll[rows].sum(axis=1) for rows, _ in chosen])  # (m, C)
+                    truth = np.concatenate([np.full(len(rows), t) for rows, t in chosen])
+                    scaled = total[None] / temps[:, None, None]
+                    nll = _lse(scaled, axis=2) - scaled[:, np.arange(len(truth)), truth]
+                    loss += nll.mean(axis=1) / len(self.fit_touches)
+                t = int(np.argmin(loss))
+                if loss[t] < best[0] - 1e-12:
+                    best = (float(loss[t]), (float(h), float(w), float(temps[t])))
+        self.fit_loss_ = best[0]
+        self.bandwidth_, self.mixture_, self.temperature_ = best[1]
+
+    # -- the likelihood --------------------------------------------------------------------------
+
+    def _match(self, bank: _Bank, G: np.ndarray):
+        """(n, K) entry indices and log weights (summing to one) of each place under one hypothesis."""
+        K = min(self.neighbours, len(bank.keys))
+        dist, idx = bank.tree.query(G, k=K)
+        dist, idx = dist.reshape(len(G), K), idx.reshape(len(G), K)
+        logw = -0.5 * (dist**2 - dist[:, :1] ** 2) / bank.match_width**2
+        return idx, logw - _lse(logw, axis=1, keepdims=True)
+
+    @staticmethod
+    def _sample_d2(bank: _Bank, Z, idx, exclude):
+        """(n, K, S) squared distances from each touch to its matched entries' samples; inf for padding and for
+        samples of the touch's excluded instance."""
+        Y = bank.samples[idx]  # (n, K, S, d)
+        z = Z.astype(np.float32)
+        d2 = np.einsum("nd,nd->n", z, z)[:, None, None] + bank.sq[idx] - 2.0 * np.einsum("nd,nksd->nks", z, Y)
+        d2 = d2.astype(np.float64)
+        inst = bank.instances[idx]
+        bad = (inst < 0) | (inst == exclude[:, None, None])
+        return np.where(bad, np.inf, np.maximum(d2, 0.0))
+
+    def _log_terms(self, Z, G, exclude, widths, chunk: int = 1024):
+        """Place and place-free log-likelihood terms, each (len(widths), n, C), of touches Z at places G."""
+        n, C = len(Z), len(self.banks_)
+        place = np.full((len(widths), n, C), _NEG)
+        free = np.full((len(widths), n, C), _NEG)
+        inv = 0.5 / np.asarray(widths, np.float64) ** 2
+        for a in range(0, n, chunk):
+            z, ex = Z[a : a + chunk], exclude[a : a + chunk]
+            rows = slice(a, a + len(z))
+            for c, bank in enumerate(self.banks_):
+                idx, logw = self._match(bank, G[rows] if G.ndim == 2 else G[rows, c])
+                d2 = self._sample_d2(bank, z, idx, ex)  # (m, K, S), inf where left out
+                fd2 = np.maximum(np.einsum("md,md->m", z, z)[:, None] + bank.free_sq[None] - 2.0 * z @ bank.free.T, 0.0)
+                fd2[bank.free_instances[None, :] == ex[:, None]] = np.inf
+                # Log-means of kernels over each entry's samples: the nearest sample sets the scale of the sum.
+                near, fnear = d2.min(axis=2, keepdims=True), fd2.min(axis=1, keepdims=True)
+                count, fcount = np.isfinite(d2).sum(axis=2), np.isfinite(fd2).sum(axis=1)
+                valid = count > 0
+                logw = np.where(valid, logw, _NEG)
+                top = logw.max(axis=1, keepdims=True)
+                with np.errstate(divide="ignore", invalid="ignore"):
+                    norm = np.log(np.exp(logw - top).sum(axis=1)) + top[:, 0]
+                    rel, frel = np.where(valid[..., None], d2 - near, np.inf), fd2 - fnear
+                    logcount, flogcount = np.log(np.maximum(count, 1)), np.log(np.maximum(fcount, 1))
+                    for b, s in enumerate(inv):
+                        lm = np.log(np.exp(-s * rel).sum(axis=2)) - s * near[..., 0] - logcount
+                        lm = np.where(valid, lm + logw, _NEG)
+                        peak = lm.max(axis=1, keepdims=True)
+                        place[b, rows, c] = np.log(np.exp(lm - peak).sum(axis=1)) + peak[:, 0] - norm
+                        free[b, rows, c] = np.log(np.exp(-s * frel).sum(axis=1)) - s * fnear[:, 0] - flogcount
+        # A touch whose every matched entry is left out leans on the place-free term alone.
+        place = np.where(np.isnan(place), _NEG, place)
+        return place, free
+
+    def log_likelihood(self, X, signatures, exclude=None) -> np.ndarray:
+        """Untempered log-likelihood of each touch under each object, (n, C) float64 (up to one constant).
+
+        Parameters
+        ----------
+        X : (n, rows, cols) imprints or (n, d) descriptors
+        signatures : (n, L) where each touch's place lies on the touched instance, or (n, C, L) where it lies
+            under each object's hypothesis
+        exclude : (n,) int, optional
+            A training instance whose touches each query leaves out (-1: none).
+        """
+        check_is_fitted(self, "banks_")
+        Z = self._standardized(describe_touches(X))
+        G = np.asarray(signatures, np.float64)
+        G = G.reshape(len(Z), -1) if G.ndim <= 2 else G
+        ex = np.full(len(Z), -1, np.int64) if exclude is None else np.asarray(exclude, np.int64)
+        place, free = self._log_terms(Z, G, ex, [self.bandwidth_])
+        w = self.mixture_
+        return np.logaddexp(np.log1p(-w) + place[0], np.log(w) + free[0])
+
+    def predict_proba(self, X, signatures) -> np.ndarray:
+        """(n, C) single-touch posteriors: each touch's tempered likelihoods, normalized.
+
+        Their product over touches, normalized, is the belief after those touches.
+        """
+        ll = self.log_likelihood(X, signatures) / self.temperature_
+        return np.exp(ll - _lse(ll, axis=1, keepdims=True))
+
+    def predict(self, X, signatures) -> np.ndarray:
+        """(n,) the most likely object of each single touch."""
+        return self.classes_[np.argmax(self.log_likelihood(X, signatures), axis=1)]
+
+    # -- more places and the forecast ------------------------------------------------------------
+
+    def with_places(self, X, y, *, signatures, instances, places):
+        """A copy whose banks also hold these touches (e.g. a fixed plan's training points), fitted parameters kept.
+
+        Touches whose place key an object's bank already has join that entry.
+        """
+        import copy
+
+        check_is_fitted(self, "banks_")
+        Z = self._standardized(describe_touches(X))
+        y, sig = np.asarray(y, np.int64), np.asarray(signatures, np.float64)
+        inst, keys = np.asarray(instances, np.int64), np.asarray(places, np.int64)
+        out = copy.copy(self)
+        out.banks_ = []
+        for c, bank in zip(self.classes_, self.banks_):
+            mine = y == c
+            if not mine.any():
+                out.banks_.append(bank)
+                continue
+            old = bank.instances >= 0
+            old_keys = np.repeat(bank.keys, old.sum(axis=1))
+            old_sig = np.repeat(bank.signatures, old.sum(axis=1), axis=0)
+            all_keys = np.r_[old_keys, keys[mine]]
+            all_sig = np.r_[old_sig, sig[mine]]
+            all_Z = np.r_[bank.samples[old], Z[mine]]
+            all_inst = np.r_[bank.instances[old], inst[mine]]
+            k, s, samples, sample_inst = _entries(all_keys, all_Z, all_sig, all_inst)
+            out.banks_.append(_Bank(k, s, samples, sample_inst, bank.free, bank.free_instances, bank.match_width))
+        return out
+
+    def forecast_table(self, samples: int = 8) -> list:
+        """What a touch at each entry of each object would make of the belief: per object, (E, samples, C).
+
+        For object j's entry e, up to ``samples`` of its training touches
+        (spread over its instances), each scored under every object with its
+        own instance left out, tempered and normalized: the single-touch
+        posterior it would give.  Rows past an entry's touches are uniform
+        (their weight, in the second list, is 0).
+
+        Returns
+        -------
+        posteriors : list of (E_j, samples, C) float64
+        weights : list of (E_j, samples) float64, summing to 1 per entry
+        """
+        check_is_fitted(self, "banks_")
+        posteriors, weights = [], []
+        C = len(self.banks_)
+        for bank in self.banks_:
+            E, S = bank.instances.shape
+            valid = bank.instances >= 0
+            count = valid.sum(axis=1)
+            take = np.zeros((E, samples), np.int64)
+            used = np.zeros((E, samples), bool)
+            for e in range(E):
+                m = min(samples, int(count[e]))
+                # Valid samples are the first count[e], sorted by instance: spread the picks over them.
+                take[e, :m] = np.unique(np.linspace(0, count[e] - 1, m).round().astype(np.int64))[:m]
+                used[e, :m] = True
+            rows_e, rows_s = np.nonzero(used)
+            Z = bank.samples[rows_e, take[rows_e, rows_s]]
+            G = bank.signatures[rows_e]
+            ex = bank.instances[rows_e, take[rows_e, rows_s]]
+            place, free = self._log_terms(Z, G, ex, [self.bandwidth_])
+            w = self.mixture_
+            ll = np.logaddexp(np.log1p(-w) + place[0], np.log(w) + free[0]) / self.temperature_
+            post = np.full((E, samples, C), 1.0 / C)
+            post[rows_e, rows_s] = np.exp(ll - _lse(ll, axis=1, keepdims=True))
+            weight = np.where(used, 1.0 / np.maximum(used.sum(axis=1, keepdims=True), 1), 0.0)
+            posteriors.append(post)
+            weights.append(weight)
+        return posteriors, weights
+
+    def match(self, c: int, signatures) -> tuple[np.ndarray, np.ndarray]:
+        """Object ``c``'s matched entries of places at ``signatures`` (n, L): (n, K) indices and (n, K) weights."""
+        check_is_fitted(self, "banks_")
+        idx, logw = self._match(self.banks_[c], np.asarray(signatures, np.float64))
+        return idx, np.exp(logw)

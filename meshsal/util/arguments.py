@@ -1,0 +1,88 @@
+"""What every ``visuotactile`` subcommand's options share: defaults shown in ``--help``, renamed options.
+
+Each package registers its own subcommands (``meshsal.cli``, ``tactile.cli``,
+``hw.cli``, ``classify.cli``); they use :class:`HelpFormatter`, and an option
+renamed so that one concept has one name everywhere keeps its old spelling
+for one release with a warning (:func:`add_renamed`), as scikit-learn
+deprecates a parameter.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+__all__ = ["HelpFormatter", "add_renamed", "REMOVED_IN"]
+
+#: The release that drops the old spellings.
+REMOVED_IN = "0.3"
+
+
+class HelpFormatter(argparse.ArgumentDefaultsHelpFormatter):
+    """``--help`` with each option's default, unless its help already tells it or there is none to tell.
+
+    Examples
+    --------
+    >>> p = argparse.ArgumentParser(prog="x", formatter_class=HelpFormatter)
+    >>> _ = p.add_argument("--n-points", type=int, default=15, help="points per mesh")
+    >>> _ = p.add_argument("--methods", default=("attention", "uniform"), help="point methods")
+    >>> _ = p.add_argument("--model", help="touch model file")
+    >>> _ = p.add_argument("--quiet", action="store_true", help="no progress bar")
+    >>> print(p.format_help().split("options:")[1].strip())  # doctest: +NORMALIZE_WHITESPACE
+    -h, --help            show this help message and exit
+    --n-points N_POINTS   points per mesh (default: 15)
+    --methods METHODS     point methods (default: attention,uniform)
+    --model MODEL         touch model file
+    --quiet               no progress bar
+    """
+
+    def _get_help_string(self, action):
+        text = action.help or ""
+        default = action.default
+        told = "default" in text.lower() or "%(default)" in text
+        if told or action.nargs == 0 or default is None or default is argparse.SUPPRESS or default == ():
+            return text  # a flag's default is its absence
+        if isinstance(default, tuple | list):  # a comma-separated list, as it is typed
+            return f"{text} (default: {','.join(map(str, default)).replace('%', '%%')})"
+        return super()._get_help_string(action)
+
+
+class _Renamed(argparse.Action):
+    """The old spelling of a renamed option: stores into the new option's destination, with a warning."""
+
+    def __init__(self, option_strings, dest, new_option: str = "", **kwargs):
+        self.new_option = new_option
+        super().__init__(option_strings, dest, **kwargs)
+
+    def __call__(self, parser, namespace, values, option_string=None):
+        print(
+            f"{parser.prog}: warning: {option_string} is deprecated and goes in {REMOVED_IN}: "
+            f"use {self.new_option} (FutureWarning)",
+            file=sys.stderr,
+        )
+        setattr(namespace, self.dest, values)
+
+
+def add_renamed(parser: argparse.ArgumentParser, old: str, new: argparse.Action) -> None:
+    """Accept ``old``, the former spelling of the option ``new`` (the action ``add_argument`` returned).
+
+    It is hidden from ``--help``; using it stores the value as ``new`` would
+    and prints ``PROG: warning: OLD is deprecated and goes in 0.3: use NEW``.
+
+    Examples
+    --------
+    >>> p = argparse.ArgumentParser(prog="visuotactile points")
+    >>> add_renamed(p, "--n", p.add_argument("--n-points", type=int, default=15))
+    >>> p.parse_args(["--n", "6"]).n_points   # and a warning on stderr
+    6
+    """
+    parser.add_argument(
+        old,
+        dest=new.dest,
+        type=new.type,
+        choices=new.choices,
+        metavar=new.metavar,
+        action=_Renamed,
+        new_option=new.option_strings[-1],
+        help=argparse.SUPPRESS,
+    )

@@ -1,0 +1,260 @@
+"""The place-aware recognizer: touch codebooks, a likelihood that knows where the pad pressed, and its guards."""
+
+import dataclasses
+
+import numpy as np
+import pytest
+import shapes
+from sklearn.base import clone
+
+import tactile
+from classify.experiment.config import Settings
+from classify.experiment.controls import donors, shuffled_places
+from classify.experiment.samples import SampleTask, instance_samples, nominal_mesh
+from classify.policies import InfoGainPolicy, PlaceKnowledge, fit_knowledge, run_episode, signatures
+from classify.recognizers.place import PlaceAware
+from classify.recognizers.touches import Recognizer
+from meshsal.mesh import Mesh
+from meshsal.points.places import POOL_FACTOR
+
+SETTINGS = Settings(n_points=3, view_size=32, train_instances=2, train_sessions=1, codebook_draws=4)
+PLANE = Mesh(vertices=[[-50, 0, -50], [50, 0, -50], [50, 0, 50], [-50, 0, 50]], faces=[[0, 2, 1], [0, 3, 2]])
+
+
+# -- codebooks ---------------------------------------------------------------------------------------------
+
+
+def test_a_codebook_gives_every_touch_its_own_device_and_is_reproducible():
+    perturb = tactile.Perturbation(gain_spread=0.2, dead_fraction=0.2, adc_bits=8)
+    sensor = tactile.Sensor(mode="pressure")
+    book = tactile.touch_codebook(PLANE, [[0, 0, 0]], [[0, 1, 0]], sensor, perturb, draws=6, rng=3)
+    assert book.shape == (1, 6, 16, 16)
+    dead = book[0] == 0  # a flat plane presses every taxel: zeros are dead taxels
+    assert len({d.tobytes() for d in dead}) == 6  # six devices, six dead-taxel maps
+    np.testing.assert_array_equal(book, tactile.touch_codebook(PLANE, [[0, 0, 0]], [[0, 1, 0]], sensor, perturb, 6, 3))
+    # One device per call instead: acquire's readings share one dead map.
+    shared = tactile.acquire(PLANE, [[0, 0, 0]] * 6, [[0, 1, 0]] * 6, sensor, perturb, rng=3)
+    assert len({(s == 0).tobytes() for s in shared}) == 1
+
+
+def test_a_clean_codebook_is_the_clean_imprint_and_bad_draws_are_refused():
+    book = tactile.touch_codebook(PLANE, [[0, 0, 0], [5, 0, 5]], [[0, 1, 0]] * 2, None, tactile.Perturbation.none(), 3)
+    clean = tactile.imprints(PLANE, [[0, 0, 0], [5, 0, 5]], [[0, 1, 0]] * 2)
+    np.testing.assert_array_equal(book, np.repeat(clean[:, None], 3, axis=1))
+    with pytest.raises(ValueError, match="draws must be a positive integer"):
+        tactile.touch_codebook(PLANE, [[0, 0, 0]], [[0, 1, 0]], draws=0)
+
+
+def test_exact_acquisition_is_the_exact_section_with_the_same_draws():
+    sphere = shapes.sphere(40.0, 60)
+    p = sphere.vertices[[10, 400]]
+    n = p / np.linalg.norm(p, axis=1, keepdims=True)
+    clean = tactile.acquire(sphere, p, n, None, tactile.Perturbation.none(), rng=1, exact=True)
+    np.testing.assert_array_equal(clean, tactile.imprints_exact(sphere, p, n))
+    perturb = tactile.Perturbation(jitter_mm=0.5, uniform_rotation=True)
+    exact = tactile.acquire(sphere, p, n, None, perturb, rng=1, exact=True)
+    fast = tactile.acquire(sphere, p, n, None, perturb, rng=1)
+    # Two simulators of one contact, with the same draws: alike, not equal.
+    assert not np.array_equal(exact, fast) and np.corrcoef(exact.ravel(), fast.ravel())[0, 1] > 0.8
+
+
+# -- the likelihood on planted stimuli ---------------------------------------------------------------------
+
+
+def _planted(rng, feel):
+    """Two objects x two places x two training instances x 30 touches; ``feel[(obj, place)]`` is the mean felt."""
+    X, y, sig, inst, key = [], [], [], [], []
+    for (obj, place), mean in feel.items():
+        for j in (1, 2):
+            X.append(rng.normal(mean, 0.3, (30, 4)))
+            y += [obj] * 30
+            sig += [[place, 1.0 - place]] * 30
+            inst += [j] * 30
+            key += [place] * 30
+    return np.concatenate(X), np.array(y), np.array(sig, float), np.array(inst), np.array(key)
+
+
+def test_knowing_the_place_tells_apart_what_no_place_free_classifier_can():
+    # Object 0 is flat at place 0 and edged at place 1; object 1 the other way round: felt anywhere, alike.
+    flat, edge = np.zeros(4), np.full(4, 3.0)
+    X, y, sig, inst, key = _planted(np.random.default_rng(0), {(0, 0): flat, (0, 1): edge, (1, 0): edge, (1, 1): flat})
+    model = PlaceAware().fit(X, y, signatures=sig, instances=inst, places=key)
+    at0, at1 = np.array([[0.0, 1.0]]), np.array([[1.0, 0.0]])
+    assert model.predict(flat[None], at0).tolist() == [0] and model.predict(flat[None], at1).tolist() == [1]
+    assert model.predict_proba(edge[None], at0)[0, 1] > 0.9
+    # A place-free model of the same touches cannot tell: each object feels flat and edged alike.
+    queries = np.random.default_rng(9).normal(0.0, 0.3, (200, 4))  # object 0 touched at place 0
+    knn = clone(__import__("classify").make("knn")).fit(X, y)
+    assert 0.3 < np.mean(knn.predict(queries) == 0) < 0.7
+    assert np.mean(model.predict(queries, np.tile(at0, (200, 1))) == 0) > 0.95
+
+
+def test_how_well_a_place_matches_is_not_evidence():
+    # Both objects feel the same everywhere; the test place matches object 0's places exactly and object 1's
+    # poorly.  The belief must not move.
+    rng = np.random.default_rng(1)
+    same = rng.normal(0, 1, (60, 4))
+    X = np.r_[same, same]
+    y = np.repeat([0, 1], 60)
+    inst = np.tile(np.repeat([1, 2], 30), 2)
+    sig = np.r_[np.tile([[0.0, 1.0]], (60, 1)), np.tile([[5.0, 9.0]], (60, 1))]
+    model = PlaceAware().fit(X, y, signatures=sig, instances=inst, places=np.zeros(120, int))
+    ll = model.log_likelihood(rng.normal(0, 1, (5, 4)), np.tile([[0.0, 1.0]], (5, 1)))
+    np.testing.assert_allclose(ll[:, 0], ll[:, 1], rtol=0, atol=1e-9)
+
+
+def test_the_place_free_term_keeps_a_wrong_match_from_sinking_the_true_object():
+    flat, edge = np.zeros(4), np.full(4, 3.0)
+    X, y, sig, inst, key = _planted(np.random.default_rng(2), {(0, 0): flat, (0, 1): edge, (1, 0): edge, (1, 1): edge})
+    model = PlaceAware().fit(X, y, signatures=sig, instances=inst, places=key)
+    # Object 0 touched at place 1 but located at place 0 (a wrong match): it felt an edge, which object 0 has.
+    ll = model.log_likelihood(edge[None], np.array([[0.0, 1.0]]))
+    assert np.isfinite(ll).all() and model.mixture_ > 0
+
+
+def test_the_estimator_clones_validates_and_extends_its_banks():
+    rng = np.random.default_rng(3)
+    X, y, sig, inst, key = _planted(rng, {(0, 0): np.zeros(4), (1, 0): np.ones(4), (0, 1): 0, (1, 1): 1})
+    model = PlaceAware(neighbours=2)
+    assert clone(model).get_params()["neighbours"] == 2
+    with pytest.raises(ValueError, match="at least two training instances"):
+        PlaceAware().fit(X, y, signatures=sig, instances=np.ones_like(inst), places=key)
+    with pytest.raises(ValueError, match="one row per touch"):
+        PlaceAware().fit(X[:-1], y, signatures=sig, instances=inst, places=key)
+    model.fit(X, y, signatures=sig, instances=inst, places=key)
+    # A new place far from the others, where object 1 feels 5s: the extended model knows it, the old one not.
+    new = np.full((20, 4), 5.0) + rng.normal(0, 0.3, (20, 4))
+    there = np.tile([[20.0, 20.0]], (20, 1))
+    more = model.with_places(
+        new, np.ones(20, int), signatures=there, instances=np.repeat([1, 2], 10), places=np.full(20, 7)
+    )
+    assert more.predict(np.full((1, 4), 5.0), there[:1]).tolist() == [1]
+    assert len(model.banks_[1].keys) == 2 and len(more.banks_[1].keys) == 3
+    posteriors, weights = more.forecast_table(samples=4)
+    assert [p.shape for p in posteriors] == [(2, 4, 2), (3, 4, 2)]
+    np.testing.assert_allclose(posteriors[1].sum(axis=2), 1.0)
+    np.testing.assert_allclose(weights[1].sum(axis=1), 1.0)
+
+
+# -- the place-aware knowledge on two shapes that differ in one place --------------------------------------
+
+
+@pytest.fixture(scope="module")
+def world():
+    """Ball and domed: test instance 0 and training instances 1, 2 with places and codebooks; the knowledge."""
+    nominal = {m.name: nominal_mesh(m, SETTINGS) for m in shapes.ball_and_domed()}
+    samples = {
+        (name, j): instance_samples(SampleTask(mesh, name, (), SETTINGS, 0, j, places=True, codebook=True)).places
+        for name, mesh in nominal.items()
+        for j in range(3)
+    }
+    knowledge = fit_knowledge({k: v for k, v in samples.items() if k[1] >= 1}, Recognizer("place"))
+    return nominal, samples, knowledge
+
+
+def test_training_instances_carry_codebooks_and_the_test_instance_none(world):
+    _, samples, knowledge = world
+    assert isinstance(knowledge, PlaceKnowledge)
+    book = samples["domed", 1].codebook
+    ok = samples["domed", 1].places.touchable
+    assert book.shape[:2] == (len(ok), SETTINGS.codebook_draws) and np.abs(book[ok]).sum(axis=(1, 2)).min() > 0
+    assert samples["domed", 0].codebook is None
+
+
+def test_the_place_aware_belief_finds_the_dome_and_info_gain_touches_it(world):
+    nominal, samples, knowledge = world
+    apex = nominal["domed"].vertices[np.argmax(nominal["domed"].vertices @ shapes.DOME_APEX)]
+    test = samples["domed", 0]
+    episode = run_episode(InfoGainPolicy(), test, knowledge, 2, 8.0, np.random.default_rng(0))
+    touched = nominal["domed"].vertices[episode.vertex_ids]  # instance 0 keeps the nominal mesh's numbering
+    assert np.linalg.norm(touched - apex, axis=1).min() < 25.0
+    assert episode.beliefs[-1][knowledge.names.index("domed")] > 0.9
+
+
+def test_shuffled_imprints_take_the_place_aware_belief_to_the_donor(world):
+    _, samples, knowledge = world
+    names = knowledge.names
+    tests = shuffled_places(tuple(samples[n, 0] for n in names), names, 0, 0)
+    for c, test in enumerate(tests):
+        # The places stay the test instance's own; only what is felt there comes from the other object.
+        assert test.places is samples[names[c], 0].places
+        felt = knowledge.posterior(test.imprints[0], test.places)
+        dome_like = felt[test.places.touchable].argmax(axis=1)
+        assert np.mean(dome_like == c) <= 0.5 + 1e-9  # never better than chance at telling c
+
+
+def test_donors_are_a_derangement_by_name():
+    d = donors(["a", "b", "c", "d"], 0, 3)
+    assert sorted(d.values()) == ["a", "b", "c", "d"] and all(k != v for k, v in d.items())
+    assert d == donors(["d", "c", "b", "a"], 0, 3)
+    with pytest.raises(ValueError, match="at least two objects"):
+        donors(["a"], 0, 0)
+
+
+def test_a_training_instance_with_no_touchable_place_stops_with_its_name(world, monkeypatch):
+    nominal, _, _ = world
+    import meshsal.points.touch as touch
+
+    monkeypatch.setattr(
+        touch, "touchable", lambda mesh, positions, normals, width, scene=None: np.zeros(len(positions), bool)
+    )
+    task = SampleTask(nominal["ball"], "ball", (), SETTINGS, 0, 1, places=True, codebook=True)
+    with pytest.raises(ValueError, match="ball, replicate 0, training instance 1.*no touchable place"):
+        instance_samples(task)
+
+
+def test_a_codebook_from_other_draws_is_recomputed_never_reused(world, tmp_path):
+    nominal, _, _ = world
+    task = SampleTask(nominal["ball"], "ball", (), SETTINGS, 0, 1, places=True, codebook=True, cache_dir=tmp_path)
+    four = instance_samples(task).places.codebook
+    again = instance_samples(task).places.codebook
+    six = instance_samples(dataclasses.replace(task, settings=dataclasses.replace(SETTINGS, codebook_draws=6)))
+    np.testing.assert_array_equal(four, again)
+    assert four.shape[1] == 4 and six.places.codebook.shape[1] == 6
+
+
+def test_signatures_of_the_places_locate_them_on_the_shape(world):
+    _, samples, _ = world
+    a, b = signatures(samples["domed", 1].places), signatures(samples["domed", 2].places)
+    # Two turned, resized copies: the pool is the same places in the same order.
+    pool = POOL_FACTOR * SETTINGS.n_points
+    np.testing.assert_allclose(a[:pool], b[:pool], atol=1e-9)
+    assert not np.allclose(samples["domed", 1].places.positions, samples["domed", 2].places.positions)
+
+
+def test_places_of_a_retessellated_turned_copy_are_located_where_they_lie():
+    from scipy.spatial import cKDTree
+
+    from meshsal.mesh.curvature import mesh_saliency
+    from meshsal.objects import toys
+    from meshsal.objects.instances import retessellate
+    from meshsal.points.places import candidate_places, landmarks_in
+    from meshsal.points.places import signatures as located
+
+    cow = nominal_mesh(toys.make("cow"), SETTINGS)  # no symmetry: a place is located by where it lies, not up to one
+    P = cow.vertices[candidate_places(cow, mesh_saliency(cow), 15)]
+    turn = np.array([[0.0, 0, 1], [0, 1, 0], [-1, 0, 0]])
+    for kind in ("subdivided", "decimated"):
+        copy = retessellate(cow, kind)
+        copy = copy.replace(vertices=1.04 * copy.vertices @ turn.T + 3.0)
+        Q = copy.vertices[candidate_places(copy, mesh_saliency(copy), 15)]
+        back = (Q - 3.0) @ turn / 1.04  # where each place of the copy lies on the original
+        tree = cKDTree(located(P, P[:8]))
+        error = np.linalg.norm(P[tree.query(located(Q, landmarks_in(Q, P)))[1]] - back, axis=1)
+        own = np.linalg.norm(P[tree.query(located(Q, Q[:8]))[1]] - back, axis=1)  # the copy's own landmarks
+        spacing = np.median(cKDTree(P).query(P, k=2)[0][:, 1])
+        assert np.median(error) < 0.5 * spacing and np.mean(error < spacing) > 0.85, (kind, np.median(error))
+        assert np.mean(error < spacing) >= np.mean(own < spacing)
+
+
+def test_a_scrambled_control_gives_the_donors_imprints_in_another_order(world):
+    _, samples, knowledge = world
+    names = knowledge.names
+    tests = tuple(samples[n, 0] for n in names)
+    shuffled = shuffled_places(tests, names, 0, 0, "shuffled")
+    scrambled = shuffled_places(tests, names, 0, 0, "scrambled")
+    for a, b in zip(shuffled, scrambled):
+        assert sorted(x.tobytes() for x in a.imprints[0]) == sorted(x.tobytes() for x in b.imprints[0])
+        assert not np.array_equal(a.imprints, b.imprints)
+    with pytest.raises(ValueError, match="unknown control"):
+        shuffled_places(tests, names, 0, 0, "reversed")
