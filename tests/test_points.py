@@ -270,6 +270,25 @@ def test_random_baselines_depend_on_the_seed(method):
     assert a.vertex_ids.tolist() != b.vertex_ids.tolist()
 
 
+def test_every_method_of_a_call_shares_one_embree_scene(monkeypatch):
+    import meshsal.mesh.embree as embree
+    from meshsal.points import PointOptions, method_points, points_by_method
+
+    mesh, _, _ = planted_sphere()
+    methods = ["uniform", "mesh_saliency", "random", "curvature"]
+    alone = points_by_method(mesh, methods, PointOptions(n=6, seed=2))
+    built = []
+    real = embree.embree_scene
+    monkeypatch.setattr(embree, "embree_scene", lambda m, *a, **k: built.append(m) or real(m, *a, **k))
+    shared = points_by_method(mesh, methods, PointOptions(n=6, seed=2))
+    assert len(built) == 1
+    held = real(mesh)
+    given = method_points(mesh, methods, PointOptions(n=6, seed=2), scene=held)
+    assert len(built) == 1  # the caller's scene serves every method
+    for m in methods:
+        assert shared[m].vertex_ids.tolist() == alone[m].vertex_ids.tolist() == given[m].vertex_ids.tolist()
+
+
 def test_saliency_and_curvature_baselines_start_at_the_bump():
     mesh, to_bump, _ = planted_sphere()
     for method in ("mesh_saliency", "curvature"):

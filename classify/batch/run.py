@@ -255,7 +255,7 @@ def _compute(source, path: Path, name: str, store: Path, settings: BatchSettings
     options = PointOptions(
         n=settings.n_points, seed=settings.seed, size=settings.view_size, threads=1, pad_width=sensor.width_mm
     )
-    picked = method_points(mesh, settings.methods, options, vertex_saliency=saliency)
+    picked = method_points(mesh, settings.methods, options, vertex_saliency=saliency, scene=scene)
     timings["points"] = time.perf_counter() - t
     for method in settings.methods:
         pts = picked[method]

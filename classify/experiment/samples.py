@@ -420,6 +420,7 @@ def instance_samples(task: SampleTask) -> InstanceSamples:
             surveyed=task.surveyed,
             vertex_saliency=vertex_saliency,
             seen=seen,
+            scene=scene,
         )
         for m in missing:
             by_method[m] = _sessions(mesh, picked[m], task, scene)

@@ -156,6 +156,7 @@ def attention_points(
     rules: Rules | None = None,
     combination: str = "equal",
     method: str = "attention",
+    scene=None,
     **changes,
 ) -> InterestPoints:
     """Steps 2-5 of the pipeline on views and saliency maps already computed.
@@ -174,6 +175,9 @@ def attention_points(
         How ``maps`` were combined, recorded in the result.
     method : str
         The attention method's name recorded in the result ("attention", "attention_itti"...).
+    scene : optional
+        The mesh's Embree scene (:func:`meshsal.mesh.embree.embree_scene`) for the touch check, built
+        when omitted.
 
     Returns
     -------
@@ -203,7 +207,7 @@ def attention_points(
     votes, _ = view_votes(graph, salient, found.vertex_ids, spacing)
     peaks = found.take(np.lexsort((np.arange(len(found)), -scores, -votes)))
     seen = _best_set_values(mesh, views, maps, set_views)
-    checker = TouchFilter(mesh, rules) if rules.touch else None
+    checker = TouchFilter(mesh, rules, scene) if rules.touch else None
     chosen, lost = select(
         peaks,
         saliency_fill(mesh, vn, vertex_saliency, lambda i: seen[i]),

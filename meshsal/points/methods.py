@@ -62,6 +62,7 @@ class MeshContext:
     model: object = None
     seen: ViewChannels | None = None
     maps: dict | None = None
+    scene: object = None
 
     def maps_of(self, combination: str, weights=None) -> np.ndarray:
         return self.maps[_maps_key(combination, weights)]
@@ -111,6 +112,7 @@ def _attention(name, ctx: MeshContext) -> InterestPoints:
         ctx.rules,
         combination=mode,
         method=name,
+        scene=ctx.scene,
     )
 
 
@@ -135,7 +137,7 @@ def _baseline(candidates):
             ctx.mesh, ctx.vertex_normals, ctx.rules.n, np.random.default_rng(ctx.options.seed), ctx.vertex_saliency
         )
         return choose_without_views(
-            ctx.mesh, ctx.vertex_normals, ctx.vertex_saliency, first, lambda i: field[i], ctx.rules, name
+            ctx.mesh, ctx.vertex_normals, ctx.vertex_saliency, first, lambda i: field[i], ctx.rules, name, ctx.scene
         )
 
     return choose
@@ -184,6 +186,7 @@ def points_by_method(
     model=None,
     vertex_saliency=None,
     seen: ViewChannels | None = None,
+    scene=None,
     **changes,
 ) -> dict:
     """:func:`interest_points` of several methods on one mesh, rendering and computing channels once.
@@ -201,6 +204,9 @@ def points_by_method(
     seen : ViewChannels, optional
         The mesh's :func:`meshsal.attention.rig.view_channels` if already
         computed (else rendered here when a method looks).
+    scene : optional
+        The mesh's robust Embree scene (:func:`meshsal.mesh.embree.embree_scene`), which every
+        method's touch check shares; built once here when omitted.
 
     Returns
     -------
@@ -242,14 +248,26 @@ def points_by_method(
             mesh, size=options.size, vertex_saliency=vertex_saliency, threads=options.threads, quiet=options.quiet
         )
     maps = {key: attention_maps(seen, mode, weights) for key, (mode, weights) in wanted.items()}
+    if scene is None and rules.touch and chosen:
+        from meshsal.mesh.embree import embree_scene
+
+        scene = embree_scene(mesh)
     ctx = MeshContext(
-        mesh, vertex_normals(mesh.vertices, mesh.faces), vertex_saliency, rules, options, model, seen, maps
+        mesh, vertex_normals(mesh.vertices, mesh.faces), vertex_saliency, rules, options, model, seen, maps, scene
     )
     return {m: method.choose(m, ctx) for m, method in chosen.items()}
 
 
 def method_points(
-    mesh: Mesh, methods, options: PointOptions, *, model=None, surveyed=None, vertex_saliency=None, seen=None
+    mesh: Mesh,
+    methods,
+    options: PointOptions,
+    *,
+    model=None,
+    surveyed=None,
+    vertex_saliency=None,
+    seen=None,
+    scene=None,
 ) -> dict:
     """:func:`points_by_method`, with "learned" chosen from a survey's pool when one is given (no rendering).
 
@@ -269,6 +287,8 @@ def method_points(
         Precomputed mesh saliency.
     seen : ViewChannels, optional
         The mesh's channels if already computed.
+    scene : optional
+        The mesh's robust Embree scene, shared with the caller's imprints (built when omitted).
 
     Returns
     -------
@@ -294,6 +314,7 @@ def method_points(
         model=model,
         vertex_saliency=vertex_saliency,
         seen=seen,
+        scene=scene,
     )
     if by_survey:
         picked["learned"] = learned_points(

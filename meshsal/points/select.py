@@ -91,10 +91,12 @@ class TouchFilter:
     """Whether the pad can touch candidates first (:func:`meshsal.points.touch.pad_touches`), on one mesh.
 
     Its rays (the scene, their start height) are built once and shared by every call of one selection.
+    ``scene``, the mesh's robust Embree scene (:func:`meshsal.mesh.embree.embree_scene`), is built when
+    omitted; pass the one the caller holds so that one mesh has one.
     """
 
-    def __init__(self, mesh: Mesh, rules: Rules):
-        self.rays, self.tolerance = pad_rays(mesh, rules.pad_width), rules.touch_tolerance
+    def __init__(self, mesh: Mesh, rules: Rules, scene=None):
+        self.rays, self.tolerance = pad_rays(mesh, rules.pad_width, scene=scene), rules.touch_tolerance
 
     def __call__(self, c: Candidates) -> np.ndarray:
         return pad_touches(self.rays, c.positions, c.normals, self.tolerance)
@@ -169,9 +171,13 @@ def choose_without_views(
     fill_score: Callable,
     rules: Rules,
     method: str,
+    scene=None,
 ) -> InterestPoints:
-    """A method that needs no view of its own: ``first``, then the mesh-saliency fill scored by ``fill_score``."""
-    checker = TouchFilter(mesh, rules) if rules.touch else None
+    """A method that needs no view of its own: ``first``, then the mesh-saliency fill scored by ``fill_score``.
+
+    ``scene`` is the mesh's Embree scene for the touch check (:class:`TouchFilter`), built when omitted.
+    """
+    checker = TouchFilter(mesh, rules, scene) if rules.touch else None
     chosen, lost = select(
         first,
         saliency_fill(mesh, vn, vertex_saliency, fill_score),
