@@ -13,9 +13,10 @@ T = TypeVar("T")
 def progress(
     items: Iterable[T], total: int | None = None, desc: str = "", quiet: bool = False, stream=None, unit: str = ""
 ) -> Iterator[T]:
-    """Yield ``items`` while drawing ``desc [#####.....] k/total elapsed`` on stderr.
+    """Yield ``items`` while drawing ``desc [#####.....] k/total elapsed, left`` on stderr.
 
-    Nothing is drawn when ``quiet`` is true.  On a terminal the bar redraws in
+    ``left`` estimates the time still to go from the mean time per item so
+    far.  Nothing is drawn when ``quiet`` is true.  On a terminal the bar redraws in
     place; elsewhere (logs, CI) it prints a line at most every 10 % so logs
     stay short.  With a ``unit`` (``"meshes"``) the rate follows: ``2.4 meshes/s``.
 
@@ -45,6 +46,8 @@ def progress(
             last_decile = decile
             bar = "#" * int(frac * 30) + "." * (30 - int(frac * 30))
             text = f"{desc} [{bar}] {k}/{total} {elapsed:5.1f}s"
+            if 0 < k < total:
+                text += f", about {_duration(elapsed / k * (total - k))} left"
         else:
             text = f"{desc} {k} {elapsed:5.1f}s"
         if unit:
@@ -61,3 +64,13 @@ def progress(
     if tty:
         stream.write("\n")
         stream.flush()
+
+
+def _duration(seconds: float) -> str:
+    """``42 s``, ``7 min``, ``2 h 05 min``: as precise as an estimate deserves."""
+    if seconds < 60:
+        return f"{seconds:.0f} s"
+    if seconds < 3600:
+        return f"{seconds / 60:.0f} min"
+    hours, minutes = divmod(round(seconds / 60), 60)
+    return f"{hours} h {minutes:02d} min"
