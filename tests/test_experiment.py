@@ -408,3 +408,29 @@ def test_a_result_read_back_from_its_json_prints_the_same_tables(tmp_path):
     again = ExperimentResult.from_json(json.loads((tmp_path / "results.json").read_text()))
     assert experiment.format_tables(again) == experiment.format_tables(r)
     assert again.cell("uniform", "instance", "knn", 2, False, 3) == r.cell("uniform", "instance", "knn", 2, False, 3)
+
+
+def test_the_cpu_time_of_a_run_counts_the_workers_still_running():
+    import subprocess
+    import sys
+
+    from classify.experiment.run import _cpu_seconds
+
+    before = _cpu_seconds()
+    # A child that works for a while and then waits, alive, as a run's local workers do when it ends.
+    child = subprocess.Popen(
+        [
+            sys.executable,
+            "-c",
+            "import sys, time\nt = time.process_time()\nwhile time.process_time() - t < 0.5: pass\n"
+            "print('done', flush=True)\nsys.stdin.read()",
+        ],
+        stdin=subprocess.PIPE,
+        stdout=subprocess.PIPE,
+        text=True,
+    )
+    try:
+        assert child.stdout.readline().strip() == "done"
+        assert _cpu_seconds() - before >= 0.5
+    finally:
+        child.communicate("")

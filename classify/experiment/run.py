@@ -74,11 +74,24 @@ WORKER_MODULES = (__name__, "meshsal.points", "meshsal.attention.rig", "meshsal.
 
 
 def _cpu_seconds() -> float:
-    """User and system CPU seconds of this process and of its children that have ended."""
+    """User and system CPU seconds of this process and of every process below it, running or ended.
+
+    Local workers still run when a run ends, so the kernel's count of ended
+    children alone would miss all their work.
+    """
     import resource
 
-    own, children = resource.getrusage(resource.RUSAGE_SELF), resource.getrusage(resource.RUSAGE_CHILDREN)
-    return own.ru_utime + own.ru_stime + children.ru_utime + children.ru_stime
+    import psutil
+
+    own, ended = resource.getrusage(resource.RUSAGE_SELF), resource.getrusage(resource.RUSAGE_CHILDREN)
+    total = own.ru_utime + own.ru_stime + ended.ru_utime + ended.ru_stime
+    for child in psutil.Process().children(recursive=True):
+        try:
+            times = child.cpu_times()
+        except psutil.Error:  # ended meanwhile: counted with the ended ones once reaped
+            continue
+        total += times.user + times.system
+    return total
 
 
 def _provenance() -> dict:
