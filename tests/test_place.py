@@ -258,3 +258,17 @@ def test_a_scrambled_control_gives_the_donors_imprints_in_another_order(world):
         assert not np.array_equal(a.imprints, b.imprints)
     with pytest.raises(ValueError, match="unknown control"):
         shuffled_places(tests, names, 0, 0, "reversed")
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_a_registration_onto_places_it_cannot_match_never_collapses_the_shape(seed):
+    from meshsal.points.places import landmarks_in, register
+
+    rng = np.random.default_rng(seed)
+    moving = rng.normal(size=(60, 3)) * [40, 20, 10]
+    # Another object's places, most of them at one spot: the nearest-place fit pulls every moving place there.
+    fixed = np.r_[rng.normal(size=(8, 3)) * 40, np.tile([5.0, 5.0, 5.0], (52, 1))]
+    s, R, t = register(moving, fixed, rng=seed)
+    size = np.sqrt(((fixed - fixed.mean(0)) ** 2).sum(1).mean() / ((moving - moving.mean(0)) ** 2).sum(1).mean())
+    assert 1e-3 * size < s < 1e3 * size and np.allclose(R @ R.T, np.eye(3)) and np.isfinite(t).all()
+    assert np.isfinite(landmarks_in(moving, fixed, rng=seed)).all()

@@ -208,22 +208,42 @@ def register(moving, fixed, rng=0, rounds: int = 200, keep: int = 5) -> tuple[fl
     d = np.partition(np.abs(gm[:, None, :] - gf[None, :, :]), keep - 1, axis=2)[:, :, :keep]
     pair = np.argmin((d**2).sum(axis=2), axis=1)
     scale = np.sqrt(((F - F.mean(axis=0)) ** 2).sum(axis=1).mean())
+    size = scale / max(np.sqrt(((M - M.mean(axis=0)) ** 2).sum(axis=1).mean()), 1e-300)
     tol = 0.05 * scale
     picks = np.argsort(rng.random((rounds, len(M))), axis=1)[:, :3]
     S, R, T = similarity_fit(M[picks], F[pair[picks]])
     moved = S[:, None, None] * np.einsum("bij,kj->bki", R, M) + T[:, None, :]
     counts = (np.linalg.norm(moved - F[pair][None], axis=2) < tol).sum(axis=1)
+    counts[~_plausible(S, size)] = -1
     b = int(np.argmax(counts))
+    if counts[b] < 0:  # every sample collapses the shape: the sizes and centroids are all that can be matched
+        return float(size), np.eye(3), F.mean(axis=0) - size * M.mean(axis=0)
     s, R, t = float(S[b]), R[b], T[b]
     inliers = np.linalg.norm(s * M @ R.T + t - F[pair], axis=1) < tol
     if inliers.sum() >= 3:
-        s, R, t = similarity_fit(M[inliers], F[pair[inliers]])
+        s, R, t = _unless_collapsed(similarity_fit(M[inliers], F[pair[inliers]]), (s, R, t), size)
     tree = cKDTree(F)
     for _ in range(10):
         dist, nearest = tree.query(s * M @ R.T + t)
         close = dist <= np.quantile(dist, 0.8)
-        s, R, t = similarity_fit(M[close], F[nearest[close]])
+        s, R, t = _unless_collapsed(similarity_fit(M[close], F[nearest[close]]), (s, R, t), size)
     return float(s), R, t
+
+
+def _plausible(s, size: float):
+    """Whether scales ``s`` keep the moving shape within a thousandfold of the size that matches the fixed one.
+
+    A fit to places of another shape can shrink every place onto a few
+    fixed ones (scale 0): such a fit locates nothing, and dividing by it
+    would give infinite landmarks.
+    """
+    s = np.asarray(s, np.float64)
+    return np.isfinite(s) & (s > 1e-3 * size) & (s < 1e3 * size)
+
+
+def _unless_collapsed(fit, previous, size: float):
+    """``fit`` when its scale is :func:`_plausible`, else ``previous``."""
+    return fit if bool(_plausible(fit[0], size)) else previous
 
 
 def landmarks_in(moving, fixed, rng=0) -> np.ndarray:
