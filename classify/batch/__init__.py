@@ -64,7 +64,6 @@ OpenCV's pool), so N workers on N cores do not fight over them.
 from classify.batch.run import (
     READ_CHUNK,
     STAGES,
-    SUFFIXES,
     BadMeshesError,
     BatchSummary,
     find_meshes,
@@ -90,7 +89,6 @@ __all__ = [
     "FORMAT",
     "ENTRY_FORMAT",
     "VERSION",
-    "SUFFIXES",
     "STAGES",
     "READ_CHUNK",
     "LOCK",

@@ -21,7 +21,6 @@ from classify.batch.store import (
 )
 
 __all__ = [
-    "SUFFIXES",
     "STAGES",
     "BatchSummary",
     "BadMeshesError",
@@ -32,7 +31,6 @@ __all__ = [
     "run_batch",
 ]
 
-SUFFIXES = (".obj", ".ply", ".off", ".stl")
 STAGES = ("load", "mesh_saliency", "points", "imprints", "write")
 #: Meshes one reading task loads: enough that a task's own cost (a few ms) is small beside theirs.
 READ_CHUNK = 16
@@ -99,13 +97,14 @@ def find_meshes(directory) -> list[tuple[str, Path]]:
     root = Path(directory)
     if not root.is_dir():
         raise ValueError(f"{root}: not a folder of meshes")
+    from meshsal.mesh.io import mesh_files
+
     found = {}
-    for path in sorted(root.rglob("*")):
-        if path.is_file() and path.suffix.lower() in SUFFIXES and not path.name.startswith("."):
-            name = path.relative_to(root).with_suffix("").as_posix()
-            if name in found:
-                raise ValueError(f"{root}: {found[name].name} and {path.name} would share the entry {name!r}")
-            found[name] = path
+    for path in mesh_files(root):
+        name = path.relative_to(root).with_suffix("").as_posix()
+        if name in found:
+            raise ValueError(f"{root}: {found[name].name} and {path.name} would share the entry {name!r}")
+        found[name] = path
     return sorted(found.items())
 
 

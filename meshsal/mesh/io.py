@@ -37,6 +37,7 @@ __all__ = [
     "MeshRepairWarning",
     "MeshReport",
     "load_mesh",
+    "mesh_files",
     "save_ply",
     "load_vertex_quality",
     "MAX_MESH_BYTES",
@@ -47,6 +48,28 @@ __all__ = [
 #: Largest mesh file read, in bytes (256 MiB).  Scanning an OBJ takes about 30 times its size in
 #: memory (nefertiti: 3.7 MB of OBJ, 100 MB), so this admits a 7-million-face OBJ in about 7 GB.
 MAX_MESH_BYTES = 256 * 2**20
+
+
+def mesh_files(folder) -> list[Path]:
+    """Every mesh file under ``folder``, searched recursively, sorted by path; hidden files are skipped.
+
+    A mesh file is one whose extension is in :data:`SUPPORTED_EXTENSIONS` (any case).
+
+    Examples
+    --------
+    >>> import tempfile
+    >>> root = Path(tempfile.mkdtemp())
+    >>> for name in ("b.OBJ", "a/c.ply", ".hidden.stl", "notes.txt"):
+    ...     (root / name).parent.mkdir(exist_ok=True)
+    ...     _ = (root / name).write_text("")
+    >>> [p.relative_to(root).as_posix() for p in mesh_files(root)]
+    ['a/c.ply', 'b.OBJ']
+    """
+    return sorted(
+        p
+        for p in Path(folder).rglob("*")
+        if p.is_file() and p.suffix.lower() in SUPPORTED_EXTENSIONS and not p.name.startswith(".")
+    )
 
 
 def _read_checked(path: Path, max_bytes: int | None) -> bytes:

@@ -50,16 +50,16 @@ class ObjectRef:
 def _folder(folder: Path) -> list[ObjectRef]:
     """Every mesh file under ``folder`` (recursively, sorted by path), named by its stem, or by its path
     below the folder where stems repeat."""
-    from meshsal.mesh.formats import SUPPORTED_EXTENSIONS
+    from collections import Counter
 
-    files = sorted(p for p in folder.rglob("*") if p.is_file() and p.suffix.lower() in SUPPORTED_EXTENSIONS)
+    from meshsal.mesh.io import SUPPORTED_EXTENSIONS, mesh_files
+
+    files = mesh_files(folder)
     if not files:
         raise ValueError(f"{folder}: no mesh file ({', '.join(SUPPORTED_EXTENSIONS)}) under this folder")
-    stems = [p.stem for p in files]
+    stems = Counter(p.stem for p in files)
     return [
-        ObjectRef(
-            p.stem if stems.count(p.stem) == 1 else p.relative_to(folder).with_suffix("").as_posix(), "file", str(p)
-        )
+        ObjectRef(p.stem if stems[p.stem] == 1 else p.relative_to(folder).with_suffix("").as_posix(), "file", str(p))
         for p in files
     ]
 
