@@ -11,6 +11,9 @@ and CPU time and its peak memory (this process and its workers), the time
 per object, and the recognition rate after 1 and 5 touches with its
 interval; a PNG plots time per object against the number of objects.
 Stages whose time per object grows with the objects are the ones to fix.
+Past 16 objects the place-aware recognizer and ``info_gain`` work on
+shortlists of 16 objects (``classify.recognizers.shortlist``): their
+rates there are the shortlisted model's, below what the full model gives.
 
     python -m meshsal.util.reproducible .venv/bin/python benchmarks/bench_scaling.py [--counts 16,64,256,1000]
 """

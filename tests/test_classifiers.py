@@ -72,6 +72,32 @@ def test_knn_inner_cv_picks_larger_k_on_label_noise():
     assert model.cv_scores_[model.k_] >= model.cv_scores_[1]
 
 
+def test_knn_scores_at_most_cv_rows_and_still_finds_the_larger_k():
+    # The same noisy clouds, ten times over: 300 scored rows choose as the 2,000 do, and the scale is theirs.
+    rng = np.random.default_rng(0)
+    X = np.r_[rng.normal(0, 1, (1000, 2)), rng.normal(2.5, 1, (1000, 2))]
+    y = np.where(rng.random(2000) < 0.2, 1 - np.repeat([0, 1], 1000), np.repeat([0, 1], 1000))
+    whole = classify.make("knn", cv_rows=10**6).fit(X, y)
+    some = classify.make("knn", cv_rows=300).fit(X, y)
+    assert some.k_ > 1 and whole.k_ > 1
+    assert abs(some.scale_ - whole.scale_) < 0.5 * whole.scale_
+    # The sample is the rows of least content hash: the same whatever the rows' order.
+    order = rng.permutation(2000)
+    again = classify.make("knn", cv_rows=300).fit(X[order], y[order])
+    assert again.k_ == some.k_ and again.scale_ == some.scale_ and again.cv_scores_ == some.cv_scores_
+
+
+def test_knn_predicts_a_block_at_a_time_as_it_would_row_by_row():
+    rng = np.random.default_rng(1)
+    X, y = rng.normal(size=(300, 4)), rng.integers(0, 3, 300)
+    model = classify.make("knn").fit(X, y)
+    Q = rng.normal(size=(1100, 4))  # more rows than a block
+    whole = model.predict_proba(Q)
+    np.testing.assert_array_equal(
+        np.concatenate([model.predict_proba(Q[i : i + 1]) for i in (0, 700, 1099)]), whole[[0, 700, 1099]]
+    )
+
+
 def test_knn_without_enough_samples_for_inner_cv_uses_smallest_k():
     model = classify.make("knn", ks=(3, 1)).fit([[0.0], [1.0]], [0, 1])
     assert model.k_ == 1

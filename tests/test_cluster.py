@@ -160,3 +160,34 @@ def test_the_command_line_refuses_tls_without_certificates(tmp_path, capsys, cer
     )
     assert "certificates are for a Dask cluster" in capsys.readouterr().err
     assert not (tmp_path / "store").exists()
+
+
+_ORPHAN = """
+import os, sys, time
+from classify.runtime.cluster import worker_pool
+if __name__ == "__main__":
+    with worker_pool(2) as pool:
+        pids = sorted(p.pid for p in pool._processes.values())
+        print(" ".join(map(str, pids)), flush=True)
+        pool.submit(time.sleep, 600)
+        time.sleep(600)
+"""
+
+
+def test_workers_end_with_a_run_that_is_killed(tmp_path):
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    script = tmp_path / "run.py"
+    script.write_text(_ORPHAN)
+    run = subprocess.Popen([sys.executable, str(script)], stdout=subprocess.PIPE, text=True)
+    pids = [int(p) for p in run.stdout.readline().split()]
+    assert len(pids) == 2 and all(psutil.pid_exists(p) for p in pids)
+    run.send_signal(signal.SIGKILL)  # no clean-up runs: only the kernel can end the workers now
+    run.wait(timeout=30)
+    deadline = time.monotonic() + 30
+    while any(psutil.pid_exists(p) and psutil.Process(p).status() != psutil.STATUS_ZOMBIE for p in pids):
+        assert time.monotonic() < deadline, f"workers {pids} outlive their killed parent"
+        time.sleep(0.2)

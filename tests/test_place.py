@@ -131,8 +131,8 @@ def test_the_estimator_clones_validates_and_extends_its_banks():
     assert more.predict(np.full((1, 4), 5.0), there[:1]).tolist() == [1]
     assert len(model.banks_[1].keys) == 2 and len(more.banks_[1].keys) == 3
     posteriors, weights = more.forecast_table(samples=4)
-    assert [p.shape for p in posteriors] == [(2, 4, 2), (3, 4, 2)]
-    np.testing.assert_allclose(posteriors[1].sum(axis=2), 1.0)
+    assert [p.values.shape for p in posteriors] == [(2, 4, 2), (3, 4, 2)]
+    np.testing.assert_allclose(posteriors[1].values.sum(axis=2), 1.0)
     np.testing.assert_allclose(weights[1].sum(axis=1), 1.0)
 
 

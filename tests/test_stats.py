@@ -58,6 +58,21 @@ def test_calibration_fitted_on_one_hot_wrong_answers_stops_a_single_zero_from_ve
     assert fused.tolist() == [0]  # two firm votes beat one
 
 
+def test_calibration_scored_on_a_spread_sample_fits_what_the_whole_set_does():
+    # Overconfident posteriors: the labels are drawn from the square root of what they say.
+    rng = np.random.default_rng(4)
+    truth = rng.dirichlet(np.ones(6) * 0.5, 3000)
+    y = np.array([rng.choice(6, p=row) for row in truth])
+    P = truth**2 / (truth**2).sum(axis=1, keepdims=True)
+
+    def nll(cal):
+        return -np.mean(np.log(fusion.calibrate(P, cal)[np.arange(len(y)), y]))
+
+    whole, some = fusion.fit_calibration(P, y), fusion.fit_calibration(P, y, rows=600)
+    assert whole.temperature > 1.5 and some.temperature > 1.5  # both soften the overconfidence
+    assert nll(some) < 1.02 * nll(whole) < nll(fusion.Calibration())
+
+
 def test_touch_sets_are_distinct_exhaustive_when_few_and_seeded():
     rng = np.random.default_rng(0)
     assert len(fusion.touch_sets(15, 14, 50, rng)) == 15  # C(15, 14) = 15 < 50: all of them

@@ -91,11 +91,14 @@ from classify.experiment.samples import SampleTask, instance_samples
 from classify.experiment.stages import load_objects
 from classify.policies import (
     POLICIES,
+    Felt,
+    Forecasts,
     TouchPolicy,
     TouchState,
     available_places,
     decisions,
     fit_knowledge,
+    hypotheses,
     touched_belief,
 )
 from classify.recognizers.touches import Recognizer
@@ -251,9 +254,9 @@ class TouchEnv(gymnasium.Env):
 
     @property
     def forecast(self):
-        """``knowledge.forecast`` of the current test instance's places."""
+        """``knowledge.forecast`` of the current test instance's places, under every object."""
         self._check_reset()
-        return self._episode.forecast
+        return self._episode.forecasts.over(None)
 
     def _check_reset(self):
         if self._episode is None:
@@ -276,8 +279,8 @@ class TouchEnv(gymnasium.Env):
             )
         self._episode = _Episode(
             sample,
-            self.knowledge.forecast(sample.places),
-            self.knowledge.posterior(sample.imprints[0], sample.places),
+            Forecasts(self.knowledge, sample.places),
+            Felt(self.knowledge, sample.imprints[0], sample.places),
             truth,
             replicate,
             np.full(len(self.names), 1.0 / len(self.names)),
@@ -346,12 +349,12 @@ class TouchEnv(gymnasium.Env):
 
 @dataclass(eq=False)
 class _Episode:
-    """What the env holds of the current episode; ``felt`` (P, C) the posterior a touch at each place would give,
+    """What the env holds of the current episode; ``felt[p]`` (C,) the posterior a touch at place p would give,
     ``steps`` each touch's place (-1: it touched nothing)."""
 
     sample: object
-    forecast: object
-    felt: np.ndarray
+    forecasts: object
+    felt: object
     truth: int
     replicate: int
     belief: np.ndarray
@@ -372,14 +375,16 @@ def touch_state(env, observation: dict) -> TouchState:
     touched = np.asarray(observation["touched"][:p], np.int64)
     order = np.flatnonzero(touched)
     order = order[np.argsort(touched[order], kind="stable")]
+    belief = np.asarray(observation["belief"], np.float64)
     return TouchState(
         places,
         tuple(int(i) for i in order),
         np.asarray(observation["imprints"])[touched[order] - 1],
-        np.asarray(observation["belief"], np.float64),
+        belief,
         np.asarray(observation["available"][:p], bool),
-        env.forecast,
+        env._episode.forecasts,
         env.knowledge,
+        hypotheses(belief, env.knowledge.hypotheses, np.random.default_rng([env._episode.replicate, order.size])),
     )
 
 

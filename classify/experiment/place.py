@@ -116,10 +116,9 @@ def place_job(job: PlaceJob) -> PlaceOutcome:
         for m in job.methods:
             X, y, sig, inst, keys = place_touches(job.training, job.names, points=job.plans[m])
             model = knowledge.model.with_places(X, y, signatures=sig, instances=inst, places=keys)
+            located = dataclasses.replace(knowledge, model=model)
             proba = [
-                model.predict_proba(plan.imprints[0], knowledge.signatures_at(plan.positions, test.places))
-                if len(plan.positions)
-                else np.zeros((0, n))
+                located.posterior_at(plan.imprints[0], plan.positions, test.places)
                 for plan, test in zip(job.test_plans[m], job.tests)
             ]
             plans.append(plan_outcome(proba, job.names, K, job.sets_per_k, job.seed, job.replicate, job.stop_levels))

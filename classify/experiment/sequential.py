@@ -25,7 +25,7 @@ from classify.experiment.config import ExperimentConfig
 from classify.experiment.controls import shuffled_places
 from classify.experiment.stages import InstanceStage, Measurement, ObjectSet, Runtime, recognition_key, run_jobs
 from classify.experiment.streams import Stream, name_seed, recognition_rng
-from classify.policies import POLICIES, decisions, fit_knowledge, run_episode, stopping_curve
+from classify.policies import POLICIES, Felt, decisions, fit_knowledge, run_episode, stopping_curve
 from classify.recognizers.touches import Recognizer
 
 __all__ = ["PolicyJob", "PolicyOutcome", "policy_job", "run_policies", "policy_recognition", "policy_measurement"]
@@ -118,7 +118,7 @@ def run_policies(
     stop_correct, stop_touches = np.zeros((len(policies), L, n)), np.zeros((len(policies), L, n))
     touched = np.full((len(policies), n, K), -1, np.int64)
     choice_s = np.zeros(len(policies))
-    felt = [knowledge.posterior(test.imprints[0], test.places) for test in tests]
+    felt = [Felt(knowledge, test.imprints[0], test.places) for test in tests]
     for q, name in enumerate(policies):
         seconds = []
         for c, test in enumerate(tests):

@@ -1,13 +1,15 @@
 """Touch by touch: policies that choose each next touch from what the touches so far have felt.
 
 ``knowledge`` (an instance's candidate places, and what touches there feel
-like on each object, fitted on training instances), ``policy`` (the policy
+like on each object, fitted on training instances; ``place_knowledge`` the
+place-aware recognizer's), ``policy`` (the policy
 API, the built-in policies and their registry) and ``episodes`` (a policy
 touching a test instance, and the stopping rule).
 """
 
 from classify.policies.episodes import (
     Episode,
+    Felt,
     available_places,
     decisions,
     run_episode,
@@ -17,24 +19,23 @@ from classify.policies.episodes import (
 from classify.policies.knowledge import (
     LANDMARKS,
     Forecast,
-    PlaceKnowledge,
     Places,
     PlaceSample,
     TouchKnowledge,
     fit_knowledge,
-    fit_place_knowledge,
-    place_keys,
-    place_touches,
     signatures,
 )
+from classify.policies.place_knowledge import PlaceKnowledge, fit_place_knowledge, place_keys, place_touches
 from classify.policies.policy import (
     POLICIES,
+    Forecasts,
     InfoGainPolicy,
     PlanPolicy,
     RandomPolicy,
     TouchPolicy,
     TouchState,
     expected_entropy,
+    hypotheses,
 )
 
 __all__ = [
@@ -55,8 +56,11 @@ __all__ = [
     "InfoGainPolicy",
     "PlanPolicy",
     "POLICIES",
+    "Forecasts",
+    "hypotheses",
     "expected_entropy",
     "Episode",
+    "Felt",
     "available_places",
     "run_episode",
     "touched_belief",

@@ -19,9 +19,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from classify.policies.knowledge import Places, PlaceSample, TouchKnowledge
-from classify.policies.policy import TouchPolicy, TouchState
+from classify.policies.policy import Forecasts, TouchPolicy, TouchState, hypotheses
 
-__all__ = ["Episode", "available_places", "touched_belief", "run_episode", "decisions", "stopping_curve"]
+__all__ = ["Episode", "Felt", "available_places", "touched_belief", "run_episode", "decisions", "stopping_curve"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -37,6 +37,31 @@ class Episode:
     vertex_ids: np.ndarray
     beliefs: np.ndarray
     choice_s: np.ndarray
+
+
+class Felt:
+    """What a touch at each place of an instance gives, ``knowledge.posterior`` of its imprint there, computed
+    when the place is first touched: ``felt[p]`` is (C,) float64.
+
+    Up to ``knowledge.hypotheses`` objects the posteriors of every place are
+    computed at once, in one batch; past it only the touched places', since
+    each costs a registration per shortlisted object.
+    """
+
+    def __init__(self, knowledge, imprints: np.ndarray, places: Places):
+        self.knowledge, self.imprints, self.places = knowledge, imprints, places
+        self._all = None
+        self._one = {}
+        if knowledge.n_classes <= knowledge.hypotheses:
+            self._all = knowledge.posterior(imprints, places)
+
+    def __getitem__(self, p: int) -> np.ndarray:
+        if self._all is not None:
+            return self._all[p]
+        if p not in self._one:
+            at = self.places.positions[[p]]
+            self._one[p] = self.knowledge.posterior_at(self.imprints[[p]], at, self.places)[0]
+        return self._one[p]
 
 
 def available_places(places: Places, touched, min_spacing: float) -> np.ndarray:
@@ -100,9 +125,10 @@ def run_episode(
         The policy's own draws.
     session : int
         Which of the sample's acquisition sessions the touches feel.
-    felt : (P, C) float64, optional
+    felt : (P, C) float64 or :class:`Felt`, optional
         ``knowledge.posterior`` of that session's imprint at every place, when
-        already computed: it does not depend on the policy.
+        already computed (it does not depend on the policy); by default each
+        touched place's, when touched.
 
     Returns
     -------
@@ -111,19 +137,27 @@ def run_episode(
     import time
 
     places = sample.places
-    forecast = knowledge.forecast(places)
+    forecasts = Forecasts(knowledge, places)
+    C = knowledge.n_classes
+    # Objects of equal belief are drawn from a stream of their own, so the policy's draws stay its own.
+    ties = rng.spawn(1)[0] if C > knowledge.hypotheses else None
     if felt is None:
-        felt = knowledge.posterior(
-            sample.imprints[session], places
-        )  # what each place would feel; never seen by the policy
-    belief = np.full(knowledge.n_classes, 1.0 / knowledge.n_classes)
+        felt = Felt(knowledge, sample.imprints[session], places)  # never seen by the policy
+    belief = np.full(C, 1.0 / C)
     touched, beliefs, seconds = [], [], []
     for _ in range(touches):
         available = available_places(places, touched, min_spacing)
         if not available.any():
             break
         state = TouchState(
-            places, tuple(touched), sample.imprints[session, touched], belief, available, forecast, knowledge
+            places,
+            tuple(touched),
+            sample.imprints[session, touched],
+            belief,
+            available,
+            forecasts,
+            knowledge,
+            hypotheses(belief, knowledge.hypotheses, ties),
         )
         started = time.perf_counter()
         p = int(policy.choose(state, rng))
@@ -133,7 +167,6 @@ def run_episode(
         touched.append(p)
         belief = touched_belief(belief, felt[p])
         beliefs.append(belief)
-    C = knowledge.n_classes
     return Episode(
         np.asarray(touched, np.int64),
         places.vertex_ids[touched].astype(np.int64),

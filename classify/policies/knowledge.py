@@ -33,7 +33,7 @@ ball's pool starts anywhere), which is what a touch can tell apart anyway.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -45,12 +45,8 @@ __all__ = [
     "PlaceSample",
     "Forecast",
     "TouchKnowledge",
-    "PlaceKnowledge",
     "signatures",
-    "place_keys",
     "fit_knowledge",
-    "fit_place_knowledge",
-    "place_touches",
 ]
 
 
@@ -140,14 +136,17 @@ def signatures(places: Places) -> np.ndarray:
 class Forecast:
     """What a touch at each of an instance's places would feel like under each hypothesis.
 
-    ``posteriors`` (J, P, S, C): for hypothesis j (the object is class j),
-    place p and training touch s, the calibrated posterior that touch gave;
-    ``weights`` (J, P, S) the weight of each touch (summing to 1 over s, or
-    0 where object j cannot have the place: its rows are then uniform).
+    ``posteriors`` (J, P, S, J): for hypothesis j (the object is class
+    ``classes[j]``), place p and training touch s, the calibrated posterior
+    that touch gave over the hypotheses; ``weights`` (J, P, S) the weight of
+    each touch (summing to 1 over s, or 0 where object j cannot have the
+    place: its rows are then uniform); ``classes`` (J,) int64 the hypotheses,
+    None for every object in order.
     """
 
     posteriors: np.ndarray
     weights: np.ndarray
+    classes: np.ndarray | None = None
     #: ``posteriors * log(posteriors)``: the part of an entropy that does not depend on the belief (derived).
     plogp: np.ndarray = None
 
@@ -202,6 +201,10 @@ class TouchKnowledge:
             return np.zeros((0, self.n_classes))
         return calibrate(posteriors(self.model, describe(imprints, self.features), self.n_classes), self.calibration)
 
+    def posterior_at(self, imprints: np.ndarray, positions, places: Places | None = None) -> np.ndarray:
+        """(k, C) as :meth:`posterior`: where the touches were taken is not used."""
+        return self.posterior(imprints, places)
+
     def match(self, j: int, places: Places) -> np.ndarray:
         """The trained place of object ``j`` each of an instance's places would be if the object were j.
 
@@ -211,22 +214,28 @@ class TouchKnowledge:
 
         return cKDTree(self.signatures[j]).query(signatures(places))[1].astype(np.int64)
 
-    def forecast(self, places: Places) -> Forecast:
-        """The :class:`Forecast` of an instance's candidate places."""
+    #: Hypotheses a forecast holds at most (``classify.policies.policy.hypotheses``).
+    hypotheses = 16
+
+    def forecast(self, places: Places, classes=None) -> Forecast:
+        """The :class:`Forecast` of an instance's candidate places under ``classes`` (default: every object)."""
         C, P = self.n_classes, len(places)
+        J = np.arange(C) if classes is None else np.asarray(classes, np.int64)
         S = max(w.shape[1] for w in self.weights)
-        out = np.full((C, P, S, C), 1.0 / C)
-        weight = np.zeros((C, P, S))
-        for j in range(C):
+        out = np.full((J.size, P, S, J.size), 1.0 / J.size)
+        weight = np.zeros((J.size, P, S))
+        for a, j in enumerate(J):
             place = self.match(j, places)
             mine = place >= 0
             s = self.posteriors[j].shape[1]
-            out[j, mine, :s] = self.posteriors[j][place[mine]]
-            weight[j, mine, :s] = self.weights[j][place[mine]]
-        return Forecast(out, weight)
+            out[a, mine, :s] = (
+                self.posteriors[j][place[mine]] if classes is None else self.posteriors[j][place[mine]][..., J]
+            )
+            weight[a, mine, :s] = self.weights[j][place[mine]]
+        return Forecast(out, weight, None if classes is None else J)
 
 
-def fit_knowledge(training: dict, recognizer) -> TouchKnowledge | PlaceKnowledge:
+def fit_knowledge(training: dict, recognizer):
     """Touch knowledge from training instances' place samples.
 
     Parameters
@@ -251,6 +260,8 @@ def fit_knowledge(training: dict, recognizer) -> TouchKnowledge | PlaceKnowledge
             f"touch knowledge needs training instances (index >= 1) of at least two objects, got {sorted(training)}"
         )
     if recognizer.classifier == "place":
+        from classify.policies.place_knowledge import fit_place_knowledge
+
         return fit_place_knowledge(training, recognizer.params or {})
     keys = sorted(training, key=lambda k: (names.index(k[0]), k[1]))
     X, y, inst, vertex = [], [], [], []
@@ -303,178 +314,3 @@ def fit_knowledge(training: dict, recognizer) -> TouchKnowledge | PlaceKnowledge
         calibration,
         recognizer.features,
     )
-
-
-def place_keys(signatures: np.ndarray) -> np.ndarray:
-    """(k,) int64 keys of points by where they lie: equal signatures (to 1e-7) share a key, so the touches of one
-    place of an object, on any of its instances and from any source, pool into one entry."""
-    import hashlib
-
-    rounded = np.round(np.asarray(signatures, np.float64), 7) + 0.0  # -0.0 and 0.0 alike
-    return np.array(
-        [
-            int.from_bytes(hashlib.blake2b(row.tobytes(), digest_size=8).digest(), "little", signed=True)
-            for row in rounded
-        ],
-        dtype=np.int64,
-    )
-
-
-def place_touches(samples: dict, names: tuple, points=None) -> tuple:
-    """Codebook touches of training instances as the place-aware recognizer takes them.
-
-    Parameters
-    ----------
-    samples : dict (object name, instance index) -> PlaceSample with a codebook
-    names : tuple of str, the classes in order
-    points : dict (object name, instance index) -> a fixed plan's training sample, optional
-        Its ``positions`` (k, 3) and ``codebook`` (k, draws, d): the plan's
-        points, located against the instance's landmarks, instead of the places.
-
-    Returns
-    -------
-    X (N, d), y (N,), signatures (N, LANDMARKS), instances (N,), keys (N,)
-    """
-    from meshsal.points.places import signatures as located
-
-    X, y, sig, inst, keys = [], [], [], [], []
-    for (name, j), sample in sorted(samples.items(), key=lambda kv: (names.index(kv[0][0]), kv[0][1])):
-        if sample.codebook is None:
-            raise ValueError(f"{name}, training instance {j}: no touch codebook (run with the place-aware recognizer)")
-        if points is None:
-            ok = sample.places.touchable
-            where = located(sample.places.positions[ok], sample.landmarks)
-            book = sample.codebook[ok]
-        else:
-            plan = points[name, j]
-            where = located(plan.positions, sample.landmarks)
-            book = plan.codebook
-        draws = book.shape[1]
-        X.append(book.reshape(-1, book.shape[2]))
-        y.append(np.full(book.shape[0] * draws, names.index(name)))
-        sig.append(np.repeat(where, draws, axis=0))
-        inst.append(np.full(book.shape[0] * draws, j))
-        keys.append(np.repeat(place_keys(where), draws))
-    return tuple(np.concatenate(a) for a in (X, y, sig, inst, keys))
-
-
-def _session_touches(samples: dict, names: tuple) -> tuple:
-    """Each training instance's session-0 touches at its touchable places (one device): descriptors, objects,
-    signatures, instances."""
-    from tactile.features import polar_fourier
-
-    X, y, sig, inst = [], [], [], []
-    for (name, j), sample in sorted(samples.items(), key=lambda kv: (names.index(kv[0][0]), kv[0][1])):
-        ok = sample.places.touchable
-        X.append(polar_fourier(sample.imprints[0][ok]))
-        y.append(np.full(ok.sum(), names.index(name)))
-        sig.append(signatures(sample.places)[ok])
-        inst.append(np.full(ok.sum(), j))
-    return tuple(np.concatenate(a) for a in (X, y, sig, inst))
-
-
-@dataclass(frozen=True, eq=False)
-class PlaceKnowledge:
-    """The place-aware recognizer's knowledge: each object's touch codebooks at its places, and the forecast.
-
-    A touch at a place of the test instance is scored, under each object,
-    against the codebook touches of the places with the nearest signatures
-    (``classify.recognizers.place.PlaceAware``); the belief multiplies those
-    tempered likelihoods.  Under the hypothesis "the object is j" the test
-    instance's places are first laid onto j's training places
-    (``meshsal.points.places.landmarks_in``), so that they are located
-    against j's own landmarks even when the instance's tessellation put its
-    landmarks elsewhere; every hypothesis is treated alike, and how well the
-    places fit is never evidence.  The forecast of a place under j is what
-    j's codebook touches at its matched places would make of the belief.
-
-    Attributes
-    ----------
-    names : tuple of str
-    model : classify.recognizers.place.PlaceAware, fitted on the training instances' codebooks
-    table : list of (E_j, S, C) float64, ``model.forecast_table()`` posteriors per object and entry
-    table_weights : list of (E_j, S) float64
-    references : tuple of (P_j, 3) float64, each object's training places (its first training instance's)
-    features : str, always "polar"
-    """
-
-    names: tuple
-    model: object
-    table: list
-    table_weights: list
-    references: tuple
-    features: str = "polar"
-    #: Matched entries a forecast draws on per object and place.
-    forecast_neighbours: int = 2
-    _landmarks: dict = field(default_factory=dict, repr=False)
-
-    @property
-    def n_classes(self) -> int:
-        return len(self.names)
-
-    def landmarks(self, places: Places) -> np.ndarray:
-        """(C, LANDMARKS, 3) each object's landmarks laid onto the instance of ``places`` (computed once per
-        instance)."""
-        from meshsal.points.places import landmarks_in
-
-        key = id(places)
-        found = self._landmarks.get(key)
-        if found is None or found[0] is not places:
-            if len(self._landmarks) > 64:
-                self._landmarks.clear()
-            found = (places, np.stack([landmarks_in(places.positions, ref) for ref in self.references]))
-            self._landmarks[key] = found
-        return found[1]
-
-    def signatures_at(self, positions, places: Places) -> np.ndarray:
-        """(k, C, LANDMARKS) where points of the instance of ``places`` lie on each object."""
-        from meshsal.points.places import signatures as located
-
-        lm = self.landmarks(places)
-        return np.stack([located(positions, lm[j]) for j in range(self.n_classes)], axis=1)
-
-    def posterior(self, imprints: np.ndarray, places: Places) -> np.ndarray:
-        """(k, C) single-touch posteriors of imprints (k, rows, cols) taken at the first k of ``places``."""
-        if len(imprints) == 0:
-            return np.zeros((0, self.n_classes))
-        return self.model.predict_proba(imprints, self.signatures_at(places.positions[: len(imprints)], places))
-
-    def posterior_at(self, imprints: np.ndarray, positions, places: Places) -> np.ndarray:
-        """(k, C) single-touch posteriors of imprints taken at ``positions`` (k, 3) on the instance of ``places``."""
-        if len(imprints) == 0:
-            return np.zeros((0, self.n_classes))
-        return self.model.predict_proba(imprints, self.signatures_at(positions, places))
-
-    def forecast(self, places: Places) -> Forecast:
-        """The :class:`Forecast` of an instance's candidate places, from the codebooks of the matched entries."""
-        C, P = self.n_classes, len(places)
-        G = self.signatures_at(places.positions, places)
-        K = self.forecast_neighbours
-        S = self.table[0].shape[1]
-        out = np.full((C, P, K * S, C), 1.0 / C)
-        weight = np.zeros((C, P, K * S))
-        for j in range(C):
-            idx, w = self.model.match(j, G[:, j])
-            k = min(K, idx.shape[1])
-            idx, w = idx[:, :k], w[:, :k] / w[:, :k].sum(axis=1, keepdims=True)
-            for a in range(k):
-                out[j, :, a * S : (a + 1) * S] = self.table[j][idx[:, a]]
-                weight[j, :, a * S : (a + 1) * S] = w[:, a, None] * self.table_weights[j][idx[:, a]]
-        return Forecast(out, weight)
-
-
-def fit_place_knowledge(training: dict, params: dict | None = None) -> PlaceKnowledge:
-    """:class:`PlaceKnowledge` from training instances' place samples with codebooks (``params`` for the
-    ``place`` recognizer, as ``classify.make`` takes them)."""
-    from classify.recognizers.classifiers import make
-
-    names = tuple(sorted({name for name, _ in training}))
-    X, y, sig, inst, keys = place_touches(training, names)
-    model = make("place", **(params or {}).get("place", {})).fit(
-        X, y, signatures=sig, instances=inst, places=keys, session=_session_touches(training, names)
-    )
-    table, weights = model.forecast_table()
-    references = tuple(
-        training[min((k for k in training if k[0] == name), key=lambda k: k[1])].places.positions for name in names
-    )
-    return PlaceKnowledge(names, model, table, weights, references)

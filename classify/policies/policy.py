@@ -41,6 +41,8 @@ __all__ = [
     "InfoGainPolicy",
     "PlanPolicy",
     "POLICIES",
+    "Forecasts",
+    "hypotheses",
     "expected_entropy",
 ]
 
@@ -64,10 +66,13 @@ class TouchState:
     available : (P,) bool
         Places that may be touched next: touchable, untouched and at least
         the minimum spacing from every touched place.
-    forecast : Forecast
-        ``knowledge.forecast(places)``.
+    forecasts : Forecasts
+        The forecasts of ``places`` (``knowledge.forecast``), made when asked for.
     knowledge : PlaceKnowledge or TouchKnowledge
         Fitted on training instances only.
+    hypotheses : (H,) int64 or None
+        The objects :attr:`forecast` is over: the most probable ones when there
+        are more than ``knowledge.hypotheses`` (:func:`hypotheses`), else None (every object).
     """
 
     places: Places
@@ -75,8 +80,64 @@ class TouchState:
     imprints: np.ndarray
     belief: np.ndarray
     available: np.ndarray
-    forecast: Forecast
+    forecasts: Forecasts
     knowledge: TouchKnowledge
+    hypotheses: np.ndarray | None = None
+
+    @property
+    def forecast(self) -> Forecast:
+        """The forecast of every place under :attr:`hypotheses`."""
+        return self.forecasts.over(self.hypotheses)
+
+
+class Forecasts:
+    """An instance's forecasts under sets of hypotheses, each made once, when first asked for.
+
+    Examples
+    --------
+    >>> class Knows:
+    ...     def forecast(self, places, classes=None):
+    ...         print("made")
+    ...         return classes
+    >>> made = Forecasts(Knows(), None)
+    >>> made.over(None); made.over(None)
+    made
+    """
+
+    def __init__(self, knowledge, places: Places):
+        self.knowledge, self.places = knowledge, places
+        self._made = {}
+
+    def over(self, classes=None) -> Forecast:
+        """``knowledge.forecast(places, classes)``; ``classes`` None for every object."""
+        key = None if classes is None else tuple(int(c) for c in classes)
+        if key not in self._made:
+            if len(self._made) > 8:
+                self._made.clear()
+            self._made[key] = self.knowledge.forecast(self.places, classes)
+        return self._made[key]
+
+
+def hypotheses(belief: np.ndarray, H: int, rng: np.random.Generator | None) -> np.ndarray | None:
+    """The ``H`` most probable objects of ``belief``, in increasing order, or None when there are no more.
+
+    A forecast over every object costs the square of their number per place;
+    over the most probable ``H`` it costs the same for 16 objects or 1,000.
+    Objects of equal belief (all of them before the first touch) are drawn
+    with ``rng``, so a flat belief gives a random sample, not the first names.
+
+    Examples
+    --------
+    >>> hypotheses(np.array([0.1, 0.5, 0.3, 0.1]), 2, None).tolist()
+    [1, 2]
+    >>> print(hypotheses(np.array([0.5, 0.5]), 2, None))
+    None
+    """
+    C = len(belief)
+    if C <= H:
+        return None
+    draws = np.zeros(C) if rng is None else rng.random(C)
+    return np.sort(np.lexsort((draws, -np.asarray(belief)))[:H])
 
 
 class TouchPolicy:
@@ -133,7 +194,8 @@ def expected_entropy(belief: np.ndarray, forecast: Forecast, places: np.ndarray 
 
     Parameters
     ----------
-    belief : (C,) or (B, C) float64, normalized (several beliefs at once)
+    belief : (C,) or (B, C) float64, normalized (several beliefs at once); over the forecast's
+        ``classes`` only (renormalized) when it has them
     forecast : Forecast
     places : (m,) int, optional
         Only these places (default all).
@@ -151,6 +213,9 @@ def expected_entropy(belief: np.ndarray, forecast: Forecast, places: np.ndarray 
     (True, 0.6931)
     """
     b = np.atleast_2d(np.asarray(belief, dtype=np.float64))  # (B, C)
+    if forecast.classes is not None:
+        b = b[:, forecast.classes]
+        b = b / b.sum(axis=1, keepdims=True)
     P, Q, W = forecast.posteriors, forecast.plogp, forecast.weights
     if places is not None:
         P, Q, W = P[:, places], Q[:, places], W[:, places]
@@ -169,7 +234,7 @@ class InfoGainPolicy(TouchPolicy):
     """Greedy expected information gain: the available place whose touch is expected to leave the least entropy.
 
     Ties go to the earlier place.  The forecast is the per-object touch models
-    of :class:`~classify.policies.knowledge.PlaceKnowledge` (the codebooks of
+    of :class:`~classify.policies.place_knowledge.PlaceKnowledge` (the codebooks of
     the matched places) or :class:`~classify.policies.knowledge.TouchKnowledge`,
     scored with the single-touch posteriors the belief multiplies.
     """

@@ -148,6 +148,11 @@ class KNN(ClassifierMixin, BaseEstimator):
         k is used).
     random_state : int
         Seeds the inner fold shuffle and every tie break.
+    cv_rows : int
+        Training rows the inner folds score at most, and whose nearest
+        other row sets ``scale_``: those of least content hash, a sample
+        that ignores the rows' order.  The search then costs ``cv_rows``
+        times the training set, not its square; smaller sets are scored whole.
 
     Attributes
     ----------
@@ -193,10 +198,11 @@ class KNN(ClassifierMixin, BaseEstimator):
     array([1])
     """
 
-    def __init__(self, ks=(1, 3, 5, 7, 9), cv=3, random_state=0):
+    def __init__(self, ks=(1, 3, 5, 7, 9), cv=3, random_state=0, cv_rows=20000):
         self.ks = ks
         self.cv = cv
         self.random_state = random_state
+        self.cv_rows = cv_rows
 
     def fit(self, X, y, groups=None):
         """Choose k on inner folds of (X, y) grouped by ``groups`` (if given), then fit on all of it."""
@@ -221,10 +227,12 @@ class KNN(ClassifierMixin, BaseEstimator):
         n_classes = len(self.classes_)
         folds = _inner_folds(codes, groups, self.cv)
         splits = list(_split(codes, groups, folds, self.random_state)) if folds >= 2 and n_classes >= 2 else []
-        hits, self.scale_ = _scan_training_set(X, codes, keys, splits, ks, n_classes)
+        scored = np.zeros(len(X), bool)
+        scored[np.argsort(keys, kind="stable")[: int(self.cv_rows)]] = True
+        hits, self.scale_ = _scan_training_set(X, codes, keys, splits, ks, n_classes, np.flatnonzero(scored))
         self.cv_scores_ = {}
         if splits:
-            self.cv_scores_ = {k: hits[k] / len(X) for k in ks}
+            self.cv_scores_ = {k: hits[k] / scored.sum() for k in ks}
             best = max(self.cv_scores_.values())
             tied = [k for k in ks if self.cv_scores_[k] == best]
             self.k_ = int(tied[rng.integers(len(tied))])
@@ -243,9 +251,15 @@ class KNN(ClassifierMixin, BaseEstimator):
         X = as_matrix(X)
         if X.shape[1] != self.n_features_in_:
             raise ValueError(f"KNN: X has {X.shape[1]} features, the model was fitted with {self.n_features_in_}")
-        d2 = _sq_distances(X, self.X_)
-        order = _ranked(d2, self.tiebreak_, self.k_)
-        return _posterior(self.codes_[order], _class_distances(d2, self.codes_, len(self.classes_)), self.scale_)
+        out = np.empty((len(X), len(self.classes_)))
+        exact = _on_grid(X) and _on_grid(self.X_)
+        for start in range(0, len(X), _BLOCK):  # a block of distances at a time: memory stays flat
+            block = X[start : start + _BLOCK]
+            d2 = _sq_distances(block, self.X_, exact)
+            order = _ranked(d2, self.tiebreak_, self.k_)
+            dist = _class_distances(d2, self.codes_, len(self.classes_))
+            out[start : start + _BLOCK] = _posterior(self.codes_[order], dist, self.scale_)
+        return out
 
     def predict(self, X):
         return self.classes_[np.argmax(self.predict_proba(X), axis=1)]
@@ -294,14 +308,14 @@ def _sq_distances(A, B, exact: bool | None = None) -> np.ndarray:
     return out / _LEVELS**2 if exact else np.round(out, 9)
 
 
-def _scan_training_set(X, codes, keys, splits, ks, n_classes) -> tuple[dict, float]:
-    """The inner folds' hits per k and the distance scale, from one pass over the training set's distances.
+def _scan_training_set(X, codes, keys, splits, ks, n_classes, scored) -> tuple[dict, float]:
+    """The inner folds' hits per k and the distance scale, from one pass over the scored rows' distances.
 
-    A block of rows at a time, their distances to every training row serve
-    both: each inner fold reads its test rows' distances to its training
-    rows, and the scale the distance to the nearest other row.  Rows are
-    independent in every step, so the hits are those of fold-by-fold
-    distances.
+    A block of the ``scored`` rows at a time, their distances to every
+    training row serve both: each inner fold reads its test rows' distances
+    to its training rows, and the scale the distance to the nearest other
+    row.  Rows are independent in every step, so the hits are those of
+    fold-by-fold distances.
 
     Returns
     -------
@@ -313,14 +327,14 @@ def _scan_training_set(X, codes, keys, splits, ks, n_classes) -> tuple[dict, flo
     fold = np.full(n, -1)
     for f, (_, test) in enumerate(splits):
         fold[test] = f
-    nearest = np.empty(n)
+    nearest = np.empty(len(scored))
     exact = _on_grid(X)
-    for start in range(0, n, _BLOCK):
-        stop = min(start + _BLOCK, n)
-        d2 = _sq_distances(X[start:stop], X, exact)
+    for start in range(0, len(scored), _BLOCK):
+        block = scored[start : start + _BLOCK]
+        d2 = _sq_distances(X[block], X, exact)
         for f, (train, _) in enumerate(splits):
             usable = [k for k in ks if k <= len(train)]
-            rows = np.flatnonzero(fold[start:stop] == f)
+            rows = np.flatnonzero(fold[block] == f)
             if not usable or rows.size == 0:
                 continue
             sub = d2[np.ix_(rows, train)]
@@ -329,9 +343,9 @@ def _scan_training_set(X, codes, keys, splits, ks, n_classes) -> tuple[dict, flo
             for k in usable:
                 # The argmax does not depend on the scale, so the fold's own is not needed.
                 proba = _posterior(codes[train][order[:, :k]], dist, 1.0)
-                hits[k] += int(np.sum(np.argmax(proba, axis=1) == codes[start + rows]))
-        d2[np.arange(stop - start), np.arange(start, stop)] = np.inf
-        nearest[start:stop] = d2.min(axis=1)
+                hits[k] += int(np.sum(np.argmax(proba, axis=1) == codes[block[rows]]))
+        d2[np.arange(len(block)), block] = np.inf
+        nearest[start : start + len(block)] = d2.min(axis=1)
     if n < 2:
         return hits, 1.0
     scale = float(np.median(np.sqrt(nearest)))

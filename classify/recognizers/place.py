@@ -46,20 +46,16 @@ import numpy as np
 from sklearn.base import BaseEstimator, ClassifierMixin
 from sklearn.utils.validation import check_is_fitted
 
+from classify.recognizers.banks import Bank, entries, lse, sample_d2, spacing, within_place_whitening
+from classify.recognizers.shortlist import FreeStack, SparseRows, nearest_classes
+
 __all__ = ["PlaceAware", "describe_touches"]
 
 _NEG = -np.inf
 #: Temperatures tried by default: 0.25 to 64, evenly on a log scale.
 _TEMPERATURES = tuple(float(t) for t in np.round(np.geomspace(0.25, 64.0, 17), 4))
-
-
-def _lse(a: np.ndarray, axis: int, keepdims: bool = False) -> np.ndarray:
-    """log(sum(exp(a))) along ``axis``, -inf where every term is -inf (a lean ``scipy.special.logsumexp``)."""
-    top = np.max(a, axis=axis, keepdims=True)
-    top = np.where(np.isfinite(top), top, 0.0)
-    with np.errstate(divide="ignore"):
-        out = np.log(np.exp(a - top).sum(axis=axis, keepdims=True)) + top
-    return out if keepdims else np.squeeze(out, axis=axis)
+#: Tempered log-likelihoods held at once while fitting the temperature.
+_TEMPERED = 1 << 24
 
 
 def describe_touches(X) -> np.ndarray:
@@ -72,49 +68,6 @@ def describe_touches(X) -> np.ndarray:
     if X.ndim != 2:
         raise ValueError(f"touches must be imprints (N, rows, cols) or descriptors (N, d), got shape {X.shape}")
     return X.astype(np.float64)
-
-
-class _Bank:
-    """One object's entries: signatures (E, L), standardized samples (E, S, d), each sample's instance (E, S; -1
-    pads), and a place-free subsample (F, d) with its instances (F,)."""
-
-    def __init__(self, keys, signatures, samples, instances, free, free_instances, match_width):
-        from scipy.spatial import cKDTree
-
-        # Distances to an entry's samples are taken in float32: a fraction of the memory traffic, and far
-        # finer than the kernel's width.
-        self.keys, self.signatures, self.instances = keys, signatures, instances
-        self.samples = np.ascontiguousarray(samples, np.float32)
-        self.free, self.free_instances, self.match_width = free, free_instances, match_width
-        self.tree = cKDTree(signatures)
-        self.sq = np.einsum("esd,esd->es", self.samples, self.samples)
-        self.free_sq = np.einsum("fd,fd->f", free, free)
-
-
-def _entries(keys, Z, signatures, instances):
-    """Group one object's touches by place key: sorted keys, (E, L) signatures, (E, S, d) samples, (E, S)
-    instances (-1 pads)."""
-    order = np.lexsort((instances, keys))
-    keys, Z, signatures, instances = keys[order], Z[order], signatures[order], instances[order]
-    unique, start, count = np.unique(keys, return_index=True, return_counts=True)
-    S = int(count.max())
-    samples = np.zeros((unique.size, S, Z.shape[1]))
-    inst = np.full((unique.size, S), -1, np.int64)
-    for e, (a, c) in enumerate(zip(start, count)):
-        samples[e, :c] = Z[a : a + c]
-        inst[e, :c] = instances[a : a + c]
-    return unique, signatures[start], samples, inst
-
-
-def _spacing(signatures) -> float:
-    """Median distance from an entry's signature to its nearest other entry's."""
-    from scipy.spatial import cKDTree
-
-    if len(signatures) < 2:
-        return 1.0
-    d = cKDTree(signatures).query(signatures, k=2)[0][:, 1]
-    d = d[d > 0]
-    return float(np.median(d)) if d.size else 1.0
 
 
 class PlaceAware(ClassifierMixin, BaseEstimator):
@@ -146,6 +99,14 @@ class PlaceAware(ClassifierMixin, BaseEstimator):
     whiten : bool
         Whiten the descriptors by the pooled within-place covariance (shrunk
         a tenth towards its diagonal) instead of standardizing them only.
+    shortlist : int
+        Objects a touch is scored under in full: those whose place-free
+        samples come nearest it (``classify.recognizers.shortlist``); every
+        other object keeps a lower bound of its likelihood.  With no more
+        objects than this, every object is scored in full.
+    fit_objects : int
+        Objects whose held-out instances score the fit's grid (evenly spread
+        over the objects when there are more).
     random_state : int
         Seeds the touch sets of the fit.
 
@@ -182,6 +143,8 @@ class PlaceAware(ClassifierMixin, BaseEstimator):
         fit_sets=50,
         fit_places=100,
         whiten=True,
+        shortlist=16,
+        fit_objects=64,
         random_state=0,
     ):
         self.bandwidths = bandwidths
@@ -194,6 +157,8 @@ class PlaceAware(ClassifierMixin, BaseEstimator):
         self.fit_sets = fit_sets
         self.fit_places = fit_places
         self.whiten = whiten
+        self.shortlist = shortlist
+        self.fit_objects = fit_objects
         self.random_state = random_state
 
     # -- fitting ---------------------------------------------------------------------------------
@@ -240,17 +205,18 @@ class PlaceAware(ClassifierMixin, BaseEstimator):
         self.scale_ = np.maximum(Z0.std(axis=0), 1e-9 * max(float(Z0.std()), 1e-300))
         self.whitening_ = np.eye(Z0.shape[1])
         if self.whiten:
-            self.whitening_ = self._within_place_whitening((Z0 - self.mean_) / self.scale_, y, keys)
+            self.whitening_ = within_place_whitening((Z0 - self.mean_) / self.scale_, y, keys)
         Z = self._standardized(Z0)
         self.banks_ = []
         for c in self.classes_:
             mine = y == c
-            k, s, samples, sample_inst = _entries(keys[mine], Z[mine], sig[mine], inst[mine])
+            k, s, samples, sample_inst = entries(keys[mine], Z[mine], sig[mine], inst[mine])
             pick = np.unique(np.linspace(0, mine.sum() - 1, min(self.free_samples, mine.sum())).astype(np.int64))
             order = np.lexsort((inst[mine], keys[mine]))[pick]
             self.banks_.append(
-                _Bank(k, s, samples, sample_inst, Z[mine][order], inst[mine][order], self.match_width * _spacing(s))
+                Bank(k, s, samples, sample_inst, Z[mine][order], inst[mine][order], self.match_width * spacing(s))
             )
+        self.free_ = FreeStack.of([b.free for b in self.banks_], [b.free_instances for b in self.banks_])
         if session is None:
             first = np.unique(np.c_[y, inst, keys], axis=0, return_index=True)[1]
             session = (Z0[first], y[first], sig[first], inst[first])
@@ -260,29 +226,18 @@ class PlaceAware(ClassifierMixin, BaseEstimator):
     def _standardized(self, D: np.ndarray) -> np.ndarray:
         return ((D - self.mean_) / self.scale_) @ self.whitening_
 
-    @staticmethod
-    def _within_place_whitening(Z, y, keys) -> np.ndarray:
-        """(d, d) map that makes the touches of one place spread alike in every direction: the inverse square root
-        of the pooled covariance of the touches about their place's mean, shrunk towards its diagonal."""
-        _, group = np.unique(np.c_[y, keys], axis=0, return_inverse=True)
-        group = group.reshape(-1)
-        means = np.zeros((group.max() + 1, Z.shape[1]))
-        np.add.at(means, group, Z)
-        means /= np.bincount(group)[:, None]
-        R = Z - means[group]
-        W = R.T @ R / max(len(R) - group.max() - 1, 1)
-        W = 0.9 * W + 0.1 * np.diag(np.diag(W)) + 1e-6 * np.trace(W) / len(W) * np.eye(len(W))
-        vals, vecs = np.linalg.eigh(W)
-        return vecs @ np.diag(1.0 / np.sqrt(vals)) @ vecs.T
-
     def _choose(self, session):
         Xs, ys, sigs, insts = session
         Zs = self._standardized(describe_touches(Xs))
         ys = np.searchsorted(self.classes_, np.asarray(ys, np.int64))
         sigs, insts = np.asarray(sigs, np.float64), np.asarray(insts, np.int64)
         # At most fit_places touches of each held-out instance, spread over its places, score the grid.
+        C = len(self.banks_)
+        scored = np.unique(np.linspace(0, C - 1, min(C, self.fit_objects)).round().astype(np.int64))
         keep = []
         for c, t in sorted(set(zip(ys.tolist(), insts.tolist()))):
+            if c not in scored:
+                continue
             rows = np.flatnonzero((ys == c) & (insts == t))
             keep.append(rows[np.unique(np.linspace(0, rows.size - 1, min(rows.size, self.fit_places)).astype(int))])
         keep = np.sort(np.concatenate(keep))
@@ -291,14 +246,17 @@ class PlaceAware(ClassifierMixin, BaseEstimator):
         near = []
         for c, bank in enumerate(self.banks_):
             rows = np.flatnonzero(ys == c)
+            if rows.size == 0:
+                continue
             idx, _ = self._match(bank, sigs[rows])
-            d2 = self._sample_d2(bank, Zs[rows], idx[:, :1], insts[rows])
+            d2 = sample_d2(bank, Zs[rows], idx[:, :1], insts[rows])
             near.append(np.sqrt(d2[np.isfinite(d2)]))
         near = np.concatenate(near)
         unit = float(np.median(near)) if near.size else 1.0
         widths = unit * np.asarray(self.bandwidths, np.float64)
-        # (widths, N, C) place and place-free log-likelihoods of every held-out touch.
-        place, free = self._log_terms(Zs, sigs, insts, widths)
+        # (widths, N, C) place and place-free log-likelihoods of every held-out touch; one width at a time past
+        # the shortlist, where N x C is large.
+        every = self._log_terms(Zs, sigs, insts, widths) if C <= self.shortlist else None
         rng = np.random.default_rng(self.random_state)
         groups = [np.flatnonzero((ys == c) & (insts == t)) for c, t in sorted(set(zip(ys.tolist(), insts.tolist())))]
         sets = [
@@ -310,8 +268,10 @@ class PlaceAware(ClassifierMixin, BaseEstimator):
         temps = np.asarray(self.temperatures, np.float64)
         best = (np.inf, None)
         for a, h in enumerate(widths):
+            place, free = (every[0][a], every[1][a]) if every is not None else self._log_terms(Zs, sigs, insts, [h])[:2]
+            place, free = place.reshape(len(Zs), C), free.reshape(len(Zs), C)
             for w in self.mixtures:
-                ll = np.logaddexp(np.log1p(-w) + place[a], np.log(w) + free[a])
+                ll = np.logaddexp(np.log1p(-w) + place, np.log(w) + free)
                 loss = np.zeros(temps.size)
                 for k in self.fit_touches:
                     chosen = [(rows, truth) for kk, rows, truth in sets if kk == k]
@@ -319,9 +279,11 @@ class PlaceAware(ClassifierMixin, BaseEstimator):
                         continue
                     total = np.concatenate([ll[rows].sum(axis=1) for rows, _ in chosen])  # (m, C)
                     truth = np.concatenate([np.full(len(rows), t) for rows, t in chosen])
-                    scaled = total[None] / temps[:, None, None]
-                    nll = _lse(scaled, axis=2) - scaled[:, np.arange(len(truth)), truth]
-                    loss += nll.mean(axis=1) / len(self.fit_touches)
+                    step = max(1, _TEMPERED // total.size)
+                    for i in range(0, temps.size, step):
+                        scaled = total[None] / temps[i : i + step, None, None]
+                        nll = lse(scaled, axis=2) - scaled[:, np.arange(len(truth)), truth]
+                        loss[i : i + step] += nll.mean(axis=1) / len(self.fit_touches)
                 t = int(np.argmin(loss))
                 if loss[t] < best[0] - 1e-12:
                     best = (float(loss[t]), (float(h), float(w), float(temps[t])))
@@ -330,38 +292,44 @@ class PlaceAware(ClassifierMixin, BaseEstimator):
 
     # -- the likelihood --------------------------------------------------------------------------
 
-    def _match(self, bank: _Bank, G: np.ndarray):
+    def _match(self, bank: Bank, G: np.ndarray):
         """(n, K) entry indices and log weights (summing to one) of each place under one hypothesis."""
         K = min(self.neighbours, len(bank.keys))
         dist, idx = bank.tree.query(G, k=K)
         dist, idx = dist.reshape(len(G), K), idx.reshape(len(G), K)
         logw = -0.5 * (dist**2 - dist[:, :1] ** 2) / bank.match_width**2
-        return idx, logw - _lse(logw, axis=1, keepdims=True)
-
-    @staticmethod
-    def _sample_d2(bank: _Bank, Z, idx, exclude):
-        """(n, K, S) squared distances from each touch to its matched entries' samples; inf for padding and for
-        samples of the touch's excluded instance."""
-        Y = bank.samples[idx]  # (n, K, S, d)
-        z = Z.astype(np.float32)
-        d2 = np.einsum("nd,nd->n", z, z)[:, None, None] + bank.sq[idx] - 2.0 * np.einsum("nd,nksd->nks", z, Y)
-        d2 = d2.astype(np.float64)
-        inst = bank.instances[idx]
-        bad = (inst < 0) | (inst == exclude[:, None, None])
-        return np.where(bad, np.inf, np.maximum(d2, 0.0))
+        return idx, logw - lse(logw, axis=1, keepdims=True)
 
     def _log_terms(self, Z, G, exclude, widths, chunk: int = 1024):
-        """Place and place-free log-likelihood terms, each (len(widths), n, C), of touches Z at places G."""
+        """Place and place-free log-likelihood terms, each (len(widths), n, C), of touches Z at places G.
+
+        ``G`` is (n, L), the same place under every object, (n, C, L), or a
+        function ``G(c, rows)`` giving rows' places under object c as (len(rows), L).
+        Past the shortlist an object off a touch's shortlist has no place term
+        (-inf) and the place-free term's nearest kernel alone: lower bounds.
+        The third value is the (n, C) bool shortlist then, else None.
+        """
         n, C = len(Z), len(self.banks_)
         place = np.full((len(widths), n, C), _NEG)
         free = np.full((len(widths), n, C), _NEG)
         inv = 0.5 / np.asarray(widths, np.float64) ** 2
+        member = None
+        if C > self.shortlist:
+            d2, count = self.free_.nearest(Z, exclude)
+            member = np.zeros((n, C), bool)
+            np.put_along_axis(member, nearest_classes(d2, self.shortlist), True, axis=1)
+            with np.errstate(invalid="ignore"):
+                for b, s in enumerate(inv):
+                    free[b] = np.where(count > 0, -s * d2 - np.log(np.maximum(count, 1)), _NEG)
         for a in range(0, n, chunk):
-            z, ex = Z[a : a + chunk], exclude[a : a + chunk]
-            rows = slice(a, a + len(z))
-            for c, bank in enumerate(self.banks_):
-                idx, logw = self._match(bank, G[rows] if G.ndim == 2 else G[rows, c])
-                d2 = self._sample_d2(bank, z, idx, ex)  # (m, K, S), inf where left out
+            span = np.arange(a, min(a + chunk, n))
+            for c in range(C) if member is None else np.flatnonzero(member[span].any(axis=0)):
+                bank = self.banks_[c]
+                rows = span if member is None else span[member[span, c]]
+                z, ex = Z[rows], exclude[rows]
+                g = G(c, rows) if callable(G) else (G[rows] if G.ndim == 2 else G[rows, c])
+                idx, logw = self._match(bank, g)
+                d2 = sample_d2(bank, z, idx, ex)  # (m, K, S), inf where left out
                 fd2 = np.maximum(np.einsum("md,md->m", z, z)[:, None] + bank.free_sq[None] - 2.0 * z @ bank.free.T, 0.0)
                 fd2[bank.free_instances[None, :] == ex[:, None]] = np.inf
                 # Log-means of kernels over each entry's samples: the nearest sample sets the scale of the sum.
@@ -382,7 +350,7 @@ class PlaceAware(ClassifierMixin, BaseEstimator):
                         free[b, rows, c] = np.log(np.exp(-s * frel).sum(axis=1)) - s * fnear[:, 0] - flogcount
         # A touch whose every matched entry is left out leans on the place-free term alone.
         place = np.where(np.isnan(place), _NEG, place)
-        return place, free
+        return place, free, member
 
     def log_likelihood(self, X, signatures, exclude=None) -> np.ndarray:
         """Untempered log-likelihood of each touch under each object, (n, C) float64 (up to one constant).
@@ -390,17 +358,20 @@ class PlaceAware(ClassifierMixin, BaseEstimator):
         Parameters
         ----------
         X : (n, rows, cols) imprints or (n, d) descriptors
-        signatures : (n, L) where each touch's place lies on the touched instance, or (n, C, L) where it lies
-            under each object's hypothesis
+        signatures : (n, L) where each touch's place lies on the touched instance, (n, C, L) where it lies
+            under each object's hypothesis, or a function ``(c, rows) -> (len(rows), L)`` of the same, called
+            only for the objects on a touch's shortlist
         exclude : (n,) int, optional
             A training instance whose touches each query leaves out (-1: none).
         """
         check_is_fitted(self, "banks_")
         Z = self._standardized(describe_touches(X))
-        G = np.asarray(signatures, np.float64)
-        G = G.reshape(len(Z), -1) if G.ndim <= 2 else G
+        G = signatures
+        if not callable(G):
+            G = np.asarray(G, np.float64)
+            G = G.reshape(len(Z), -1) if G.ndim <= 2 else G
         ex = np.full(len(Z), -1, np.int64) if exclude is None else np.asarray(exclude, np.int64)
-        place, free = self._log_terms(Z, G, ex, [self.bandwidth_])
+        place, free, _ = self._log_terms(Z, G, ex, [self.bandwidth_])
         w = self.mixture_
         return np.logaddexp(np.log1p(-w) + place[0], np.log(w) + free[0])
 
@@ -410,7 +381,7 @@ class PlaceAware(ClassifierMixin, BaseEstimator):
         Their product over touches, normalized, is the belief after those touches.
         """
         ll = self.log_likelihood(X, signatures) / self.temperature_
-        return np.exp(ll - _lse(ll, axis=1, keepdims=True))
+        return np.exp(ll - lse(ll, axis=1, keepdims=True))
 
     def predict(self, X, signatures) -> np.ndarray:
         """(n,) the most likely object of each single touch."""
@@ -443,27 +414,30 @@ class PlaceAware(ClassifierMixin, BaseEstimator):
             all_sig = np.r_[old_sig, sig[mine]]
             all_Z = np.r_[bank.samples[old], Z[mine]]
             all_inst = np.r_[bank.instances[old], inst[mine]]
-            k, s, samples, sample_inst = _entries(all_keys, all_Z, all_sig, all_inst)
-            out.banks_.append(_Bank(k, s, samples, sample_inst, bank.free, bank.free_instances, bank.match_width))
+            k, s, samples, sample_inst = entries(all_keys, all_Z, all_sig, all_inst)
+            out.banks_.append(Bank(k, s, samples, sample_inst, bank.free, bank.free_instances, bank.match_width))
         return out
 
-    def forecast_table(self, samples: int = 8) -> list:
-        """What a touch at each entry of each object would make of the belief: per object, (E, samples, C).
+    def forecast_table(self, samples: int = 8) -> tuple[list, list]:
+        """What a touch at each entry of each object would make of the belief: per object, (E, samples) rows.
 
         For object j's entry e, up to ``samples`` of its training touches
         (spread over its instances), each scored under every object with its
         own instance left out, tempered and normalized: the single-touch
         posterior it would give.  Rows past an entry's touches are uniform
-        (their weight, in the second list, is 0).
+        (their weight, in the second list, is 0).  Each row keeps its
+        shortlisted objects (every object, in order, up to ``shortlist``
+        objects) and one value for the others.
 
         Returns
         -------
-        posteriors : list of (E_j, samples, C) float64
+        posteriors : list of classify.recognizers.shortlist.SparseRows, (E_j, samples, T) each
         weights : list of (E_j, samples) float64, summing to 1 per entry
         """
         check_is_fitted(self, "banks_")
         posteriors, weights = [], []
         C = len(self.banks_)
+        T = min(C, self.shortlist)
         for bank in self.banks_:
             E, S = bank.instances.shape
             valid = bank.instances >= 0
@@ -479,13 +453,22 @@ class PlaceAware(ClassifierMixin, BaseEstimator):
             Z = bank.samples[rows_e, take[rows_e, rows_s]]
             G = bank.signatures[rows_e]
             ex = bank.instances[rows_e, take[rows_e, rows_s]]
-            place, free = self._log_terms(Z, G, ex, [self.bandwidth_])
+            place, free, member = self._log_terms(Z, G, ex, [self.bandwidth_])
             w = self.mixture_
             ll = np.logaddexp(np.log1p(-w) + place[0], np.log(w) + free[0]) / self.temperature_
-            post = np.full((E, samples, C), 1.0 / C)
-            post[rows_e, rows_s] = np.exp(ll - _lse(ll, axis=1, keepdims=True))
+            post = np.exp(ll - lse(ll, axis=1, keepdims=True))
+            values = np.full((E, samples, T), 1.0 / C)
+            classes = np.tile(np.arange(T), (E, samples, 1))
+            rest = np.full((E, samples), 1.0 / C)
+            if member is None:
+                values[rows_e, rows_s] = post
+            else:
+                shortlisted = np.nonzero(member)[1].reshape(len(post), T)
+                values[rows_e, rows_s] = np.take_along_axis(post, shortlisted, axis=1)
+                classes[rows_e, rows_s] = shortlisted
+                rest[rows_e, rows_s] = np.maximum(1.0 - values[rows_e, rows_s].sum(axis=1), 0.0) / (C - T)
             weight = np.where(used, 1.0 / np.maximum(used.sum(axis=1, keepdims=True), 1), 0.0)
-            posteriors.append(post)
+            posteriors.append(SparseRows(values, classes, rest, C))
             weights.append(weight)
         return posteriors, weights
 

@@ -92,14 +92,31 @@ def one_thread():
         cv2.setNumThreads(before)
 
 
+def _die_with_parent() -> None:
+    """Have the kernel end this process when its parent ends (Linux), so that a run stopped by a signal
+    leaves no worker computing for nobody; elsewhere, nothing."""
+    import ctypes
+    import os
+    import signal
+    import sys
+
+    if sys.platform.startswith("linux"):
+        PR_SET_PDEATHSIG = 1
+        ctypes.CDLL(None, use_errno=True).prctl(PR_SET_PDEATHSIG, int(signal.SIGTERM), 0, 0, 0)
+        parent = multiprocessing.parent_process()
+        if parent is not None and os.getppid() != parent.pid:  # the parent ended before the request
+            os._exit(1)
+
+
 def _start_worker(preload=()):
     """Worker initializer: one BLAS, OpenMP and OpenCV thread per worker process, for its whole life; ``preload``
-    imported."""
+    imported; ended with its parent."""
     import importlib
 
     import cv2
     from threadpoolctl import threadpool_limits
 
+    _die_with_parent()
     threadpool_limits(1)
     cv2.setNumThreads(1)
     for name in preload:

@@ -1,0 +1,208 @@
+"""The place-aware recognizer's knowledge: each object's touch codebooks at its places, and the forecast.
+
+A training instance's codebooks (``tactile.touch_codebook``) become the
+banks of ``classify.recognizers.place.PlaceAware`` (:func:`place_touches`,
+pooled by :func:`place_keys`); :class:`PlaceKnowledge` locates a test
+instance's places on each object (by registration, when first needed) and
+forecasts what a touch there would make of the belief.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from classify.policies.knowledge import Forecast, Places, signatures
+
+__all__ = ["PlaceKnowledge", "fit_place_knowledge", "place_keys", "place_touches"]
+
+
+def place_keys(signatures: np.ndarray) -> np.ndarray:
+    """(k,) int64 keys of points by where they lie: equal signatures (to 1e-7) share a key, so the touches of one
+    place of an object, on any of its instances and from any source, pool into one entry."""
+    import hashlib
+
+    rounded = np.round(np.asarray(signatures, np.float64), 7) + 0.0  # -0.0 and 0.0 alike
+    return np.array(
+        [
+            int.from_bytes(hashlib.blake2b(row.tobytes(), digest_size=8).digest(), "little", signed=True)
+            for row in rounded
+        ],
+        dtype=np.int64,
+    )
+
+
+def place_touches(samples: dict, names: tuple, points=None) -> tuple:
+    """Codebook touches of training instances as the place-aware recognizer takes them.
+
+    Parameters
+    ----------
+    samples : dict (object name, instance index) -> PlaceSample with a codebook
+    names : tuple of str, the classes in order
+    points : dict (object name, instance index) -> a fixed plan's training sample, optional
+        Its ``positions`` (k, 3) and ``codebook`` (k, draws, d): the plan's
+        points, located against the instance's landmarks, instead of the places.
+
+    Returns
+    -------
+    X (N, d), y (N,), signatures (N, LANDMARKS), instances (N,), keys (N,)
+    """
+    from meshsal.points.places import signatures as located
+
+    X, y, sig, inst, keys = [], [], [], [], []
+    for (name, j), sample in sorted(samples.items(), key=lambda kv: (names.index(kv[0][0]), kv[0][1])):
+        if sample.codebook is None:
+            raise ValueError(f"{name}, training instance {j}: no touch codebook (run with the place-aware recognizer)")
+        if points is None:
+            ok = sample.places.touchable
+            where = located(sample.places.positions[ok], sample.landmarks)
+            book = sample.codebook[ok]
+        else:
+            plan = points[name, j]
+            where = located(plan.positions, sample.landmarks)
+            book = plan.codebook
+        draws = book.shape[1]
+        X.append(book.reshape(-1, book.shape[2]))
+        y.append(np.full(book.shape[0] * draws, names.index(name)))
+        sig.append(np.repeat(where, draws, axis=0))
+        inst.append(np.full(book.shape[0] * draws, j))
+        keys.append(np.repeat(place_keys(where), draws))
+    return tuple(np.concatenate(a) for a in (X, y, sig, inst, keys))
+
+
+def _session_touches(samples: dict, names: tuple) -> tuple:
+    """Each training instance's session-0 touches at its touchable places (one device): descriptors, objects,
+    signatures, instances."""
+    from tactile.features import polar_fourier
+
+    X, y, sig, inst = [], [], [], []
+    for (name, j), sample in sorted(samples.items(), key=lambda kv: (names.index(kv[0][0]), kv[0][1])):
+        ok = sample.places.touchable
+        X.append(polar_fourier(sample.imprints[0][ok]))
+        y.append(np.full(ok.sum(), names.index(name)))
+        sig.append(signatures(sample.places)[ok])
+        inst.append(np.full(ok.sum(), j))
+    return tuple(np.concatenate(a) for a in (X, y, sig, inst))
+
+
+@dataclass(frozen=True, eq=False)
+class PlaceKnowledge:
+    """The place-aware recognizer's knowledge: each object's touch codebooks at its places, and the forecast.
+
+    A touch at a place of the test instance is scored, under each object,
+    against the codebook touches of the places with the nearest signatures
+    (``classify.recognizers.place.PlaceAware``); the belief multiplies those
+    tempered likelihoods.  Under the hypothesis "the object is j" the test
+    instance's places are first laid onto j's training places
+    (``meshsal.points.places.landmarks_in``), so that they are located
+    against j's own landmarks even when the instance's tessellation put its
+    landmarks elsewhere; every hypothesis is treated alike, and how well the
+    places fit is never evidence.  The forecast of a place under j is what
+    j's codebook touches at its matched places would make of the belief.
+
+    Attributes
+    ----------
+    names : tuple of str
+    model : classify.recognizers.place.PlaceAware, fitted on the training instances' codebooks
+    table : list of classify.recognizers.shortlist.SparseRows (E_j, S), ``model.forecast_table()`` posteriors
+    table_weights : list of (E_j, S) float64
+    references : tuple of (P_j, 3) float64, each object's training places (its first training instance's)
+    features : str, always "polar"
+    """
+
+    names: tuple
+    model: object
+    table: list
+    table_weights: list
+    references: tuple
+    features: str = "polar"
+    #: Matched entries a forecast draws on per object and place.
+    forecast_neighbours: int = 2
+    _landmarks: dict = field(default_factory=dict, repr=False)
+
+    @property
+    def n_classes(self) -> int:
+        return len(self.names)
+
+    @property
+    def hypotheses(self) -> int:
+        """Hypotheses a forecast holds at most: the recognizer's shortlist."""
+        return int(self.model.shortlist)
+
+    def landmarks(self, places: Places, c: int) -> np.ndarray:
+        """(LANDMARKS, 3) object ``c``'s landmarks laid onto the instance of ``places`` (computed once per
+        instance and object, when first asked for)."""
+        from meshsal.points.places import landmarks_in
+
+        key = id(places)
+        found = self._landmarks.get(key)
+        if found is None or found[0] is not places:
+            if len(self._landmarks) > 4096:
+                self._landmarks.clear()
+            found = (places, {})
+            self._landmarks[key] = found
+        if c not in found[1]:
+            found[1][c] = landmarks_in(places.positions, self.references[c])
+        return found[1][c]
+
+    def signatures_at(self, positions, places: Places, classes=None) -> np.ndarray:
+        """(k, J, LANDMARKS) where points of the instance of ``places`` lie on each object of ``classes``
+        (default: every object)."""
+        from meshsal.points.places import signatures as located
+
+        J = range(self.n_classes) if classes is None else classes
+        return np.stack([located(positions, self.landmarks(places, int(j))) for j in J], axis=1)
+
+    def _where(self, positions, places: Places):
+        """``model.log_likelihood``'s signatures of points at ``positions``: computed per object on demand."""
+        from meshsal.points.places import signatures as located
+
+        positions = np.asarray(positions, np.float64)
+        return lambda c, rows: located(positions, self.landmarks(places, int(c)))[rows]
+
+    def posterior(self, imprints: np.ndarray, places: Places) -> np.ndarray:
+        """(k, C) single-touch posteriors of imprints (k, rows, cols) taken at the first k of ``places``."""
+        return self.posterior_at(imprints, places.positions[: len(imprints)], places)
+
+    def posterior_at(self, imprints: np.ndarray, positions, places: Places) -> np.ndarray:
+        """(k, C) single-touch posteriors of imprints taken at ``positions`` (k, 3) on the instance of ``places``."""
+        if len(imprints) == 0:
+            return np.zeros((0, self.n_classes))
+        return self.model.predict_proba(imprints, self._where(positions, places))
+
+    def forecast(self, places: Places, classes=None) -> Forecast:
+        """The :class:`Forecast` of an instance's candidate places under ``classes`` (default: every object),
+        from the codebooks of the matched entries."""
+        C, P = self.n_classes, len(places)
+        J = np.arange(C) if classes is None else np.asarray(classes, np.int64)
+        G = self.signatures_at(places.positions, places, J)
+        K = self.forecast_neighbours
+        S = self.table[0].values.shape[1]
+        out = np.full((J.size, P, K * S, J.size), 1.0 / J.size)
+        weight = np.zeros((J.size, P, K * S))
+        for a, j in enumerate(J):
+            idx, w = self.model.match(j, G[:, a])
+            k = min(K, idx.shape[1])
+            idx, w = idx[:, :k], w[:, :k] / w[:, :k].sum(axis=1, keepdims=True)
+            for b in range(k):
+                out[a, :, b * S : (b + 1) * S] = self.table[j][idx[:, b]].over(J)
+                weight[a, :, b * S : (b + 1) * S] = w[:, b, None] * self.table_weights[j][idx[:, b]]
+        return Forecast(out, weight, None if classes is None else J)
+
+
+def fit_place_knowledge(training: dict, params: dict | None = None) -> PlaceKnowledge:
+    """:class:`PlaceKnowledge` from training instances' place samples with codebooks (``params`` for the
+    ``place`` recognizer, as ``classify.make`` takes them)."""
+    from classify.recognizers.classifiers import make
+
+    names = tuple(sorted({name for name, _ in training}))
+    X, y, sig, inst, keys = place_touches(training, names)
+    model = make("place", **(params or {}).get("place", {})).fit(
+        X, y, signatures=sig, instances=inst, places=keys, session=_session_touches(training, names)
+    )
+    table, weights = model.forecast_table()
+    references = tuple(
+        training[min((k for k in training if k[0] == name), key=lambda k: k[1])].places.positions for name in names
+    )
+    return PlaceKnowledge(names, model, table, weights, references)

@@ -1,0 +1,92 @@
+"""Banks: each object's training touches grouped by place, as the place-aware recognizer holds them.
+
+An entry is one place of an object (its touches on every training
+instance, pooled by place key), located by its signature; a bank is one
+object's entries, with a k-d tree over their signatures and a fixed
+place-free subsample of its touches (``classify.recognizers.place``).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = ["Bank", "entries", "lse", "sample_d2", "spacing", "within_place_whitening"]
+
+
+def lse(a: np.ndarray, axis: int, keepdims: bool = False) -> np.ndarray:
+    """log(sum(exp(a))) along ``axis``, -inf where every term is -inf (a lean ``scipy.special.logsumexp``)."""
+    top = np.max(a, axis=axis, keepdims=True)
+    top = np.where(np.isfinite(top), top, 0.0)
+    with np.errstate(divide="ignore"):
+        out = np.log(np.exp(a - top).sum(axis=axis, keepdims=True)) + top
+    return out if keepdims else np.squeeze(out, axis=axis)
+
+
+class Bank:
+    """One object's entries: signatures (E, L), standardized samples (E, S, d), each sample's instance (E, S; -1
+    pads), and a place-free subsample (F, d) with its instances (F,)."""
+
+    def __init__(self, keys, signatures, samples, instances, free, free_instances, match_width):
+        from scipy.spatial import cKDTree
+
+        # Distances to an entry's samples are taken in float32: a fraction of the memory traffic, and far
+        # finer than the kernel's width.
+        self.keys, self.signatures, self.instances = keys, signatures, instances
+        self.samples = np.ascontiguousarray(samples, np.float32)
+        self.free, self.free_instances, self.match_width = free, free_instances, match_width
+        self.tree = cKDTree(signatures)
+        self.sq = np.einsum("esd,esd->es", self.samples, self.samples)
+        self.free_sq = np.einsum("fd,fd->f", free, free)
+
+
+def entries(keys, Z, signatures, instances):
+    """Group one object's touches by place key: sorted keys, (E, L) signatures, (E, S, d) samples, (E, S)
+    instances (-1 pads)."""
+    order = np.lexsort((instances, keys))
+    keys, Z, signatures, instances = keys[order], Z[order], signatures[order], instances[order]
+    unique, start, count = np.unique(keys, return_index=True, return_counts=True)
+    S = int(count.max())
+    samples = np.zeros((unique.size, S, Z.shape[1]))
+    inst = np.full((unique.size, S), -1, np.int64)
+    for e, (a, c) in enumerate(zip(start, count)):
+        samples[e, :c] = Z[a : a + c]
+        inst[e, :c] = instances[a : a + c]
+    return unique, signatures[start], samples, inst
+
+
+def spacing(signatures) -> float:
+    """Median distance from an entry's signature to its nearest other entry's."""
+    from scipy.spatial import cKDTree
+
+    if len(signatures) < 2:
+        return 1.0
+    d = cKDTree(signatures).query(signatures, k=2)[0][:, 1]
+    d = d[d > 0]
+    return float(np.median(d)) if d.size else 1.0
+
+
+def within_place_whitening(Z, y, keys) -> np.ndarray:
+    """(d, d) map that makes the touches of one place spread alike in every direction: the inverse square root
+    of the pooled covariance of the touches about their place's mean, shrunk towards its diagonal."""
+    _, group = np.unique(np.c_[y, keys], axis=0, return_inverse=True)
+    group = group.reshape(-1)
+    means = np.zeros((group.max() + 1, Z.shape[1]))
+    np.add.at(means, group, Z)
+    means /= np.bincount(group)[:, None]
+    R = Z - means[group]
+    W = R.T @ R / max(len(R) - group.max() - 1, 1)
+    W = 0.9 * W + 0.1 * np.diag(np.diag(W)) + 1e-6 * np.trace(W) / len(W) * np.eye(len(W))
+    vals, vecs = np.linalg.eigh(W)
+    return vecs @ np.diag(1.0 / np.sqrt(vals)) @ vecs.T
+
+
+def sample_d2(bank: Bank, Z, idx, exclude):
+    """(n, K, S) squared distances from each touch to its matched entries' samples; inf for padding and for
+    samples of the touch's excluded instance."""
+    Y = bank.samples[idx]  # (n, K, S, d)
+    z = Z.astype(np.float32)
+    d2 = np.einsum("nd,nd->n", z, z)[:, None, None] + bank.sq[idx] - 2.0 * np.einsum("nd,nksd->nks", z, Y)
+    d2 = d2.astype(np.float64)
+    inst = bank.instances[idx]
+    bad = (inst < 0) | (inst == exclude[:, None, None])
+    return np.where(bad, np.inf, np.maximum(d2, 0.0))

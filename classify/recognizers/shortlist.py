@@ -1,0 +1,142 @@
+"""Shortlists of hypotheses: the few objects a touch's place-aware likelihood is worth computing for.
+
+The place-aware recognizer (:mod:`classify.recognizers.place`) scores a
+touch under an object by matching the touched place to that object's places
+(a registration of the test instance per object) and by a kernel density
+over the object's codebook touches there.  Done under every object, the
+work per touch grows with the number of objects, and an experiment's with
+its square.  A shortlist keeps it flat: every object gets a cheap score (the
+squared distance from the touch to its nearest place-free sample, one matrix
+product over all objects), and only the ``H`` nearest objects get the
+place-aware terms.  The others keep a lower bound of their likelihood (the
+place-free term's nearest kernel), so a touch that resembles nothing of an
+object never raises it.  With no more objects than ``H`` every object is on
+the shortlist and nothing is approximated.
+
+:class:`SparseRows` holds posteriors that way: the values of a row's
+shortlisted objects, and one value shared by every other object.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+__all__ = ["FreeStack", "SparseRows", "nearest_classes"]
+
+#: Distances of this many (touch, sample) pairs are held at once.
+_BLOCK = 1 << 22
+
+
+@dataclass(frozen=True, eq=False)
+class FreeStack:
+    """Every object's place-free samples in one array, for screening all objects with one matrix product.
+
+    ``samples`` (C, F, d) float32, padded; ``sq`` (C, F) float32 their squared
+    norms (inf for padding); ``instances`` (C, F) int64 each sample's
+    training instance (-2 for padding).
+    """
+
+    samples: np.ndarray
+    sq: np.ndarray
+    instances: np.ndarray
+
+    @staticmethod
+    def of(frees: list, instances: list) -> FreeStack:
+        """From per-object (F_c, d) samples and (F_c,) instances."""
+        C, F, d = len(frees), max(len(f) for f in frees), frees[0].shape[1]
+        samples = np.zeros((C, F, d), np.float32)
+        sq = np.full((C, F), np.inf, np.float32)
+        inst = np.full((C, F), -2, np.int64)
+        for c, (f, i) in enumerate(zip(frees, instances)):
+            samples[c, : len(f)] = f
+            sq[c, : len(f)] = np.einsum("fd,fd->f", f, f)
+            inst[c, : len(f)] = i
+        return FreeStack(samples, sq, inst)
+
+    def nearest(self, Z: np.ndarray, exclude: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Squared distance from each touch to each object's nearest sample, and how many samples count.
+
+        Parameters
+        ----------
+        Z : (n, d) float64, standardized descriptors
+        exclude : (n,) int64, a training instance whose samples each touch leaves out (-1: none)
+
+        Returns
+        -------
+        d2 : (n, C) float64 (inf where every sample is left out)
+        count : (n, C) int64
+        """
+        C, F, d = self.samples.shape
+        flat = self.samples.reshape(C * F, d)
+        n = len(Z)
+        d2 = np.empty((n, C))
+        count = np.empty((n, C), np.int64)
+        step = max(1, _BLOCK // (C * F))
+        for a in range(0, n, step):
+            z = Z[a : a + step].astype(np.float32)
+            ex = exclude[a : a + step]
+            D = (np.einsum("nd,nd->n", z, z)[:, None] + self.sq.reshape(1, -1) - 2.0 * (z @ flat.T)).reshape(-1, C, F)
+            out = self.instances[None] == ex[:, None, None]
+            D[out] = np.inf
+            d2[a : a + step] = np.maximum(D.min(axis=2), 0.0)
+            count[a : a + step] = np.isfinite(D).sum(axis=2)
+        return d2, count
+
+
+def nearest_classes(d2: np.ndarray, H: int) -> np.ndarray:
+    """(n, H) int64, each row's ``H`` objects of least ``d2``, in increasing object index.
+
+    Examples
+    --------
+    >>> nearest_classes(np.array([[3.0, 0.5, 2.0, 0.1]]), 2).tolist()
+    [[1, 3]]
+    """
+    n, C = d2.shape
+    if H >= C:
+        return np.tile(np.arange(C), (n, 1))
+    return np.sort(np.argpartition(d2, H - 1, axis=1)[:, :H], axis=1)
+
+
+@dataclass(frozen=True, eq=False)
+class SparseRows:
+    """Posteriors over many objects, each row kept at its shortlisted objects.
+
+    ``values`` (..., T) float64 the posterior of each shortlisted object,
+    ``classes`` (..., T) int64 which objects (increasing), ``rest`` (...)
+    float64 the posterior of every other object, ``n_classes`` C.
+    """
+
+    values: np.ndarray
+    classes: np.ndarray
+    rest: np.ndarray
+    n_classes: int
+
+    def __getitem__(self, index) -> SparseRows:
+        return SparseRows(self.values[index], self.classes[index], self.rest[index], self.n_classes)
+
+    @property
+    def dense(self) -> bool:
+        """Whether every row holds every object, in order."""
+        return self.values.shape[-1] == self.n_classes
+
+    def over(self, classes: np.ndarray) -> np.ndarray:
+        """(..., len(classes)) the posterior of ``classes`` in each row.
+
+        Examples
+        --------
+        >>> rows = SparseRows(np.array([[0.6, 0.3]]), np.array([[0, 2]]), np.array([0.05]), 4)
+        >>> rows.over(np.array([2, 3])).tolist()
+        [[0.3, 0.05]]
+        """
+        classes = np.asarray(classes, np.int64)
+        if self.dense and np.array_equal(classes, np.arange(self.n_classes)):
+            return self.values.copy()
+        pos = np.full(self.n_classes, -1, np.int64)
+        pos[classes] = np.arange(classes.size)
+        out = np.repeat(self.rest[..., None], classes.size, axis=-1)
+        col = pos[self.classes]
+        hit = np.nonzero(col >= 0)
+        out[(*hit[:-1], col[hit])] = self.values[hit]
+        return out

@@ -1,0 +1,179 @@
+"""Shortlists: past ``shortlist`` objects a touch is scored in full only under its nearest objects.
+
+Built on synthetic codebooks: ten objects whose places lie at the same
+positions in another order, each place with a descriptor of its own.
+"""
+
+import copy
+
+import numpy as np
+import pytest
+
+from classify.policies import (
+    Felt,
+    Forecasts,
+    Places,
+    PlaceSample,
+    expected_entropy,
+    fit_place_knowledge,
+    hypotheses,
+    run_episode,
+    signatures,
+)
+from classify.policies.policy import InfoGainPolicy
+from classify.recognizers.shortlist import FreeStack, SparseRows, nearest_classes
+from meshsal.points.learned import FEATURES
+
+OBJECTS, PLACES = 10, 24
+
+
+def _training(seed=0):
+    rng = np.random.default_rng(seed)
+    positions = rng.normal(size=(PLACES, 3)) * 50.0
+    training, feels = {}, {}
+    for j in range(OBJECTS):
+        order = np.r_[np.arange(8), 8 + rng.permutation(PLACES - 8)]  # the landmarks first, as on a real pool
+        feel = rng.normal(size=(PLACES, 42)) * 2.0
+        feels[j] = feel[order]
+        for i in (1, 2):
+            where = Places(
+                np.arange(PLACES),
+                positions[order],
+                rng.normal(size=(PLACES, 3)),
+                np.zeros((PLACES, len(FEATURES))),
+                np.ones(PLACES, bool),
+            )
+            book = (feel[order][:, None] + 0.5 * rng.normal(size=(PLACES, 6, 42))).astype(np.float32)
+            training[f"object{j:02d}", i] = PlaceSample(where, rng.random((1, PLACES, 16, 16)).astype(np.float32), book)
+    return training, feels
+
+
+@pytest.fixture(scope="module")
+def fitted():
+    """The same training set fitted with every object on the shortlist, and with three."""
+    training, feels = _training()
+    full = fit_place_knowledge(training, {"place": {"shortlist": 16}})
+    short = fit_place_knowledge(training, {"place": {"shortlist": 3}})
+    return training, feels, full, short
+
+
+def test_free_stack_finds_each_objects_nearest_sample_and_leaves_out_an_instance():
+    rng = np.random.default_rng(1)
+    frees = [rng.normal(size=(n, 5)) for n in (4, 7, 2)]
+    insts = [np.array([1, 2, 1, 2]), np.arange(7) % 2 + 1, np.array([1, 1])]
+    stack = FreeStack.of(frees, insts)
+    Z = rng.normal(size=(6, 5))
+    exclude = np.array([-1, 1, 2, -1, 1, 2])
+    d2, count = stack.nearest(Z, exclude)
+    for r in range(6):
+        for c, (f, i) in enumerate(zip(frees, insts)):
+            keep = i != exclude[r]
+            want = ((f[keep] - Z[r]) ** 2).sum(axis=1).min() if keep.any() else np.inf
+            assert count[r, c] == keep.sum()
+            np.testing.assert_allclose(d2[r, c], want, rtol=1e-4, atol=1e-4)
+    assert np.isinf(d2[1, 2]) and count[1, 2] == 0  # object 2 has instance 1 only
+
+
+def test_nearest_classes_are_the_least_distances_in_order():
+    d2 = np.array([[5.0, 1.0, 3.0, 0.5, 9.0], [0.0, 0.1, 0.2, 0.3, 0.4]])
+    assert nearest_classes(d2, 2).tolist() == [[1, 3], [0, 1]]
+    assert nearest_classes(d2, 9).tolist() == [[0, 1, 2, 3, 4]] * 2
+
+
+def test_sparse_rows_keep_a_distribution_and_give_any_columns():
+    rows = SparseRows(np.array([[0.5, 0.2]]), np.array([[1, 3]]), np.array([0.1]), 5)
+    assert rows.over(np.arange(5)).tolist() == [[0.1, 0.5, 0.1, 0.2, 0.1]]
+    dense = SparseRows(np.array([[0.7, 0.3]]), np.array([[0, 1]]), np.zeros(1), 2)
+    assert dense.dense and dense.over(np.arange(2)).tolist() == [[0.7, 0.3]]
+
+
+def test_shortlisted_objects_score_exactly_and_the_others_get_lower_bounds(fitted):
+    training, feels, full, _ = fitted
+    model = full.model
+    limited = copy.copy(model)
+    limited.shortlist = 3
+    rng = np.random.default_rng(2)
+    # Touches at four places of each object, located where they lie (every object has its places there).
+    X = np.concatenate([feels[j][8:12] + 0.5 * rng.normal(size=(4, 42)) for j in range(OBJECTS)])
+    G = np.concatenate([signatures(training[f"object{j:02d}", 1].places)[8:12] for j in range(OBJECTS)])
+    every = model.log_likelihood(X, G)
+    few = limited.log_likelihood(X, G)
+    d2, _ = model.free_.nearest(model._standardized(X), np.full(len(X), -1))
+    listed = np.zeros(every.shape, bool)
+    np.put_along_axis(listed, nearest_classes(d2, 3), True, axis=1)
+    assert listed.sum(axis=1).tolist() == [3] * len(X)
+    np.testing.assert_array_equal(few[listed], every[listed])
+    assert np.all(few[~listed] <= every[~listed] + 1e-9)
+    assert np.all(np.isfinite(few))
+    # The touch's own object is on its shortlist here, and the shortlist decides as the full model does.
+    truth = np.repeat(np.arange(OBJECTS), 4)
+    assert listed[np.arange(len(X)), truth].mean() > 0.9
+    assert (every.argmax(axis=1) == truth).mean() > 0.9
+    np.testing.assert_array_equal(few.argmax(axis=1), every.argmax(axis=1))
+
+
+def test_a_touch_registers_the_test_instance_only_onto_its_shortlist(fitted):
+    training, feels, _, short = fitted
+    knowledge = copy.copy(short)
+    object.__setattr__(knowledge, "_landmarks", {})
+    test = training["object04", 1]
+    knowledge.posterior_at(test.codebook[:1, 0], test.places.positions[:1], test.places)
+    assert 1 <= len(knowledge._landmarks[id(test.places)][1]) <= 3
+
+
+def test_a_forecast_over_some_objects_is_the_full_forecast_restricted(fitted):
+    training, _, full, _ = fitted
+    places = training["object02", 2].places
+    whole = full.forecast(places)
+    J = np.array([1, 2, 7])
+    part = full.forecast(places, J)
+    np.testing.assert_array_equal(part.classes, J)
+    np.testing.assert_array_equal(part.posteriors, whole.posteriors[J][..., J])
+    np.testing.assert_array_equal(part.weights, whole.weights[J])
+    belief = np.random.default_rng(3).dirichlet(np.ones(OBJECTS))
+    restricted = type(whole)(whole.posteriors[J][..., J], whole.weights[J])
+    np.testing.assert_allclose(
+        expected_entropy(belief, part), expected_entropy(belief[J] / belief[J].sum(), restricted), rtol=1e-12
+    )
+
+
+def test_forecast_rows_past_the_shortlist_keep_their_mass(fitted):
+    _, _, _, short = fitted
+    rows = short.table[0]
+    assert rows.values.shape[-1] == 3 and not rows.dense
+    total = rows.values.sum(axis=-1) + rows.rest * (OBJECTS - 3)
+    np.testing.assert_allclose(total, 1.0, atol=1e-9)
+    assert np.all(rows.rest >= 0) and np.all(np.diff(rows.classes, axis=-1) > 0)
+
+
+def test_hypotheses_are_the_most_probable_with_ties_drawn():
+    belief = np.array([0.05, 0.4, 0.05, 0.3, 0.2])
+    assert hypotheses(belief, 3, np.random.default_rng(0)).tolist() == [1, 3, 4]
+    assert hypotheses(belief, 5, None) is None
+    flat = np.full(40, 1 / 40)
+    draws = {tuple(hypotheses(flat, 4, np.random.default_rng(s)).tolist()) for s in range(6)}
+    assert len(draws) == 6  # a flat belief gives a random sample, not the first names
+    assert (
+        hypotheses(flat, 4, np.random.default_rng(9)).tolist() == hypotheses(flat, 4, np.random.default_rng(9)).tolist()
+    )
+
+
+def test_info_gain_runs_on_its_shortlist_and_finds_the_object(fitted, monkeypatch):
+    import classify.policies.episodes as episodes
+
+    training, _, _, short = fitted
+    test = PlaceSample(training["object06", 2].places, training["object06", 2].codebook[None, :, 0, :])
+    asked = []
+
+    class Counting(Forecasts):
+        def over(self, classes=None):
+            asked.append(None if classes is None else len(classes))
+            return super().over(classes)
+
+    monkeypatch.setattr(episodes, "Forecasts", Counting)
+    episode = run_episode(InfoGainPolicy(), test, short, 3, 0.0, np.random.default_rng(0))
+    assert asked and set(asked) == {3}  # never a forecast over all ten objects
+    np.testing.assert_allclose(episode.beliefs.sum(axis=1), 1.0)
+    assert int(np.argmax(episode.beliefs[-1])) == 6
+    felt = Felt(short, test.imprints[0], test.places)
+    assert felt._all is None and felt[0].shape == (OBJECTS,)
