@@ -36,16 +36,15 @@ def _training(seed=0):
         feel = rng.normal(size=(PLACES, 42)) * 2.0
         feels[j] = feel[order]
         for i in (1, 2):
-            where = Places(
-                np.arange(PLACES),
-                positions[order],
-                rng.normal(size=(PLACES, 3)),
-                np.zeros((PLACES, len(FEATURES))),
-                np.ones(PLACES, bool),
-            )
             book = (feel[order][:, None] + 0.5 * rng.normal(size=(PLACES, 6, 42))).astype(np.float32)
-            training[f"object{j:02d}", i] = PlaceSample(where, rng.random((1, PLACES, 16, 16)).astype(np.float32), book)
+            imprints = rng.random((1, PLACES, 16, 16)).astype(np.float32)
+            training[f"object{j:02d}", i] = PlaceSample(_places(positions[order], rng), imprints, book)
     return training, feels
+
+
+def _places(positions, rng):
+    n = len(positions)
+    return Places(np.arange(n), positions, rng.normal(size=(n, 3)), np.zeros((n, len(FEATURES))), np.ones(n, bool))
 
 
 @pytest.fixture(scope="module")
@@ -177,3 +176,19 @@ def test_info_gain_runs_on_its_shortlist_and_finds_the_object(fitted, monkeypatc
     assert int(np.argmax(episode.beliefs[-1])) == 6
     felt = Felt(short, test.imprints[0], test.places)
     assert felt._all is None and felt[0].shape == (OBJECTS,)
+
+
+def test_another_objects_touches_at_an_objects_places_do_not_point_to_it(fitted):
+    # The shuffled control in miniature: object j's places, touched with what object j + 1 feels there.
+    training, feels, _, short = fitted
+    rng = np.random.default_rng(6)
+    named, donor = [], []
+    for j in range(OBJECTS):
+        test = training[f"object{j:02d}", 2]
+        d = (j + 1) % OBJECTS
+        touches = feels[d][8:14] + 0.5 * rng.normal(size=(6, 42))
+        post = short.posterior_at(touches, test.places.positions[8:14], test.places)
+        named.append(np.argmax(post, axis=1) == j)
+        donor.append(np.argmax(post, axis=1) == d)
+    assert np.mean(named) <= 2.0 / OBJECTS  # the places do not give the object away
+    assert np.mean(donor) > 0.5  # what was felt does

@@ -39,15 +39,7 @@ import numpy as np
 
 from meshsal.points.places import LANDMARKS
 
-__all__ = [
-    "LANDMARKS",
-    "Places",
-    "PlaceSample",
-    "Forecast",
-    "TouchKnowledge",
-    "signatures",
-    "fit_knowledge",
-]
+__all__ = ["LANDMARKS", "Places", "PlaceSample", "Forecast", "TouchKnowledge", "signatures", "fit_knowledge"]
 
 
 @dataclass(frozen=True, eq=False)
