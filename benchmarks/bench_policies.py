@@ -40,6 +40,7 @@ def synthetic(objects: int, places: int, touches: int, seed: int = 0):
     """A TouchKnowledge of random calibrated posteriors, and a test instance's Places, at the given sizes."""
     from classify.policies import Places, TouchKnowledge, signatures
     from classify.recognizers.fusion import Calibration
+    from classify.recognizers.shortlist import SparseRows
     from meshsal.points.learned import FEATURES
 
     rng = np.random.default_rng(seed)
@@ -55,7 +56,10 @@ def synthetic(objects: int, places: int, touches: int, seed: int = 0):
     for _ in range(objects):
         place_ids.append(np.sort(rng.choice(4 * places, places, replace=False)))
         located.append(signatures(test)[rng.permutation(places)])  # every object's places, in another order
-        posteriors.append(rng.dirichlet(np.full(objects, 0.3), size=(places, touches)))
+        post = rng.dirichlet(np.full(objects, 0.3), size=(places, touches))
+        posteriors.append(
+            SparseRows(post, np.tile(np.arange(objects), (places, touches, 1)), np.zeros((places, touches)), objects)
+        )
         weights.append(np.full((places, touches), 1.0 / touches))
     knowledge = TouchKnowledge(
         names, tuple(place_ids), tuple(located), tuple(posteriors), tuple(weights), None, Calibration(), "polar"

@@ -119,6 +119,8 @@ def test_the_estimator_clones_validates_and_extends_its_banks():
     assert clone(model).get_params()["neighbours"] == 2
     with pytest.raises(ValueError, match="at least two training instances"):
         PlaceAware().fit(X, y, signatures=sig, instances=np.ones_like(inst), places=key)
+    with pytest.raises(ValueError, match="shortlist and fit_objects must be positive integers"):
+        PlaceAware(shortlist=0).fit(X, y, signatures=sig, instances=inst, places=key)
     with pytest.raises(ValueError, match="one row per touch"):
         PlaceAware().fit(X[:-1], y, signatures=sig, instances=inst, places=key)
     model.fit(X, y, signatures=sig, instances=inst, places=key)

@@ -192,3 +192,32 @@ def test_another_objects_touches_at_an_objects_places_do_not_point_to_it(fitted)
         donor.append(np.argmax(post, axis=1) == d)
     assert np.mean(named) <= 2.0 / OBJECTS  # the places do not give the object away
     assert np.mean(donor) > 0.5  # what was felt does
+
+
+def test_the_place_free_knowledge_keeps_each_touchs_most_probable_objects(monkeypatch):
+    from classify.policies import TouchKnowledge, fit_knowledge
+    from classify.recognizers.touches import Recognizer
+
+    rng = np.random.default_rng(7)
+    training = {}
+    for j in range(6):  # six objects, each a bump of its own height under the pad at every place
+        for i in (1, 2):
+            imprints = np.clip(rng.normal(0.1 * j, 0.05, (1, 12, 16, 16)), 0, 1).astype(np.float32)
+            training[f"object{j}", i] = PlaceSample(_places(rng.normal(size=(12, 3)) * 40, rng), imprints)
+    recognizer = Recognizer("knn", features="polar")
+    whole = fit_knowledge(training, recognizer)
+    monkeypatch.setattr(TouchKnowledge, "hypotheses", 3)
+    short = fit_knowledge(training, recognizer)
+    assert whole.posteriors[0].dense and short.posteriors[0].values.shape[-1] == 3
+    assert short.calibration == whole.calibration
+    for a, b in zip(whole.posteriors, short.posteriors):
+        top = np.sort(np.argsort(-a.values, axis=-1, kind="stable")[..., :3], axis=-1)
+        ranked = -np.sort(-a.values, axis=-1)
+        untied = ranked[..., 2] > ranked[..., 3] * (1 + 1e-9)
+        assert untied.mean() > 0.5
+        np.testing.assert_array_equal(b.classes[untied], top[untied])  # where the top three are not tied
+        np.testing.assert_allclose(b.values.sum(axis=-1) + 3 * b.rest, 1.0)
+    # A forecast over three objects reads them off the kept rows.
+    places = training["object2", 1].places
+    part = short.forecast(places, np.array([1, 2, 3]))
+    assert part.posteriors.shape[0] == part.posteriors.shape[-1] == 3

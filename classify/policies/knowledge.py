@@ -158,9 +158,10 @@ class TouchKnowledge:
         The places (vertex ids) each object's training instances were touched at.
     signatures : tuple of (P_j, LANDMARKS) float64
         Where each of those places lies on its object (:func:`signatures`).
-    posteriors : tuple of (P_j, S, C) float64
+    posteriors : tuple of classify.recognizers.shortlist.SparseRows (P_j, S)
         Calibrated held-out posteriors of those touches (a touch scored by a
-        classifier fitted without its instance).
+        classifier fitted without its instance): every object's up to
+        :attr:`hypotheses` objects, past it each row's most probable ones.
     weights : tuple of (P_j, S) float64
         Weight of each touch in its place's forecast (0 for padding).
     model : fitted classifier of single touches (all training touches)
@@ -219,10 +220,8 @@ class TouchKnowledge:
         for a, j in enumerate(J):
             place = self.match(j, places)
             mine = place >= 0
-            s = self.posteriors[j].shape[1]
-            out[a, mine, :s] = (
-                self.posteriors[j][place[mine]] if classes is None else self.posteriors[j][place[mine]][..., J]
-            )
+            s = self.posteriors[j].values.shape[1]
+            out[a, mine, :s] = self.posteriors[j][place[mine]].over(J)
             weight[a, mine, :s] = self.weights[j][place[mine]]
         return Forecast(out, weight, None if classes is None else J)
 
@@ -242,8 +241,7 @@ def fit_knowledge(training: dict, recognizer):
     -------
     TouchKnowledge or PlaceKnowledge, classes in the order of the sorted object names
     """
-    from classify.recognizers.fusion import calibrate, fit_calibration
-    from classify.recognizers.touches import point_groups, posteriors
+    from classify.recognizers.touches import point_groups
     from tactile.features import describe
 
     names = tuple(sorted({name for name, _ in training}))
@@ -268,28 +266,31 @@ def fit_knowledge(training: dict, recognizer):
     F = describe(X, recognizer.features)
     groups = point_groups(y, vertex, inst)
     C = len(names)
-    held = np.zeros((len(y), C))
-    for i in np.unique(inst):
-        out = inst == i
-        model = recognizer.fit(F[~out], y[~out], groups[~out])
-        held[out] = posteriors(model, F[out], C)
-    calibration = fit_calibration(held, y)
-    held = calibrate(held, calibration)
+    held, calibration = _held_out(recognizer, F, y, inst, groups, C, TouchKnowledge.hypotheses)
     model = recognizer.fit(F, y, groups)
     located = np.concatenate([signatures(training[k].places) for k in keys for _ in range(len(training[k].imprints))])
+    from classify.recognizers.shortlist import SparseRows
+
     place_ids, located_places, posteriors, weights = [], [], [], []
     for c in range(len(names)):
         mine = y == c
         ids, where = np.unique(vertex[mine], return_inverse=True)
         counts = np.bincount(where, minlength=ids.size)
         S = int(counts.max())
-        post = np.full((ids.size, S, C), 1.0 / C)
+        T = held.values.shape[1]
+        values, classes = np.full((ids.size, S, T), 1.0 / C), np.tile(np.arange(T), (ids.size, S, 1))
+        rest = np.full((ids.size, S), 1.0 / C)
         weight = np.zeros((ids.size, S))
         slot = np.zeros(ids.size, np.int64)
-        for row, p in zip(held[mine], where):
-            post[p, slot[p]] = row
+        for row, p in zip(np.flatnonzero(mine), where):
+            values[p, slot[p]], classes[p, slot[p]], rest[p, slot[p]] = (
+                held.values[row],
+                held.classes[row],
+                held.rest[row],
+            )
             weight[p, slot[p]] = 1.0 / counts[p]
             slot[p] += 1
+        post = SparseRows(values, classes, rest, C)
         place_ids.append(ids)
         # A vertex lies at one place of its object: the signature of its first training touch.
         first = np.unique(where, return_index=True)[1]
@@ -306,3 +307,43 @@ def fit_knowledge(training: dict, recognizer):
         calibration,
         recognizer.features,
     )
+
+
+def _held_out(recognizer, F, y, inst, groups, C: int, H: int, block: int = 4096):
+    """Each training touch's calibrated posterior from a classifier fitted without its instance, as
+    :class:`~classify.recognizers.shortlist.SparseRows` (N,): every object up to ``H``, past it each row's
+    ``H`` most probable and one value for the others (a block of rows at a time, so memory stays linear);
+    and the calibration, fitted on those posteriors."""
+    from classify.recognizers.fusion import calibrate, calibrate_rows, fit_calibration
+    from classify.recognizers.shortlist import SparseRows
+    from classify.recognizers.touches import posteriors
+
+    if C <= H:
+        held = np.zeros((len(y), C))
+        for i in np.unique(inst):
+            out = inst == i
+            model = recognizer.fit(F[~out], y[~out], groups[~out])
+            held[out] = posteriors(model, F[out], C)
+        calibration = fit_calibration(held, y)
+        held = calibrate(held, calibration)
+        return SparseRows(held, np.tile(np.arange(C), (len(y), 1)), np.zeros(len(y)), C), calibration
+    # The rows fit_calibration scores (evenly spread over all of them) are kept whole.
+    pick = np.unique(np.linspace(0, len(y) - 1, min(len(y), 20000)).round().astype(np.int64))
+    kept = np.zeros((pick.size, C))
+    values, classes, rest = np.zeros((len(y), H)), np.zeros((len(y), H), np.int64), np.zeros(len(y))
+    for i in np.unique(inst):
+        out = np.flatnonzero(inst == i)
+        model = recognizer.fit(F[~(inst == i)], y[~(inst == i)], groups[~(inst == i)])
+        for a in range(0, out.size, block):
+            rows = out[a : a + block]
+            P = posteriors(model, F[rows], C)
+            top = np.sort(np.argpartition(-P, H - 1, axis=1)[:, :H], axis=1)
+            classes[rows] = top
+            values[rows] = np.take_along_axis(P, top, axis=1)
+            rest[rows] = np.maximum(1.0 - values[rows].sum(axis=1), 0.0) / (C - H)
+            at = np.searchsorted(pick, rows)
+            hit = (at < pick.size) & (pick[np.minimum(at, pick.size - 1)] == rows)
+            kept[at[hit]] = P[hit]
+    calibration = fit_calibration(kept, y[pick])
+    values, rest = calibrate_rows(values, rest, C, calibration)
+    return SparseRows(values, classes, rest, C), calibration

@@ -27,7 +27,7 @@ from itertools import combinations
 
 import numpy as np
 
-__all__ = ["Calibration", "fit_calibration", "calibrate", "touch_sets", "fuse"]
+__all__ = ["Calibration", "fit_calibration", "calibrate", "calibrate_rows", "touch_sets", "fuse"]
 
 _EPS_GRID = (1e-4, 1e-3, 1e-2, 0.03, 0.1, 0.3)
 _T_GRID = tuple(float(t) for t in np.round(np.geomspace(0.1, 20.0, 24), 6))
@@ -57,6 +57,27 @@ def calibrate(proba, calibration: Calibration) -> np.ndarray:
     logp -= logp.max(axis=1, keepdims=True)
     out = np.exp(logp)
     return out / out.sum(axis=1, keepdims=True)
+
+
+def calibrate_rows(values, rest, n_classes: int, calibration: Calibration) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`calibrate` of posteriors kept sparse: each row's listed values (n, T) and the one value ``rest``
+    (n,) of its other ``n_classes - T`` objects; the calibrated (n, T) and (n,).
+
+    Examples
+    --------
+    >>> v, r = calibrate_rows(np.array([[0.6, 0.3]]), np.array([0.05]), 4, Calibration(eps=0.1, temperature=2.0))
+    >>> full = calibrate([[0.6, 0.3, 0.05, 0.05]], Calibration(eps=0.1, temperature=2.0))
+    >>> bool(np.allclose(v, full[:, :2]) and np.allclose(r, full[:, 2]))
+    True
+    """
+    V, r = np.asarray(values, np.float64), np.asarray(rest, np.float64)
+    C, T = int(n_classes), V.shape[1]
+    logv = np.log(np.maximum((1.0 - calibration.eps) * V + calibration.eps / C, _TINY)) / calibration.temperature
+    logr = np.log(np.maximum((1.0 - calibration.eps) * r + calibration.eps / C, _TINY)) / calibration.temperature
+    top = np.maximum(logv.max(axis=1), logr)
+    ev, er = np.exp(logv - top[:, None]), np.exp(logr - top)
+    total = ev.sum(axis=1) + (C - T) * er
+    return ev / total[:, None], er / total
 
 
 def fit_calibration(proba, y, rows: int = 20000) -> Calibration:

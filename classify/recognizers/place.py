@@ -201,6 +201,10 @@ class PlaceAware(ClassifierMixin, BaseEstimator):
             raise ValueError("the place-aware recognizer needs at least two training instances (it leaves one out)")
         if not (0 < min(self.mixtures) and max(self.mixtures) < 1):
             raise ValueError(f"mixtures must lie in (0, 1), got {self.mixtures}")
+        if min(self.shortlist, self.fit_objects) < 1 or int(self.shortlist) != self.shortlist:
+            raise ValueError(
+                f"shortlist and fit_objects must be positive integers, got {self.shortlist}, {self.fit_objects}"
+            )
         self.mean_ = Z0.mean(axis=0)
         self.scale_ = np.maximum(Z0.std(axis=0), 1e-9 * max(float(Z0.std()), 1e-300))
         self.whitening_ = np.eye(Z0.shape[1])
