@@ -37,6 +37,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from classify.recognizers.shortlist import SHORTLIST
 from meshsal.points.places import LANDMARKS
 
 __all__ = ["LANDMARKS", "Places", "PlaceSample", "Forecast", "TouchKnowledge", "signatures", "fit_knowledge"]
@@ -208,7 +209,7 @@ class TouchKnowledge:
         return cKDTree(self.signatures[j]).query(signatures(places))[1].astype(np.int64)
 
     #: Hypotheses a forecast holds at most (``classify.policies.policy.hypotheses``).
-    hypotheses = 16
+    hypotheses = SHORTLIST
 
     def forecast(self, places: Places, classes=None) -> Forecast:
         """The :class:`Forecast` of an instance's candidate places under ``classes`` (default: every object)."""
@@ -312,38 +313,34 @@ def fit_knowledge(training: dict, recognizer):
 def _held_out(recognizer, F, y, inst, groups, C: int, H: int, block: int = 4096):
     """Each training touch's calibrated posterior from a classifier fitted without its instance, as
     :class:`~classify.recognizers.shortlist.SparseRows` (N,): every object up to ``H``, past it each row's
-    ``H`` most probable and one value for the others (a block of rows at a time, so memory stays linear);
-    and the calibration, fitted on those posteriors."""
-    from classify.recognizers.fusion import calibrate, calibrate_rows, fit_calibration
-    from classify.recognizers.shortlist import SparseRows
+    ``H`` most probable and one value for the others; and the calibration, fitted on those posteriors."""
+    from classify.recognizers.fusion import CALIBRATION_ROWS, calibrate, calibrate_rows, fit_calibration
+    from classify.recognizers.shortlist import SparseRows, nearest_classes, spread
     from classify.recognizers.touches import posteriors
 
-    if C <= H:
-        held = np.zeros((len(y), C))
-        for i in np.unique(inst):
-            out = inst == i
-            model = recognizer.fit(F[~out], y[~out], groups[~out])
-            held[out] = posteriors(model, F[out], C)
-        calibration = fit_calibration(held, y)
-        held = calibrate(held, calibration)
-        return SparseRows(held, np.tile(np.arange(C), (len(y), 1)), np.zeros(len(y)), C), calibration
-    # The rows fit_calibration scores (evenly spread over all of them) are kept whole.
-    pick = np.unique(np.linspace(0, len(y) - 1, min(len(y), 20000)).round().astype(np.int64))
+    dense = C <= H
+    T = C if dense else H
+    # The rows the calibration is fitted on are kept whole: every row up to H objects.
+    pick = np.arange(len(y)) if dense else spread(len(y), CALIBRATION_ROWS)
     kept = np.zeros((pick.size, C))
-    values, classes, rest = np.zeros((len(y), H)), np.zeros((len(y), H), np.int64), np.zeros(len(y))
+    values, classes, rest = np.zeros((len(y), T)), np.tile(np.arange(T), (len(y), 1)), np.zeros(len(y))
     for i in np.unique(inst):
-        out = np.flatnonzero(inst == i)
-        model = recognizer.fit(F[~(inst == i)], y[~(inst == i)], groups[~(inst == i)])
-        for a in range(0, out.size, block):
-            rows = out[a : a + block]
+        out = inst == i
+        model = recognizer.fit(F[~out], y[~out], groups[~out])
+        mine = np.flatnonzero(out)
+        # Past H objects a block of rows at a time, so that memory stays linear in the objects.
+        step = mine.size if dense else block
+        for a in range(0, mine.size, step):
+            rows = mine[a : a + step]
             P = posteriors(model, F[rows], C)
-            top = np.sort(np.argpartition(-P, H - 1, axis=1)[:, :H], axis=1)
-            classes[rows] = top
-            values[rows] = np.take_along_axis(P, top, axis=1)
-            rest[rows] = np.maximum(1.0 - values[rows].sum(axis=1), 0.0) / (C - H)
-            at = np.searchsorted(pick, rows)
-            hit = (at < pick.size) & (pick[np.minimum(at, pick.size - 1)] == rows)
-            kept[at[hit]] = P[hit]
+            hit = np.isin(rows, pick)
+            kept[np.searchsorted(pick, rows[hit])] = P[hit]
+            if not dense:
+                classes[rows] = nearest_classes(-P, H)
+                values[rows] = np.take_along_axis(P, classes[rows], axis=1)
+                rest[rows] = np.maximum(1.0 - values[rows].sum(axis=1), 0.0) / (C - H)
     calibration = fit_calibration(kept, y[pick])
+    if dense:
+        return SparseRows(calibrate(kept, calibration), classes, rest, C), calibration
     values, rest = calibrate_rows(values, rest, C, calibration)
     return SparseRows(values, classes, rest, C), calibration

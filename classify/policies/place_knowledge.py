@@ -154,13 +154,6 @@ class PlaceKnowledge:
         J = range(self.n_classes) if classes is None else classes
         return np.stack([located(positions, self.landmarks(places, int(j))) for j in J], axis=1)
 
-    def _where(self, positions, places: Places):
-        """``model.log_likelihood``'s signatures of points at ``positions``: computed per object on demand."""
-        from meshsal.points.places import signatures as located
-
-        positions = np.asarray(positions, np.float64)
-        return lambda c, rows: located(positions, self.landmarks(places, int(c)))[rows]
-
     def posterior(self, imprints: np.ndarray, places: Places) -> np.ndarray:
         """(k, C) single-touch posteriors of imprints (k, rows, cols) taken at the first k of ``places``."""
         return self.posterior_at(imprints, places.positions[: len(imprints)], places)
@@ -169,7 +162,11 @@ class PlaceKnowledge:
         """(k, C) single-touch posteriors of imprints taken at ``positions`` (k, 3) on the instance of ``places``."""
         if len(imprints) == 0:
             return np.zeros((0, self.n_classes))
-        return self.model.predict_proba(imprints, self._where(positions, places))
+        positions = np.asarray(positions, np.float64)
+        # Located on an object only when the model asks: when the object is on a touch's shortlist.
+        return self.model.predict_proba(
+            imprints, lambda c, rows: self.signatures_at(positions[rows], places, [c])[:, 0]
+        )
 
     def forecast(self, places: Places, classes=None) -> Forecast:
         """The :class:`Forecast` of an instance's candidate places under ``classes`` (default: every object),

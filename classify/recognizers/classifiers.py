@@ -227,12 +227,11 @@ class KNN(ClassifierMixin, BaseEstimator):
         n_classes = len(self.classes_)
         folds = _inner_folds(codes, groups, self.cv)
         splits = list(_split(codes, groups, folds, self.random_state)) if folds >= 2 and n_classes >= 2 else []
-        scored = np.zeros(len(X), bool)
-        scored[np.argsort(keys, kind="stable")[: int(self.cv_rows)]] = True
-        hits, self.scale_ = _scan_training_set(X, codes, keys, splits, ks, n_classes, np.flatnonzero(scored))
+        scored = np.sort(np.argsort(keys, kind="stable")[: int(self.cv_rows)])
+        hits, self.scale_ = _scan_training_set(X, codes, keys, splits, ks, n_classes, scored)
         self.cv_scores_ = {}
         if splits:
-            self.cv_scores_ = {k: hits[k] / scored.sum() for k in ks}
+            self.cv_scores_ = {k: hits[k] / len(scored) for k in ks}
             best = max(self.cv_scores_.values())
             tied = [k for k in ks if self.cv_scores_[k] == best]
             self.k_ = int(tied[rng.integers(len(tied))])

@@ -80,7 +80,11 @@ def calibrate_rows(values, rest, n_classes: int, calibration: Calibration) -> tu
     return ev / total[:, None], er / total
 
 
-def fit_calibration(proba, y, rows: int = 20000) -> Calibration:
+#: Rows a calibration is fitted on at most.
+CALIBRATION_ROWS = 20000
+
+
+def fit_calibration(proba, y, rows: int = CALIBRATION_ROWS) -> Calibration:
     """The ``(eps, T)`` of the grid minimizing the negative log-likelihood of held-out ``proba``.
 
     Parameters
@@ -105,7 +109,9 @@ def fit_calibration(proba, y, rows: int = 20000) -> Calibration:
     if len(y) == 0:
         return Calibration()
     if len(y) > rows:
-        pick = np.unique(np.linspace(0, len(y) - 1, rows).round().astype(np.int64))
+        from classify.recognizers.shortlist import spread
+
+        pick = spread(len(y), rows)
         P, y = P[pick], y[pick]
     best, best_nll = Calibration(), math.inf
     for eps in _EPS_GRID:

@@ -47,7 +47,7 @@ from sklearn.base import BaseEstimator, ClassifierMixin
 from sklearn.utils.validation import check_is_fitted
 
 from classify.recognizers.banks import Bank, entries, lse, sample_d2, spacing, within_place_whitening
-from classify.recognizers.shortlist import FreeStack, SparseRows, nearest_classes
+from classify.recognizers.shortlist import SHORTLIST, FreeStack, SparseRows, nearest_classes, spread
 
 __all__ = ["PlaceAware", "describe_touches"]
 
@@ -143,7 +143,7 @@ class PlaceAware(ClassifierMixin, BaseEstimator):
         fit_sets=50,
         fit_places=100,
         whiten=True,
-        shortlist=16,
+        shortlist=SHORTLIST,
         fit_objects=64,
         random_state=0,
     ):
@@ -237,7 +237,7 @@ class PlaceAware(ClassifierMixin, BaseEstimator):
         sigs, insts = np.asarray(sigs, np.float64), np.asarray(insts, np.int64)
         # At most fit_places touches of each held-out instance, spread over its places, score the grid.
         C = len(self.banks_)
-        scored = np.unique(np.linspace(0, C - 1, min(C, self.fit_objects)).round().astype(np.int64))
+        scored = spread(C, self.fit_objects)
         keep = []
         for c, t in sorted(set(zip(ys.tolist(), insts.tolist()))):
             if c not in scored:

@@ -23,8 +23,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["FreeStack", "SparseRows", "nearest_classes"]
+__all__ = ["SHORTLIST", "FreeStack", "SparseRows", "nearest_classes", "spread"]
 
+#: Objects scored in full per touch, and hypotheses a forecast holds, by default.
+SHORTLIST = 16
 #: Distances of this many (touch, sample) pairs are held at once.
 _BLOCK = 1 << 22
 
@@ -83,6 +85,17 @@ class FreeStack:
             d2[a : a + step] = np.maximum(D.min(axis=2), 0.0)
             count[a : a + step] = np.isfinite(D).sum(axis=2)
         return d2, count
+
+
+def spread(n: int, k: int) -> np.ndarray:
+    """Indices of at most ``k`` of ``n`` rows, evenly spread over them (all of them when ``n <= k``), increasing.
+
+    Examples
+    --------
+    >>> spread(10, 4).tolist()
+    [0, 3, 6, 9]
+    """
+    return np.unique(np.linspace(0, n - 1, min(n, k)).round().astype(np.int64))
 
 
 def nearest_classes(d2: np.ndarray, H: int) -> np.ndarray:
