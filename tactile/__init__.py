@@ -24,6 +24,8 @@ _EXPORTS = {
     "Perturbation": "perturbation",
     "acquire": "perturbation",
     "touch_codebook": "perturbation",
+    "Acquisition": "perturbation",
+    "acquire_all": "perturbation",
     "select_by_similarity": "selection",
     "ImprintSet": "imprint_set",
     "imprint_grid": "picture",

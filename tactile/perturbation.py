@@ -17,9 +17,9 @@ import numpy as np
 
 from meshsal.mesh import Mesh
 from tactile.raycast import imprints_at
-from tactile.sensor import Sensor, check_points, poses_from_normals, sensor_poses, tangent_frames
+from tactile.sensor import Poses, Sensor, check_points, poses_from_normals, sensor_poses, tangent_frames
 
-__all__ = ["Perturbation", "acquire", "touch_codebook"]
+__all__ = ["Perturbation", "Acquisition", "acquire", "touch_codebook", "acquire_all"]
 
 
 @dataclass(frozen=True)
@@ -194,16 +194,8 @@ def acquire(
     >>> bool((noisy == acquire(plane, [[0, 0, 0]], [[0, 1, 0]], s, Perturbation(noise=0.05, adc_bits=4), rng=1)).all())
     True
     """
-    sensor = Sensor() if sensor is None else sensor
-    perturb = _checked(perturb)
-    # The device (gain map, dead taxels) comes from its own stream: one session's device is the same
-    # whatever points it touches, so methods touching other places meet the same device.
-    device, rng = _rng(rng).spawn(2)
-    gain, dead = _devices(device, perturb, sensor, ())
-    P, N, _ = check_points(positions, normals)
-    if P.shape[0] == 0:
-        return np.zeros((0, sensor.rows, sensor.cols), dtype=np.float32)
-    return _read(_touch(mesh, P, N, sensor, perturb, rng, workers, scene, exact), gain, dead, sensor, perturb, rng)
+    request = Acquisition(positions, normals, Perturbation.none() if perturb is None else perturb, rng)
+    return acquire_all(mesh, [request], sensor, workers, scene, exact)[0]
 
 
 def touch_codebook(
@@ -247,19 +239,120 @@ def touch_codebook(
     >>> book.shape, len({b.tobytes() for b in book[0]})     # four devices: four different readings
     ((2, 4, 16, 16), 4)
     """
+    request = Acquisition(positions, normals, Perturbation.typical() if perturb is None else perturb, rng, draws)
+    return acquire_all(mesh, [request], sensor, workers, scene)[0]
+
+
+@dataclass(frozen=True, eq=False)
+class Acquisition:
+    """One request to :func:`acquire_all`: an acquisition session, or a touch codebook.
+
+    Attributes
+    ----------
+    positions, normals : (k, 3) float64
+        Where the robot is told to touch, and the outward normals there.
+    perturb : Perturbation
+    rng : numpy.random.Generator or int or None
+        The source of this request's draws, as in :func:`acquire`.
+    draws : int or None
+        None: one session on one device, as :func:`acquire` reads it,
+        (k, rows, cols).  An integer: that many touches per point, each its
+        own device, as :func:`touch_codebook` reads them, (k, draws, rows, cols).
+    """
+
+    positions: object
+    normals: object
+    perturb: Perturbation = Perturbation()
+    rng: object = 0
+    draws: int | None = None
+
+
+@dataclass(frozen=True, eq=False)
+class _Placed:
+    """A request's pads after its placement draws (jitter, roll), with its device and what is left of its stream."""
+
+    perturb: Perturbation
+    rng: np.random.Generator
+    gain: np.ndarray
+    dead: np.ndarray
+    positions: np.ndarray
+    normals: np.ndarray
+    angles: np.ndarray
+    shape: tuple
+
+
+def acquire_all(
+    mesh: Mesh, requests, sensor: Sensor | None = None, workers: int | None = None, scene=None, exact: bool = False
+) -> list:
+    """Many acquisitions on one mesh, their pads fitted and cast together.
+
+    Each request reads exactly what :func:`acquire` (or, with ``draws``,
+    :func:`touch_codebook`) reads alone: its draws come from its own
+    stream, and a pad's imprint does not depend on the other pads.  Casting
+    every pad of every request in one call keeps the Embree threads busy
+    and walks the mesh once.
+
+    Parameters
+    ----------
+    mesh : Mesh, in millimetres
+    requests : sequence of Acquisition
+    sensor : Sensor, optional
+    workers, scene, exact : as for :func:`acquire`
+
+    Returns
+    -------
+    list of float32 arrays in [0, 1], one per request, in order
+
+    Examples
+    --------
+    >>> from meshsal.mesh import Mesh
+    >>> plane = Mesh(vertices=[[-50, 0, -50], [50, 0, -50], [50, 0, 50], [-50, 0, 50]],
+    ...              faces=[[0, 2, 1], [0, 3, 2]])
+    >>> s, p = Sensor(mode="pressure"), Perturbation.typical()
+    >>> both = acquire_all(plane, [Acquisition([[0, 0, 0]], [[0, 1, 0]], p, 1), Acquisition([[5, 0, 0]], [[0, 1, 0]], p, 2, 3)], s)
+    >>> [b.shape for b in both], bool((both[0] == acquire(plane, [[0, 0, 0]], [[0, 1, 0]], s, p, 1)).all())
+    ([(1, 16, 16), (1, 3, 16, 16)], True)
+    """
     sensor = Sensor() if sensor is None else sensor
-    perturb = _checked(Perturbation.typical() if perturb is None else perturb)
-    if isinstance(draws, bool) or not isinstance(draws, (int, np.integer)) or draws < 1:
+    placed = [_place(r, sensor) for r in requests]
+    live = [p for p in placed if p.positions.shape[0]]
+    clean = iter(_touch(mesh, live, sensor, workers, scene, exact) if live else ())
+    out = []
+    for p in placed:
+        if p.positions.shape[0] == 0:
+            out.append(np.zeros(p.shape, dtype=np.float32))
+        else:
+            out.append(_read(next(clean), p.gain, p.dead, sensor, p.perturb, p.rng).reshape(p.shape))
+    return out
+
+
+def _place(request: Acquisition, sensor: Sensor) -> _Placed:
+    """Validate a request, draw its device(s), then its pads' jitter and roll."""
+    if not isinstance(request, Acquisition):
+        raise ValueError(f"requests must be tactile.Acquisition records, got {type(request).__name__}")
+    perturb, draws = _checked(request.perturb), request.draws
+    if draws is not None and (isinstance(draws, bool) or not isinstance(draws, (int, np.integer)) or draws < 1):
         raise ValueError(f"draws must be a positive integer, got {draws!r}")
-    P, N, _ = check_points(positions, normals)
+    P, N, _ = check_points(request.positions, request.normals)
     k = P.shape[0]
-    device, rng = _rng(rng).spawn(2)
-    gain, dead = _devices(device, perturb, sensor, (k * draws,))
-    if k == 0:
-        return np.zeros((0, draws, sensor.rows, sensor.cols), dtype=np.float32)
-    P, N = np.repeat(P, draws, axis=0), np.repeat(N, draws, axis=0)
-    images = _read(_touch(mesh, P, N, sensor, perturb, rng, workers, scene, False), gain, dead, sensor, perturb, rng)
-    return images.reshape(k, draws, sensor.rows, sensor.cols)
+    # The device (gain map, dead taxels) comes from its own stream: one session's device is the same
+    # whatever points it touches, so methods touching other places meet the same device.
+    device, rng = _rng(request.rng).spawn(2)
+    gain, dead = _devices(device, perturb, sensor, () if draws is None else (k * draws,))
+    shape = (k, sensor.rows, sensor.cols) if draws is None else (k, draws, sensor.rows, sensor.cols)
+    if draws is not None:
+        P, N = np.repeat(P, draws, axis=0), np.repeat(N, draws, axis=0)
+    if k and perturb.jitter_mm > 0:
+        up, right = tangent_frames(N)
+        step = perturb.jitter_mm * rng.standard_normal((len(P), 2))
+        P = P + step[:, :1] * right + step[:, 1:] * up
+    if not k:
+        angles = np.zeros(0)
+    elif perturb.uniform_rotation:
+        angles = rng.uniform(0.0, 360.0, len(P))
+    else:
+        angles = perturb.rotation_deg * rng.standard_normal(len(P)) if perturb.rotation_deg > 0 else np.zeros(len(P))
+    return _Placed(perturb, rng, gain, dead, P, N, angles, shape)
 
 
 def _checked(perturb) -> Perturbation:
@@ -277,26 +370,30 @@ def _devices(device: np.random.Generator, perturb: Perturbation, sensor: Sensor,
     return gain, dead
 
 
-def _touch(mesh, P, N, sensor, perturb, rng, workers, scene, exact) -> np.ndarray:
-    """Clean images of pads placed with the perturbation's placement errors (jitter, roll, tilt)."""
-    k = P.shape[0]
-    if perturb.jitter_mm > 0:
-        up, right = tangent_frames(N)
-        step = perturb.jitter_mm * rng.standard_normal((k, 2))
-        P = P + step[:, :1] * right + step[:, 1:] * up
-    if perturb.uniform_rotation:
-        angles = rng.uniform(0.0, 360.0, k)
-    else:
-        angles = perturb.rotation_deg * rng.standard_normal(k) if perturb.rotation_deg > 0 else np.zeros(k)
+def _touch(mesh, placed: list, sensor: Sensor, workers, scene, exact: bool) -> list:
+    """Clean images of every request's pads, tilted by its draws: one pose fit and one cast for all."""
+    cuts = np.cumsum([len(p.positions) for p in placed])[:-1]
+    P, A = np.concatenate([p.positions for p in placed]), np.concatenate([p.angles for p in placed])
     # The same pose chain as tactile.imprints, so a clean acquisition is bit-identical.
-    poses = sensor_poses(mesh, P, N, sensor, angles)
-    if perturb.tilt_deg > 0:
-        poses = poses_from_normals(P, _tilt(poses.normals, perturb.tilt_deg, rng), angles)
+    fitted = sensor_poses(mesh, P, np.concatenate([p.normals for p in placed]), sensor, A)
+    parts = []
+    for p, part in zip(placed, _split(fitted, cuts)):
+        if p.perturb.tilt_deg > 0:
+            part = poses_from_normals(p.positions, _tilt(part.normals, p.perturb.tilt_deg, p.rng), p.angles)
+        parts.append(part)
+    poses = Poses(*(np.concatenate([getattr(q, f) for q in parts]) for f in ("centers", "normals", "ups", "rights")))
     if exact:
         from tactile.section import imprints_exact_at
 
-        return imprints_exact_at(mesh, poses, sensor)
-    return imprints_at(mesh, poses, sensor, workers, scene=scene)
+        images = imprints_exact_at(mesh, poses, sensor)
+    else:
+        images = imprints_at(mesh, poses, sensor, workers, scene=scene)
+    return np.split(images, cuts)
+
+
+def _split(poses: Poses, cuts) -> list:
+    fields = [np.split(getattr(poses, f), cuts) for f in ("centers", "normals", "ups", "rights")]
+    return [Poses(*f) for f in zip(*fields)]
 
 
 def _read(images, gain, dead, sensor: Sensor, perturb: Perturbation, rng) -> np.ndarray:

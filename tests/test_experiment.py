@@ -301,13 +301,14 @@ def test_every_method_and_classifier_of_a_replicate_meets_the_same_instances_dev
     from classify.runtime import cache as cache_module
 
     acquired, touch_sets, current = Counter(), defaultdict(list), {}
-    real_acquire, real_recognition = tactile.acquire, run_module.instance_recognition
+    real_acquire, real_recognition = tactile.acquire_all, run_module.instance_recognition
     real_job, real_sets = stages.instance_job, protocols.touch_sets
 
-    def spy_acquire(mesh, positions, normals, sensor, perturbation, rng, **kwargs):
-        # The instance (its mesh) and the session's stream (hence its device), before any draw.
-        acquired[cache_module.hash_arrays(mesh.vertices), repr(rng.bit_generator.state)] += 1
-        return real_acquire(mesh, positions, normals, sensor, perturbation, rng, **kwargs)
+    def spy_acquire(mesh, requests, *args, **kwargs):
+        # The instance (its mesh) and each session's stream (hence its device), before any draw.
+        for r in requests:
+            acquired[cache_module.hash_arrays(mesh.vertices), repr(r.rng.bit_generator.state)] += 1
+        return real_acquire(mesh, requests, *args, **kwargs)
 
     def spy_recognition(method, *args):
         current["method"] = method
@@ -322,7 +323,7 @@ def test_every_method_and_classifier_of_a_replicate_meets_the_same_instances_dev
         touch_sets[current["method"], current["classifier"]].append((current["replicate"], k, n, out.tobytes()))
         return out
 
-    monkeypatch.setattr(tactile, "acquire", spy_acquire)
+    monkeypatch.setattr(tactile, "acquire_all", spy_acquire)
     monkeypatch.setattr(run_module, "instance_recognition", spy_recognition)
     monkeypatch.setattr(stages, "instance_job", spy_job)
     monkeypatch.setattr(protocols, "touch_sets", spy_sets)

@@ -145,3 +145,42 @@ def test_acquire_rejects_bad_rng_and_perturbation(surface):
 def test_perturbation_flags():
     assert Perturbation.none().is_clean and not Perturbation.typical().is_clean
     assert Perturbation(**Perturbation.typical().to_dict()) == Perturbation.typical()
+
+
+@pytest.mark.parametrize("exact", [False, True])
+def test_requests_cast_together_read_what_each_reads_alone(surface, exact):
+    # Sessions and codebooks mixed, every placement error on, one request with no point: each its own stream.
+    perturb = Perturbation.typical()
+    tilted = Perturbation(jitter_mm=0.5, tilt_deg=5.0, rotation_deg=10.0, noise=0.01)
+    requests = [
+        tactile.Acquisition(P, N, perturb, 1),
+        tactile.Acquisition(P[:0], N[:0], perturb, 2),
+        tactile.Acquisition(P[1:3], N[1:3], tilted, np.random.default_rng(3), draws=3),
+        tactile.Acquisition(P[::-1], N, tilted, 4),
+    ]
+    together = tactile.acquire_all(surface, requests, Sensor(), exact=exact)
+    alone = [
+        acquire(surface, P, N, Sensor(), perturb, 1, exact=exact),
+        acquire(surface, P[:0], N[:0], Sensor(), perturb, 2, exact=exact),
+        tactile.touch_codebook(surface, P[1:3], N[1:3], Sensor(), tilted, 3, np.random.default_rng(3))
+        if not exact
+        else tactile.acquire_all(
+            surface, [tactile.Acquisition(P[1:3], N[1:3], tilted, np.random.default_rng(3), 3)], exact=True
+        )[0],
+        acquire(surface, P[::-1], N, Sensor(), tilted, 4, exact=exact),
+    ]
+    assert [t.shape for t in together] == [(4, 16, 16), (0, 16, 16), (2, 3, 16, 16), (4, 16, 16)]
+    for t, a in zip(together, alone):
+        np.testing.assert_array_equal(t, a)
+    # The same points in another order read the same images, reordered: no pad depends on the others.
+    assert not np.array_equal(together[0], together[3][::-1])  # other streams, other readings
+    clean = tactile.acquire_all(surface, [tactile.Acquisition(P, N), tactile.Acquisition(P[::-1], N)], exact=exact)
+    np.testing.assert_array_equal(clean[0], clean[1][::-1])
+
+
+def test_acquire_all_rejects_what_is_not_a_request(surface):
+    with pytest.raises(ValueError, match="tactile.Acquisition"):
+        tactile.acquire_all(surface, [(P, N)])
+    with pytest.raises(ValueError, match="draws must be a positive integer"):
+        tactile.acquire_all(surface, [tactile.Acquisition(P, N, draws=0)])
+    assert tactile.acquire_all(surface, []) == []

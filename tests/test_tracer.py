@@ -198,3 +198,24 @@ def test_renders_of_a_scanned_bust_match_a_robust_scene(shared_mesh):
         np.testing.assert_array_equal(a.mask, r.mask)
         np.testing.assert_allclose(a.depth[a.mask], r.depth[r.mask], atol=0.01 * a.pixel_size)
         assert np.mean(a.face_id != r.face_id) < 1e-3  # ties on shared edges
+
+
+def test_a_robust_scene_held_elsewhere_takes_every_slipped_ray():
+    mesh = _sphere(3)
+    origins, directions = _rays_through_vertices(mesh)
+    shared, asked = embree_scene(mesh), []
+
+    def held():
+        asked.append(1)
+        return shared
+
+    given = tracer(mesh, robust=held)
+    assert given.local_rays == 0 and tracer(mesh).local_rays == _LOCAL_RAYS
+    o, d = origins[:40], directions[:40]
+    slip = np.zeros(len(o), bool)
+    slip[:2] = True  # two rays: without the shared scene, a small local one would take them
+    trace = Tracer(
+        mesh=mesh, fast=_Slipping(mesh, slip), facing=given.facing, robust=given.robust, reach=_refuse, local_rays=0
+    )
+    _assert_robust_answers(mesh, trace.first_hits(o, d), _run(shared, o, d))
+    assert asked == [1]

@@ -234,36 +234,37 @@ def process_mesh(path, name: str, store, settings: BatchSettings) -> dict:
 def _compute(source, path: Path, name: str, store: Path, settings: BatchSettings, timings: dict, digest: str) -> None:
     import tactile
     from classify.runtime.cache import hash_arrays
-    from meshsal.mesh.curvature import mesh_saliency
-    from meshsal.mesh.embree import embree_scene
     from meshsal.mesh.transform import scale_to_principal
-    from meshsal.points import PointOptions, method_points
+    from meshsal.points import PointOptions, Workpiece, method_points
 
     t = time.perf_counter()
     mesh = scale_to_principal(source, settings.size_mm)
     timings["load"] += time.perf_counter() - t
+    piece = Workpiece(mesh, settings.view_size, threads=1)
     t = time.perf_counter()
-    saliency = mesh_saliency(mesh)
+    arrays = {"vertex_saliency": piece.vertex_saliency}
     timings["mesh_saliency"] = time.perf_counter() - t
-    arrays = {"vertex_saliency": saliency}
-    methods = {}
-    timings["imprints"] = 0.0
-    scene = embree_scene(mesh)
     sensor = tactile.Sensor()
     t = time.perf_counter()
     options = PointOptions(
         n=settings.n_points, seed=settings.seed, size=settings.view_size, threads=1, pad_width=sensor.width_mm
     )
-    picked = method_points(mesh, settings.methods, options, vertex_saliency=saliency, scene=scene)
+    picked = method_points(piece, settings.methods, options)
     timings["points"] = time.perf_counter() - t
-    for method in settings.methods:
-        pts = picked[method]
-        t = time.perf_counter()
-        images = tactile.imprints(mesh, pts.positions, pts.normals, sensor, workers=1, scene=scene)
-        timings["imprints"] += time.perf_counter() - t
-        point_arrays, methods[method] = pts.to_arrays()
+    t = time.perf_counter()
+    # Every method's pads in one cast: a pad's imprint does not depend on the others.
+    P = np.concatenate([picked[m].positions for m in settings.methods]).reshape(-1, 3)
+    N = np.concatenate([picked[m].normals for m in settings.methods]).reshape(-1, 3)
+    images = np.split(
+        np.asarray(tactile.imprints(mesh, P, N, sensor, workers=1, scene=piece.scene), np.float32),
+        np.cumsum([len(picked[m]) for m in settings.methods])[:-1],
+    )
+    timings["imprints"] = time.perf_counter() - t
+    methods = {}
+    for method, imprints in zip(settings.methods, images):
+        point_arrays, methods[method] = picked[method].to_arrays()
         arrays.update({f"{method}/{key}": value for key, value in point_arrays.items()})
-        arrays[f"{method}/imprints"] = np.asarray(images, np.float32)
+        arrays[f"{method}/imprints"] = imprints
     t = time.perf_counter()
     frame = mesh.transform
     meta = {

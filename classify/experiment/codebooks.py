@@ -21,25 +21,27 @@ from classify.runtime import cache as cache_mod
 __all__ = ["codebook_descriptors", "training_codebooks"]
 
 
-def codebook_descriptors(mesh, positions, normals, settings: Settings, rng, scene, where: str) -> np.ndarray:
-    """Polar descriptors of a touch codebook at k points of a training instance, (k, draws, d) float32.
+def codebook_descriptors(mesh, books: list, settings: Settings, scene) -> list:
+    """Polar descriptors of touch codebooks at points of a training instance, one (k, draws, d) float32 per book.
 
-    ``settings.codebook_draws`` touches per point (``tactile.touch_codebook``:
-    each its own device, roll, jitter and tilt, under ``settings.perturbation``).
-    ``where`` names the points in errors.
+    ``books`` holds ``(positions, normals, rng, where)`` per book: its k
+    points, the source of its draws and what names them in errors.  Each
+    point gets ``settings.codebook_draws`` touches (``tactile.touch_codebook``:
+    each its own device, roll, jitter and tilt, under ``settings.perturbation``),
+    and every book's touches are cast together (``tactile.acquire_all``).
     """
     import tactile
     from tactile.features import polar_fourier
 
-    positions = np.asarray(positions, np.float64).reshape(-1, 3)
-    if len(positions) == 0:
-        raise ValueError(f"{where}: no touchable place, so no touch codebook can be built")
     draws = settings.codebook_draws
-    book = tactile.touch_codebook(
-        mesh, positions, normals, settings.sensor, settings.perturbation, draws, rng, scene=scene
-    )
-    d = polar_fourier(book.reshape(-1, *book.shape[2:]))
-    return d.reshape(len(positions), draws, -1).astype(np.float32)
+    requests = []
+    for positions, normals, rng, where in books:
+        positions = np.asarray(positions, np.float64).reshape(-1, 3)
+        if len(positions) == 0:
+            raise ValueError(f"{where}: no touchable place, so no touch codebook can be built")
+        requests.append(tactile.Acquisition(positions, normals, settings.perturbation, rng, draws))
+    read = tactile.acquire_all(mesh, requests, settings.sensor, scene=scene)
+    return [polar_fourier(b.reshape(-1, *b.shape[2:])).reshape(len(b), draws, -1).astype(np.float32) for b in read]
 
 
 def training_codebooks(task, places, by_method: dict, instance, places_key, keys: dict):
@@ -51,7 +53,7 @@ def training_codebooks(task, places, by_method: dict, instance, places_key, keys
     task : classify.experiment.samples.SampleTask, a training instance's
     places : classify.policies.PlaceSample or None, its places
     by_method : dict method -> classify.experiment.samples.TouchSample, its points
-    instance : callable giving (mesh, vertex saliency, Embree scene), built on first need
+    instance : callable giving the instance's ``meshsal.points.Workpiece``, built on first need
     places_key, keys : the cache keys of the places' codebook and of each method's
 
     Returns
@@ -64,28 +66,31 @@ def training_codebooks(task, places, by_method: dict, instance, places_key, keys
     def rng(*more):
         return instance_rng(settings.seed, task.name, task.replicate, task.index, Stream.CODEBOOK, *more)
 
-    def book(key, positions, normals, draw, label):
-        stored = cache_mod.load(task.cache_dir, key)
-        if stored is None:
-            mesh, _, scene = instance()
-            stored = {"codebook": codebook_descriptors(mesh, positions, normals, settings, draw, scene, label)}
-            cache_mod.store(task.cache_dir, key, stored)
-        return stored["codebook"]
-
+    wanted = {}
     if places is not None:
         ok = places.places.touchable
-        touched = book(
-            places_key, places.places.positions[ok], places.places.normals[ok], rng(0), f"{where}: candidate places"
+        wanted[places_key] = (
+            places.places.positions[ok],
+            places.places.normals[ok],
+            rng(0),
+            f"{where}: candidate places",
         )
-        full = np.zeros((len(ok), *touched.shape[1:]), np.float32)
-        full[ok] = touched
-        places = dataclasses.replace(places, codebook=full)
-    out = {}
     for m, sample in by_method.items():
         if len(sample.positions) == 0:
             raise ValueError(f"{where}: method {m} found no touchable point, so no touch codebook can be built")
-        out[m] = dataclasses.replace(
-            sample,
-            codebook=book(keys[m], sample.positions, sample.normals, rng(1, name_seed(m)), f"{where}: {m} points"),
-        )
+        wanted[keys[m]] = (sample.positions, sample.normals, rng(1, name_seed(m)), f"{where}: {m} points")
+    books = {key: cache_mod.load(task.cache_dir, key) for key in wanted}
+    missing = [key for key, stored in books.items() if stored is None]
+    if missing:
+        piece = instance()
+        made = codebook_descriptors(piece.mesh, [wanted[key] for key in missing], settings, piece.scene)
+        for key, codebook in zip(missing, made):
+            books[key] = {"codebook": codebook}
+            cache_mod.store(task.cache_dir, key, books[key])
+    if places is not None:
+        touched = books[places_key]["codebook"]
+        full = np.zeros((len(ok), *touched.shape[1:]), np.float32)
+        full[ok] = touched
+        places = dataclasses.replace(places, codebook=full)
+    out = {m: dataclasses.replace(sample, codebook=books[keys[m]]["codebook"]) for m, sample in by_method.items()}
     return places, out

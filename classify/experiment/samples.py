@@ -15,7 +15,7 @@ on how the object was turned in its file).  Its *instances*
 within ±5 % and repainted.  Instance 0 of a replicate is the test instance;
 instances 1..``train_instances`` train.
 
-Every acquisition session is one call of ``tactile.acquire`` under
+Every acquisition session is one ``tactile.Acquisition`` under
 ``Settings.perturbation``: its own device (gain map, dead taxels) and a free
 roll per touch, drawn from the session's stream.  None of those draws
 depends on the point method, so every method meets the same instances and
@@ -47,7 +47,7 @@ __all__ = [
     "instance_spec",
     "point_options",
     "paper_sample",
-    "place_sample",
+    "candidate_places_at",
     "test_perturbation",
     "instance_mesh",
     "instance_samples",
@@ -248,59 +248,46 @@ def test_perturbation(settings: Settings, index: int):
     return p
 
 
-def _acquire(mesh, positions, normals, task: SampleTask, session: int, scene):
-    """One acquisition session of the instance: its device and rolls; exact sections on a test instance of the
-    ``exact`` mismatch arm."""
+def _session(positions, normals, task: SampleTask, session: int):
+    """Acquisition session ``session`` of the instance at k points (``tactile.Acquisition``): its device and rolls
+    come from the session's stream, so every method meets the same ones."""
     import tactile
 
     settings = task.settings
-    return tactile.acquire(
-        mesh,
+    return tactile.Acquisition(
         positions,
         normals,
-        settings.sensor,
         test_perturbation(settings, task.index),
         instance_rng(settings.seed, task.name, task.replicate, task.index, Stream.SESSION, session),
-        scene=scene,
-        exact=task.index == 0 and "exact" in settings.mismatch,
     )
 
 
-def _sessions(mesh, pts, task: SampleTask, scene) -> TouchSample:
-    """The acquisition sessions of one instance at its points: the same devices and rolls for every method."""
+def _acquired(piece, requests: dict, task: SampleTask) -> dict:
+    """Every requested session of the instance, cast together: key -> (k, rows, cols) float32.  A test instance
+    of the ``exact`` mismatch arm is sliced exactly instead."""
+    import tactile
+
     settings = task.settings
-    sessions = 1 if task.index == 0 else settings.train_sessions
-    stack = [_acquire(mesh, pts.positions, pts.normals, task, s, scene) for s in range(sessions)]
-    return TouchSample(
-        np.asarray(pts.positions, np.float64),
-        np.asarray(pts.normals, np.float64),
-        np.asarray(stack, np.float32).reshape(sessions, len(pts), *stack[0].shape[1:]),
-    )
+    exact = task.index == 0 and "exact" in settings.mismatch
+    read = tactile.acquire_all(piece.mesh, list(requests.values()), settings.sensor, scene=piece.scene, exact=exact)
+    return dict(zip(requests, read))
 
 
-def place_sample(mesh, ids, features, task: SampleTask, scene) -> PlaceSample:
-    """An instance's candidate places, what vision sees there, and the imprints its sessions give there.
+def candidate_places_at(piece, ids, features, settings: Settings) -> Places:
+    """An instance's candidate places (``ids``, (P,) vertex ids of ``meshsal.points.places.candidate_places``),
+    what vision sees there (``features``, (P, len(FEATURES)) of ``point_features``) and which the pad can touch.
 
-    ``ids`` (P,) are the instance's ``meshsal.points.places.candidate_places``
-    and ``features`` (P, len(FEATURES)) their ``point_features``.  The test
-    instance has its one session, a training instance one session too
-    (every place, instead of a method's n points): session 0 of the same
-    streams as the methods' sessions, so the same devices.
+    Their imprints are session 0 of the instance (:func:`instance_samples`):
+    the same streams as the methods' sessions, so the same devices.
     """
-    from meshsal.mesh import vertex_normals
     from meshsal.points.touch import touchable
 
-    settings = task.settings
-    vn = vertex_normals(mesh.vertices, mesh.faces)
-    positions, normals = mesh.vertices[ids], vn[ids]
-    places = Places(
-        ids, positions, normals, features, touchable(mesh, positions, normals, settings.sensor.width_mm, scene=scene)
-    )
-    imprints = _acquire(mesh, positions, normals, task, 0, scene)
-    return PlaceSample(places, np.asarray(imprints, np.float32)[None])
+    positions, normals = piece.mesh.vertices[ids], piece.vertex_normals[ids]
+    ok = touchable(piece.mesh, positions, normals, settings.sensor.width_mm, scene=piece.scene)
+    return Places(ids, positions, normals, features, ok)
 
 
-def _looked_at(mesh, seen, vertex_saliency, settings: Settings, places: bool):
+def _looked_at(piece, settings: Settings, places: bool):
     """The candidate pool, the places to touch (the pool alone unless ``places``) and what vision sees at them.
 
     The survey's pool is the places' first rows, and a vertex's features do
@@ -310,14 +297,15 @@ def _looked_at(mesh, seen, vertex_saliency, settings: Settings, places: bool):
     from meshsal.points.learned import point_features
     from meshsal.points.places import candidate_places, candidate_pool
 
+    mesh, seen = piece.mesh, piece.seen
     pool = candidate_pool(mesh, settings.n_points)
-    ids = candidate_places(mesh, vertex_saliency, settings.n_points, pool=pool) if places else pool
+    ids = candidate_places(mesh, piece.vertex_saliency, settings.n_points, pool=pool) if places else pool
     features = point_features(
         mesh,
         seen.views,
         seen.results,
         attention_maps(seen, "equal"),
-        vertex_saliency,
+        piece.vertex_saliency,
         ids,
         0.5 * settings.sensor.width_mm,
     )
@@ -347,10 +335,13 @@ def instance_samples(task: SampleTask) -> InstanceSamples:
     """One instance: each method's points and the imprints of its sessions, its survey, places and codebooks if asked.
 
     Instance 0 is the test instance (one session), the others train
-    (``settings.train_sessions`` sessions each).  The instance is built,
-    rendered and its mesh saliency computed once for all methods
-    (:func:`meshsal.points.method_points`); each method's sample is cached on its own, so
-    adding a method later reuses the others.  The model methods take the
+    (``settings.train_sessions`` sessions each).  The instance is one
+    ``meshsal.points.Workpiece``, passed to every stage: its scene is built,
+    its mesh saliency computed and its views rendered once, when first
+    needed, for all methods (:func:`meshsal.points.method_points`), the
+    survey, the places and the codebooks.  Every method's sessions and the
+    places' are cast in one call (``tactile.acquire_all``).  Each method's
+    sample is cached on its own, so adding a method later reuses the others.  The model methods take the
     replicate's ``model``: "learned" chooses from the instance's ``surveyed``
     pool without rendering, "attention_learned" renders with the model's
     channel weights.  A training instance's codebooks (``task.codebook``)
@@ -361,7 +352,7 @@ def instance_samples(task: SampleTask) -> InstanceSamples:
     -------
     InstanceSamples
     """
-    from meshsal.points import ATTENTION_METHODS, MODEL_METHODS, method_points
+    from meshsal.points import MODEL_METHODS, PointOptions, method_points
 
     settings = task.settings
     methods = list(dict.fromkeys(task.methods))
@@ -390,43 +381,26 @@ def instance_samples(task: SampleTask) -> InstanceSamples:
         places = None if stored is None else PlaceSample.from_arrays(stored)
     missing = [m for m in methods if m not in by_method]
     want_survey, want_places = task.survey and survey is None, task.places and places is None
-    built = {}
+    built = []
 
     def instance():
-        """The mesh, its mesh saliency and its Embree scene, built on first need."""
-        if not built:
-            from meshsal.mesh.curvature import mesh_saliency
-            from meshsal.mesh.embree import embree_scene
+        """The instance's workpiece (mesh, Embree scene, mesh saliency, views), built on first need."""
+        from meshsal.points.workpiece import Workpiece
 
-            mesh = instance_mesh(task)
-            built.update(mesh=mesh, saliency=mesh_saliency(mesh), scene=embree_scene(mesh))
-        return built["mesh"], built["saliency"], built["scene"]
+        if not built:
+            built.append(Workpiece(instance_mesh(task), settings.view_size or PointOptions.size, task.threads))
+        return built[0]
 
     if missing or want_survey or want_places:
-        mesh, vertex_saliency, scene = instance()
-        seen = None
-        if any(m in ATTENTION_METHODS for m in missing) or want_survey or want_places:
-            from meshsal.points import view_channels
-
-            seen = view_channels(
-                mesh, size=settings.view_size or 128, vertex_saliency=vertex_saliency, threads=task.threads
-            )
+        piece = instance()
         options = point_options(settings, _point_seed(settings, task.name, task.replicate, task.index), task.threads)
-        picked = method_points(
-            mesh,
-            missing,
-            options,
-            model=task.model,
-            surveyed=task.surveyed,
-            vertex_saliency=vertex_saliency,
-            seen=seen,
-            scene=scene,
-        )
-        for m in missing:
-            by_method[m] = _sessions(mesh, picked[m], task, scene)
-            cache_mod.store(task.cache_dir, keys[m], by_method[m].to_arrays())
+        picked = method_points(piece, missing, options, model=task.model, surveyed=task.surveyed)
+        sessions = 1 if task.index == 0 else settings.train_sessions
+        requests = {
+            (m, s): _session(picked[m].positions, picked[m].normals, task, s) for m in missing for s in range(sessions)
+        }
         if want_survey or want_places:
-            pool, ids, features = _looked_at(mesh, seen, vertex_saliency, settings, want_places)
+            pool, ids, features = _looked_at(piece, settings, want_places)
         if want_survey:
             # The test instance is never touched before the test.
             rng = (
@@ -434,10 +408,22 @@ def instance_samples(task: SampleTask) -> InstanceSamples:
                 if task.index >= 1
                 else None
             )
-            survey = touch_survey(mesh, pool, features[: pool.size], settings, scene, rng)
+            survey = touch_survey(piece.mesh, pool, features[: pool.size], settings, piece.scene, rng)
             cache_mod.store(task.cache_dir, survey_key, survey.to_arrays())
         if want_places:
-            places = place_sample(mesh, ids, features, task, scene)
+            at = candidate_places_at(piece, ids, features, settings)
+            requests["places", 0] = _session(at.positions, at.normals, task, 0)
+        read = _acquired(piece, requests, task)
+        for m in missing:
+            pts = picked[m]
+            by_method[m] = TouchSample(
+                np.asarray(pts.positions, np.float64),
+                np.asarray(pts.normals, np.float64),
+                np.stack([read[m, s] for s in range(sessions)]).astype(np.float32),
+            )
+            cache_mod.store(task.cache_dir, keys[m], by_method[m].to_arrays())
+        if want_places:
+            places = PlaceSample(at, read["places", 0][None].astype(np.float32))
             cache_mod.store(task.cache_dir, places_key, places.to_arrays())
     if books:
         places, by_method = training_codebooks(task, places, by_method, instance, places_book_key, book_keys)

@@ -33,18 +33,19 @@ class ViewChannels:
     results: list
 
 
-def _rig_views(mesh: Mesh, size: int, threads: int | None) -> list:
+def _rig_views(mesh: Mesh, size: int, threads: int | None, scene=None) -> list:
     from meshsal.views.cameras import view_rig
     from meshsal.views.render import render_views
 
-    return render_views(mesh, [c for s in view_rig() for c in s], size=size, threads=threads)
+    return render_views(mesh, [c for s in view_rig() for c in s], size=size, threads=threads, scene=scene)
 
 
 def view_channels(
-    mesh: Mesh, size: int = 128, vertex_saliency=None, threads: int | None = None, quiet: bool = True
+    mesh: Mesh, size: int = 128, vertex_saliency=None, threads: int | None = None, quiet: bool = True, scene=None
 ) -> ViewChannels:
-    """Render the rig's 72 views and compute each one's channels (arguments as in :func:`saliency_maps`)."""
-    views = _rig_views(mesh, size, threads)
+    """Render the rig's 72 views and compute each one's channels (arguments as in :func:`saliency_maps`;
+    ``scene`` as in :func:`meshsal.views.render.render_views`)."""
+    views = _rig_views(mesh, size, threads, scene)
     return ViewChannels(
         views,
         saliency_views(views, mesh, vertex_saliency=vertex_saliency, threads=threads, quiet=quiet, normalize=False),

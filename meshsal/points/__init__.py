@@ -6,7 +6,8 @@ dispatcher (``methods``); the paper's attention pipeline (``attend``), the
 baselines (``baselines``) and the learned touch saliency (``learned``); the
 selection they share: spacing, the touch check, the fill (``select``, on
 ``sampling`` and ``touch``); the record of chosen points and its files
-(``record``).
+(``record``); the record of a mesh being worked on, which every stage
+shares (``workpiece``).
 """
 
 from meshsal.attention.rig import ViewChannels, attention_maps, saliency_maps, view_channels
@@ -25,6 +26,7 @@ from meshsal.points.methods import (
 )
 from meshsal.points.record import InterestPoints
 from meshsal.points.rules import COMBINATIONS, PointOptions, Rules, default_min_spacing
+from meshsal.points.workpiece import Workpiece
 from meshsal.views.paper_projection import project_pixel_paper
 
 __all__ = [
@@ -51,4 +53,5 @@ __all__ = [
     "learned_points",
     "points_by_method",
     "method_points",
+    "Workpiece",
 ]

@@ -157,6 +157,7 @@ def attention_points(
     combination: str = "equal",
     method: str = "attention",
     scene=None,
+    touch: TouchFilter | None = None,
     **changes,
 ) -> InterestPoints:
     """Steps 2-5 of the pipeline on views and saliency maps already computed.
@@ -178,6 +179,8 @@ def attention_points(
     scene : optional
         The mesh's Embree scene (:func:`meshsal.mesh.embree.embree_scene`) for the touch check, built
         when omitted.
+    touch : TouchFilter, optional
+        The touch check the methods of one call share (built on ``scene`` when omitted).
 
     Returns
     -------
@@ -207,7 +210,7 @@ def attention_points(
     votes, _ = view_votes(graph, salient, found.vertex_ids, spacing)
     peaks = found.take(np.lexsort((np.arange(len(found)), -scores, -votes)))
     seen = _best_set_values(mesh, views, maps, set_views)
-    checker = TouchFilter(mesh, rules, scene) if rules.touch else None
+    checker = (touch or TouchFilter(mesh, rules, scene)) if rules.touch else None
     chosen, lost = select(
         peaks,
         saliency_fill(mesh, vn, vertex_saliency, lambda i: seen[i]),

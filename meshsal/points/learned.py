@@ -283,6 +283,8 @@ def learned_points(
     model: TouchModel,
     vertex_saliency: np.ndarray,
     rules: Rules | None = None,
+    scene=None,
+    touch=None,
     **changes,
 ) -> InterestPoints:
     """The "learned" method on a candidate pool whose features are known.
@@ -301,6 +303,8 @@ def learned_points(
     rules : Rules, optional
         Default ``PointOptions(**changes).rules(mesh)`` (``n``, ``min_spacing``, ``pad_width``, ``touch``,
         ``touch_tolerance``).
+    scene, touch : optional
+        As in :func:`meshsal.points.select.choose_without_views`.
 
     Returns
     -------
@@ -316,4 +320,6 @@ def learned_points(
     vn = vertex_normals(mesh.vertices, mesh.faces)
     floor = float(predicted.min()) - 1.0 if predicted.size else 0.0
     first = vertex_candidates(mesh, vn, pool[order], predicted[order])
-    return choose_without_views(mesh, vn, vertex_saliency, first, lambda i: np.full(i.size, floor), rules, "learned")
+    return choose_without_views(
+        mesh, vn, vertex_saliency, first, lambda i: np.full(i.size, floor), rules, "learned", scene, touch
+    )

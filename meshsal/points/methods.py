@@ -18,14 +18,15 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from meshsal.attention.rig import ViewChannels, attention_maps, view_channels
-from meshsal.mesh import Mesh, vertex_normals
+from meshsal.attention.rig import ViewChannels, attention_maps
+from meshsal.mesh import Mesh
 from meshsal.points import baselines
-from meshsal.points.attend import attention_points, check_field
+from meshsal.points.attend import attention_points
 from meshsal.points.learned import candidate_pool, learned_points, point_features
 from meshsal.points.record import InterestPoints
 from meshsal.points.rules import PointOptions, Rules
-from meshsal.points.select import choose_without_views
+from meshsal.points.select import TouchFilter, choose_without_views
+from meshsal.points.workpiece import Workpiece
 from meshsal.util.registry import Registry
 
 __all__ = [
@@ -50,19 +51,35 @@ ATTENTION_METHODS = {"attention": "equal", "attention_itti": "itti", "attention_
 class MeshContext:
     """What a method may use on one mesh, computed once for every method of a call.
 
-    ``maps`` holds the combined saliency maps of each combination some
-    method of the call asked for, keyed by :func:`_maps_key`.
+    ``piece`` holds the mesh and what is computed of it on first use (its
+    scene, normals, mesh saliency, views); ``maps`` the combined saliency
+    maps of each combination some method of the call asked for, keyed by
+    :func:`_maps_key`; ``touch`` the touch check they share (None when the
+    rules do not check touches).
     """
 
-    mesh: Mesh
-    vertex_normals: np.ndarray
-    vertex_saliency: np.ndarray
+    piece: Workpiece
     rules: Rules
     options: PointOptions
     model: object = None
-    seen: ViewChannels | None = None
     maps: dict | None = None
-    scene: object = None
+    touch: TouchFilter | None = None
+
+    @property
+    def mesh(self) -> Mesh:
+        return self.piece.mesh
+
+    @property
+    def vertex_normals(self) -> np.ndarray:
+        return self.piece.vertex_normals
+
+    @property
+    def vertex_saliency(self) -> np.ndarray:
+        return self.piece.vertex_saliency
+
+    @property
+    def seen(self) -> ViewChannels:
+        return self.piece.seen
 
     def maps_of(self, combination: str, weights=None) -> np.ndarray:
         return self.maps[_maps_key(combination, weights)]
@@ -112,7 +129,7 @@ def _attention(name, ctx: MeshContext) -> InterestPoints:
         ctx.rules,
         combination=mode,
         method=name,
-        scene=ctx.scene,
+        touch=ctx.touch,
     )
 
 
@@ -128,7 +145,7 @@ def _learned(name, ctx: MeshContext) -> InterestPoints:
         ctx.rules.min_spacing,
         ctx.rules.threshold,
     )
-    return learned_points(ctx.mesh, pool, features, ctx.model, ctx.vertex_saliency, ctx.rules)
+    return learned_points(ctx.mesh, pool, features, ctx.model, ctx.vertex_saliency, ctx.rules, touch=ctx.touch)
 
 
 def _baseline(candidates):
@@ -137,7 +154,14 @@ def _baseline(candidates):
             ctx.mesh, ctx.vertex_normals, ctx.rules.n, np.random.default_rng(ctx.options.seed), ctx.vertex_saliency
         )
         return choose_without_views(
-            ctx.mesh, ctx.vertex_normals, ctx.vertex_saliency, first, lambda i: field[i], ctx.rules, name, ctx.scene
+            ctx.mesh,
+            ctx.vertex_normals,
+            ctx.vertex_saliency,
+            first,
+            lambda i: field[i],
+            ctx.rules,
+            name,
+            touch=ctx.touch,
         )
 
     return choose
@@ -179,7 +203,7 @@ MODEL_METHODS = tuple(e.name for e in POINT_METHODS if e.value.needs_model)
 
 
 def points_by_method(
-    mesh: Mesh,
+    mesh: Mesh | Workpiece,
     methods,
     options: PointOptions | None = None,
     *,
@@ -193,7 +217,10 @@ def points_by_method(
 
     Parameters
     ----------
-    mesh : Mesh
+    mesh : Mesh or Workpiece
+        A :class:`~meshsal.points.workpiece.Workpiece` brings what is already
+        computed of the mesh (its views at ``options.size``) and keeps what
+        this call computes for the caller's next stages.
     methods : iterable of str, names in ``POINT_METHODS``
     options : PointOptions, optional
         Changed by any ``**changes`` (``n=``, ``seed=``, ``size=``... as its fields).
@@ -213,8 +240,6 @@ def points_by_method(
     dict method -> InterestPoints, for each of ``methods`` (the same as one
     :func:`interest_points` call each)
     """
-    from meshsal.mesh.curvature import mesh_saliency
-
     options = (options or PointOptions()).replace(**changes)
     methods = list(dict.fromkeys(methods))
     if options.combination != "equal" and options.combination in ATTENTION_METHODS.values():
@@ -228,8 +253,9 @@ def points_by_method(
         )
         if own in methods:
             options = options.replace(combination="equal")
+    piece = _workpiece(mesh, options, scene, vertex_saliency, seen)
     chosen = {m: POINT_METHODS.get(m) for m in methods}
-    rules = options.rules(mesh)
+    rules = options.rules(piece.mesh)
     for m, method in chosen.items():
         if method.needs_model and model is None:
             raise ValueError(f"method {m!r} needs a fitted touch model (model=, a meshsal.points.learned.TouchModel)")
@@ -237,29 +263,42 @@ def points_by_method(
             raise ValueError(
                 "combination 'learned' needs channel weights (weights=, e.g. a TouchModel's channel_weights)"
             )
-    vertex_saliency = check_field(mesh, mesh_saliency(mesh) if vertex_saliency is None else vertex_saliency)
     wanted = {
         _maps_key(*method.combination(m, options, model)): method.combination(m, options, model)
         for m, method in chosen.items()
         if method.combination is not None
     }
-    if seen is None and wanted:
-        seen = view_channels(
-            mesh, size=options.size, vertex_saliency=vertex_saliency, threads=options.threads, quiet=options.quiet
-        )
-    maps = {key: attention_maps(seen, mode, weights) for key, (mode, weights) in wanted.items()}
-    if scene is None and rules.touch and chosen:
-        from meshsal.mesh.embree import embree_scene
-
-        scene = embree_scene(mesh)
-    ctx = MeshContext(
-        mesh, vertex_normals(mesh.vertices, mesh.faces), vertex_saliency, rules, options, model, seen, maps, scene
-    )
+    maps = {key: attention_maps(piece.seen, mode, weights) for key, (mode, weights) in wanted.items()}
+    touch = TouchFilter(piece.mesh, rules, piece.scene) if rules.touch and chosen else None
+    ctx = MeshContext(piece, rules, options, model, maps, touch)
     return {m: method.choose(m, ctx) for m, method in chosen.items()}
 
 
+def _workpiece(mesh, options: PointOptions, scene, vertex_saliency, seen) -> Workpiece:
+    """The caller's workpiece, or one of its mesh with what it gave; its views must be the options' size."""
+    given = (scene, vertex_saliency, seen)
+    if isinstance(mesh, Workpiece) and all(g is None for g in given):
+        piece = mesh
+    else:
+        piece = Workpiece.of(
+            mesh,
+            scene=scene,
+            vertex_saliency=vertex_saliency,
+            seen=seen,
+            view_size=options.size,
+            threads=options.threads,
+            quiet=options.quiet,
+        )
+    if piece.view_size != options.size:
+        raise ValueError(
+            f"the workpiece of {piece.mesh.name or 'the mesh'} renders {piece.view_size}-pixel views, but the "
+            f"options ask for {options.size}: build it with view_size={options.size}"
+        )
+    return piece
+
+
 def method_points(
-    mesh: Mesh,
+    mesh: Mesh | Workpiece,
     methods,
     options: PointOptions,
     *,
@@ -275,7 +314,8 @@ def method_points(
 
     Parameters
     ----------
-    mesh : Mesh
+    mesh : Mesh or Workpiece
+        As in :func:`points_by_method`.
     methods : iterable of str, names in ``POINT_METHODS``
     options : PointOptions
     model : meshsal.points.learned.TouchModel, optional
@@ -302,23 +342,20 @@ def method_points(
     >>> list(picked), len(picked["uniform"])
     (['uniform', 'random'], 5)
     """
-    from meshsal.mesh.curvature import mesh_saliency
-
     methods = list(methods)
-    vertex_saliency = mesh_saliency(mesh) if vertex_saliency is None else vertex_saliency
+    piece = _workpiece(mesh, options, scene, vertex_saliency, seen)
     by_survey = surveyed is not None and "learned" in methods
-    picked = points_by_method(
-        mesh,
-        [m for m in methods if not (by_survey and m == "learned")],
-        options,
-        model=model,
-        vertex_saliency=vertex_saliency,
-        seen=seen,
-        scene=scene,
-    )
+    picked = points_by_method(piece, [m for m in methods if not (by_survey and m == "learned")], options, model=model)
     if by_survey:
         picked["learned"] = learned_points(
-            mesh, surveyed.pool, surveyed.features, model, vertex_saliency, n=options.n, pad_width=options.pad_width
+            piece.mesh,
+            surveyed.pool,
+            surveyed.features,
+            model,
+            piece.vertex_saliency,
+            n=options.n,
+            pad_width=options.pad_width,
+            scene=piece.scene,
         )
     return {m: picked[m] for m in methods}
 

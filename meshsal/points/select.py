@@ -172,12 +172,14 @@ def choose_without_views(
     rules: Rules,
     method: str,
     scene=None,
+    touch: TouchFilter | None = None,
 ) -> InterestPoints:
     """A method that needs no view of its own: ``first``, then the mesh-saliency fill scored by ``fill_score``.
 
-    ``scene`` is the mesh's Embree scene for the touch check (:class:`TouchFilter`), built when omitted.
+    ``touch`` is the touch check the methods of one call share; without it one
+    is built on ``scene``, the mesh's Embree scene (built when omitted).
     """
-    checker = TouchFilter(mesh, rules, scene) if rules.touch else None
+    checker = (touch or TouchFilter(mesh, rules, scene)) if rules.touch else None
     chosen, lost = select(
         first,
         saliency_fill(mesh, vn, vertex_saliency, fill_score),

@@ -76,6 +76,10 @@ class Tracer:
         The mesh's robust scene, built on first use.
     reach : callable () -> (m,) float64
         Each face's longest edge, measured on first use.
+    local_rays : int
+        Up to this many slipped rays of a call are traced in a small scene of
+        the faces their lines can meet, more in the robust scene; 0 when the
+        robust scene is held elsewhere, so using it costs no build.
     """
 
     mesh: Mesh
@@ -83,6 +87,7 @@ class Tracer:
     facing: Callable[[], int]
     robust: Callable[[], object]
     reach: Callable[[], np.ndarray]
+    local_rays: int = _LOCAL_RAYS
 
     def first_hits(self, origins: np.ndarray, directions: np.ndarray) -> dict:
         """The first hit of each ray.
@@ -118,7 +123,7 @@ class Tracer:
         origins = np.take(origins, slipped, axis=0)
         if len(directions) > 1:
             directions = np.take(directions, slipped, axis=0)
-        if slipped.size > _LOCAL_RAYS:
+        if slipped.size > self.local_rays:
             again = self.robust().run(origins, directions, dists=np.inf, output=1)
         else:
             again = _trace_near(self.mesh, self.reach(), origins, directions)
@@ -161,7 +166,7 @@ def _trace_near(mesh: Mesh, reach: np.ndarray, origins: np.ndarray, directions: 
     return hit
 
 
-def tracer(mesh: Mesh, scene=None, executor: Executor | None = None) -> Tracer:
+def tracer(mesh: Mesh, scene=None, executor: Executor | None = None, robust: Callable | None = None) -> Tracer:
     """A :class:`Tracer` of the mesh.
 
     Parameters
@@ -173,6 +178,10 @@ def tracer(mesh: Mesh, scene=None, executor: Executor | None = None) -> Tracer:
         By default a fast scene is built (it costs about 15 ms per 100k faces).
     executor : optional
         Where the mesh's orientation is checked while the scene builds.
+    robust : callable () -> Embree scene, optional
+        Gives the mesh's robust scene (``embree_scene(mesh)``) held elsewhere,
+        in which every slipped ray is traced again; by default the tracer
+        builds its own when many slip at once.
 
     Raises
     ------
@@ -198,4 +207,6 @@ def tracer(mesh: Mesh, scene=None, executor: Executor | None = None) -> Tracer:
     )
     # Built before the orientation is known: an open mesh wastes it, a closed one needs it at once.
     fast = embree_scene(mesh, robust=False) if scene is None else scene
-    return Tracer(mesh=mesh, fast=fast, facing=orientation, robust=_once(lambda: embree_scene(mesh)), reach=reach)
+    if robust is None:
+        return Tracer(mesh=mesh, fast=fast, facing=orientation, robust=_once(lambda: embree_scene(mesh)), reach=reach)
+    return Tracer(mesh=mesh, fast=fast, facing=orientation, robust=_once(robust), reach=reach, local_rays=0)
