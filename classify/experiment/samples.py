@@ -341,10 +341,10 @@ def instance_samples(task: SampleTask) -> InstanceSamples:
     needed, for all methods (:func:`meshsal.points.method_points`), the
     survey, the places and the codebooks.  Every method's sessions and the
     places' are cast in one call (``tactile.acquire_all``).  Each method's
-    sample is cached on its own, so adding a method later reuses the others.  The model methods take the
-    replicate's ``model``: "learned" chooses from the instance's ``surveyed``
-    pool without rendering, "attention_learned" renders with the model's
-    channel weights.  A training instance's codebooks (``task.codebook``)
+    sample is cached on its own, so adding a method later reuses the
+    others.  The model methods take the replicate's ``model``: "learned"
+    chooses from the instance's ``surveyed`` pool without rendering,
+    "attention_learned" renders with the model's channel weights.  A training instance's codebooks (``task.codebook``)
     are cached apart, by the number of draws: they need the mesh, never its
     rendering.
 
