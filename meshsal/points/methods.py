@@ -276,19 +276,15 @@ def points_by_method(
 
 def _workpiece(mesh, options: PointOptions, scene, vertex_saliency, seen) -> Workpiece:
     """The caller's workpiece, or one of its mesh with what it gave; its views must be the options' size."""
-    given = (scene, vertex_saliency, seen)
-    if isinstance(mesh, Workpiece) and all(g is None for g in given):
-        piece = mesh
-    else:
-        piece = Workpiece.of(
-            mesh,
-            scene=scene,
-            vertex_saliency=vertex_saliency,
-            seen=seen,
-            view_size=options.size,
-            threads=options.threads,
-            quiet=options.quiet,
-        )
+    piece = Workpiece.of(
+        mesh,
+        scene=scene,
+        vertex_saliency=vertex_saliency,
+        seen=seen,
+        view_size=options.size,
+        threads=options.threads,
+        quiet=options.quiet,
+    )
     if piece.view_size != options.size:
         raise ValueError(
             f"the workpiece of {piece.mesh.name or 'the mesh'} renders {piece.view_size}-pixel views, but the "

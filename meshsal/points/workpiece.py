@@ -51,6 +51,10 @@ class Workpiece:
     threads: int | None = None
     quiet: bool = True
 
+    def __post_init__(self):
+        if not isinstance(self.mesh, Mesh):
+            raise ValueError(f"a Workpiece needs a meshsal.Mesh, got {type(self.mesh).__name__}")
+
     @classmethod
     def of(
         cls,
@@ -77,12 +81,10 @@ class Workpiece:
             if scene is None and vertex_saliency is None and seen is None:
                 return mesh
             mesh = mesh.mesh
-        if not isinstance(mesh, Mesh):
-            raise ValueError(f"a Workpiece needs a meshsal.Mesh, got {type(mesh).__name__}")
         piece = cls(mesh, int(view_size), threads, quiet)
-        # cached_property keeps its value in the instance's __dict__: what is given is what it returns.
         if vertex_saliency is not None:
             vertex_saliency = check_field(mesh, vertex_saliency)
+        # cached_property keeps its value in the instance's __dict__: what is given is what it returns.
         given = {"scene": scene, "vertex_saliency": vertex_saliency, "seen": seen}
         piece.__dict__.update({k: v for k, v in given.items() if v is not None})
         return piece
