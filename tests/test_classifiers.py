@@ -244,6 +244,39 @@ def test_knn_neighbours_are_the_first_k_of_the_full_sort_ties_included():
             np.testing.assert_array_equal(_ranked(d2, tiebreak, k), full[:, : min(k, m)])
 
 
+def test_knn_class_distances_are_each_class_nearest_sample_in_any_order_of_codes():
+    from classify.recognizers.classifiers import _class_distances
+
+    rng = np.random.default_rng(3)
+    for sort in (True, False):
+        d2 = rng.random((9, 40))
+        codes = rng.integers(0, 5, 40)
+        codes[codes == 3] = 4  # class 3 has no sample: infinitely far
+        if sort:
+            codes = np.sort(codes)
+        expected = np.array(
+            [[np.sqrt(row[codes == c].min()) if (codes == c).any() else np.inf for c in range(6)] for row in d2]
+        )
+        np.testing.assert_array_equal(_class_distances(d2, codes, 6), expected)
+
+
+def test_knn_posteriors_from_prepared_training_rows_are_those_from_the_raw_rows():
+    from classify.recognizers.classifiers import _class_distances, _posterior, _ranked, _sq_distances
+
+    rng = np.random.default_rng(4)
+    for grid in (True, False):
+        X, Q = rng.random((60, 7)), rng.random((11, 7))
+        if grid:
+            X, Q = np.round(X * 255) / 255, np.round(Q * 255) / 255
+        model = classify.make("knn").fit(X, np.arange(60) % 3)
+        assert (model.grid_rows_ is not None) == grid
+        d2 = _sq_distances(Q, model.X_)
+        assert np.allclose(d2, ((Q[:, None] - model.X_[None]) ** 2).sum(axis=2), atol=1e-9)
+        order = _ranked(d2, model.tiebreak_, model.k_)
+        expected = _posterior(model.codes_[order], _class_distances(d2, model.codes_, 3), model.scale_)
+        np.testing.assert_array_equal(model.predict_proba(Q), expected)
+
+
 def test_the_evolution_strategy_is_importable_beside_its_estimator():
     from classify.recognizers import evolution_strategy, evolutionary_svm
 

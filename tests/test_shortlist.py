@@ -220,3 +220,42 @@ def test_the_place_free_knowledge_keeps_each_touchs_most_probable_objects(monkey
     places = training["object2", 1].places
     part = short.forecast(places, np.array([1, 2, 3]))
     assert part.posteriors.shape[0] == part.posteriors.shape[-1] == 3
+
+
+@pytest.mark.parametrize("grid", [True, False])
+def test_knn_shortlist_with_every_object_a_candidate_is_predict_proba(grid):
+    import classify
+    from classify.recognizers.shortlist import knn_shortlist
+
+    rng = np.random.default_rng(11)
+    y = rng.integers(0, 9, 400)
+    X, Q = rng.random((9, 5))[y] + 0.2 * rng.random((400, 5)), rng.random((50, 5))
+    if grid:
+        X, Q = np.round(X * 255) / 255, np.round(Q * 255) / 255
+    model = classify.make("knn").fit(X, y)
+    P = model.predict_proba(Q)
+    values, classes = knn_shortlist(model, Q, 4, candidates=9)
+    expected = np.sort(nearest_classes(-P, 4), axis=1)
+    np.testing.assert_array_equal(classes, expected)
+    np.testing.assert_array_equal(values, np.take_along_axis(P, expected, axis=1))
+
+
+def test_knn_shortlist_screens_in_each_touchs_object_among_many():
+    # Forty objects, each a tight cluster: a query beside its cluster has it first, as the full kNN does,
+    # though only eight of the forty objects' rows are read in full.
+    import classify
+    from classify.recognizers.shortlist import knn_shortlist
+
+    rng = np.random.default_rng(12)
+    centres = rng.random((40, 6)) * 10
+    y = np.repeat(np.arange(40), 30)
+    model = classify.make("knn").fit(centres[y] + rng.normal(0, 0.1, (1200, 6)), y)
+    truth = rng.integers(0, 40, 200)
+    Q = centres[truth] + rng.normal(0, 0.1, (200, 6))
+    values, classes = knn_shortlist(model, Q, 4, candidates=8)
+    assert values.shape == classes.shape == (200, 4)
+    assert np.all(np.diff(classes, axis=1) > 0)
+    best = np.take_along_axis(classes, np.argmax(values, axis=1)[:, None], axis=1)[:, 0]
+    np.testing.assert_array_equal(best, truth)
+    np.testing.assert_array_equal(best, np.argmax(model.predict_proba(Q), axis=1))
+    assert np.all(values.sum(axis=1) <= 1.0 + 1e-12)

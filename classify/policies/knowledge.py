@@ -314,8 +314,9 @@ def _held_out(recognizer, F, y, inst, groups, C: int, H: int, block: int = 4096)
     """Each training touch's calibrated posterior from a classifier fitted without its instance, as
     :class:`~classify.recognizers.shortlist.SparseRows` (N,): every object up to ``H``, past it each row's
     ``H`` most probable and one value for the others; and the calibration, fitted on those posteriors."""
+    from classify.recognizers.classifiers import KNN
     from classify.recognizers.fusion import CALIBRATION_ROWS, calibrate, calibrate_rows, fit_calibration
-    from classify.recognizers.shortlist import SparseRows, nearest_classes, spread
+    from classify.recognizers.shortlist import SparseRows, knn_shortlist, nearest_classes, spread
     from classify.recognizers.touches import posteriors
 
     dense = C <= H
@@ -328,16 +329,24 @@ def _held_out(recognizer, F, y, inst, groups, C: int, H: int, block: int = 4096)
         out = inst == i
         model = recognizer.fit(F[~out], y[~out], groups[~out])
         mine = np.flatnonzero(out)
-        # Past H objects a block of rows at a time, so that memory stays linear in the objects.
+        # Past H objects a block of rows at a time, so that memory stays linear in the objects; a kNN then
+        # reads the training rows of each row's candidate objects only, and a few rows of every other.
+        screened = not dense and isinstance(model, KNN) and len(model.classes_) > H
         step = mine.size if dense else block
         for a in range(0, mine.size, step):
             rows = mine[a : a + step]
-            P = posteriors(model, F[rows], C)
             hit = np.isin(rows, pick)
-            kept[np.searchsorted(pick, rows[hit])] = P[hit]
+            if screened:
+                kept[np.searchsorted(pick, rows[hit])] = posteriors(model, F[rows[hit]], C)
+                values[rows], found = knn_shortlist(model, F[rows], H)
+                classes[rows] = model.classes_[found]
+            else:
+                P = posteriors(model, F[rows], C)
+                kept[np.searchsorted(pick, rows[hit])] = P[hit]
+                if not dense:
+                    classes[rows] = nearest_classes(-P, H)
+                    values[rows] = np.take_along_axis(P, classes[rows], axis=1)
             if not dense:
-                classes[rows] = nearest_classes(-P, H)
-                values[rows] = np.take_along_axis(P, classes[rows], axis=1)
                 rest[rows] = np.maximum(1.0 - values[rows].sum(axis=1), 0.0) / (C - H)
     calibration = fit_calibration(kept, y[pick])
     if dense:

@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import hashlib
 import numbers
+from dataclasses import dataclass
 
 import numpy as np
 from sklearn.base import BaseEstimator, ClassifierMixin
@@ -164,6 +165,9 @@ class KNN(ClassifierMixin, BaseEstimator):
     scale_ : float
         Distance scale of the posterior: the median distance from a
         training imprint to its nearest other training imprint.
+    grid_rows_ : the training rows' integer codes and squared norms when
+        they lie on the ADC's grid (else None), prepared once for every
+        prediction.
 
     Notes
     -----
@@ -239,6 +243,8 @@ class KNN(ClassifierMixin, BaseEstimator):
             self.k_ = ks[0]
         self.k_ = min(self.k_, len(X))
         self.X_ = X
+        # Every prediction compares with the training rows' integer codes: computed once.
+        self.grid_rows_ = _Rows.of(X, True) if _on_grid(X) else None
         self.codes_ = codes
         self.tiebreak_ = keys
         self.n_features_in_ = X.shape[1]
@@ -251,10 +257,10 @@ class KNN(ClassifierMixin, BaseEstimator):
         if X.shape[1] != self.n_features_in_:
             raise ValueError(f"KNN: X has {X.shape[1]} features, the model was fitted with {self.n_features_in_}")
         out = np.empty((len(X), len(self.classes_)))
-        exact = _on_grid(X) and _on_grid(self.X_)
+        rows = self.grid_rows_ if self.grid_rows_ is not None and _on_grid(X) else _Rows.of(self.X_, False)
         for start in range(0, len(X), _BLOCK):  # a block of distances at a time: memory stays flat
             block = X[start : start + _BLOCK]
-            d2 = _sq_distances(block, self.X_, exact)
+            d2 = _distances_to(block, rows)
             order = _ranked(d2, self.tiebreak_, self.k_)
             dist = _class_distances(d2, self.codes_, len(self.classes_))
             out[start : start + _BLOCK] = _posterior(self.codes_[order], dist, self.scale_)
@@ -288,6 +294,21 @@ def _on_grid(X) -> bool:
     return bool(np.all(np.abs(codes - np.round(codes)) < 1e-3))
 
 
+@dataclass(frozen=True, eq=False)
+class _Rows:
+    """Training rows ready for distances: ``values`` the integer codes of rows on the ADC's grid (``exact``),
+    else the rows as given; ``sq`` (n,) their squared norms.  Prepared once, read by every block of queries."""
+
+    values: np.ndarray
+    sq: np.ndarray
+    exact: bool
+
+    @staticmethod
+    def of(B, exact: bool) -> _Rows:
+        values = np.round(B * _LEVELS) if exact else B
+        return _Rows(values, np.einsum("ij,ij->i", values, values), exact)
+
+
 def _sq_distances(A, B, exact: bool | None = None) -> np.ndarray:
     """(len(A), len(B)) squared Euclidean distances, the same on every CPU (see KNN's Notes).
 
@@ -295,16 +316,20 @@ def _sq_distances(A, B, exact: bool | None = None) -> np.ndarray:
     """
     if exact is None:
         exact = _on_grid(A) and _on_grid(B)
-    if exact:
-        A, B = np.round(A * _LEVELS), np.round(B * _LEVELS)
-    out = np.empty((len(A), len(B)))
-    b2 = np.einsum("ij,ij->i", B, B)
+    return _distances_to(A, _Rows.of(B, exact))
+
+
+def _distances_to(A, rows: _Rows) -> np.ndarray:
+    """(len(A), len(rows.values)) squared distances from ``A`` to prepared rows (as :func:`_sq_distances`)."""
+    if rows.exact:
+        A = np.round(A * _LEVELS)
+    out = np.empty((len(A), len(rows.values)))
     for start in range(0, len(A), _BLOCK):
         a = A[start : start + _BLOCK]
-        d2 = np.einsum("ij,ij->i", a, a)[:, None] + b2[None, :] - 2.0 * (a @ B.T)
+        d2 = np.einsum("ij,ij->i", a, a)[:, None] + rows.sq[None, :] - 2.0 * (a @ rows.values.T)
         out[start : start + _BLOCK] = np.maximum(d2, 0.0)
     # Integer codes: every sum is an integer below 2**53, exact in any order.
-    return out / _LEVELS**2 if exact else np.round(out, 9)
+    return out / _LEVELS**2 if rows.exact else np.round(out, 9)
 
 
 def _scan_training_set(X, codes, keys, splits, ks, n_classes, scored) -> tuple[dict, float]:
@@ -327,10 +352,10 @@ def _scan_training_set(X, codes, keys, splits, ks, n_classes, scored) -> tuple[d
     for f, (_, test) in enumerate(splits):
         fold[test] = f
     nearest = np.empty(len(scored))
-    exact = _on_grid(X)
+    rows_all = _Rows.of(X, _on_grid(X))
     for start in range(0, len(scored), _BLOCK):
         block = scored[start : start + _BLOCK]
-        d2 = _sq_distances(X[block], X, exact)
+        d2 = _distances_to(X[block], rows_all)
         for f, (train, _) in enumerate(splits):
             usable = [k for k in ks if k <= len(train)]
             rows = np.flatnonzero(fold[block] == f)
@@ -369,6 +394,8 @@ def _row_keys(X, codes, seed) -> np.ndarray:
 def _ranked(d2, tiebreak, k: int) -> np.ndarray:
     """The ``k`` nearest training indices by increasing distance, equal distances in ``tiebreak`` order, (n, k).
 
+    ``tiebreak`` is (m,), one key per column, or (n, m), each row's own.
+
     Only the candidates no farther than each row's k-th distance are sorted
     (all of them, ties at that distance included), so the result is the first
     ``k`` columns of the full sort.
@@ -388,14 +415,26 @@ def _ranked(d2, tiebreak, k: int) -> np.ndarray:
         else:
             near = near[:, :k]
         rows = np.arange(len(d))[:, None]
-        order = np.lexsort((tiebreak[near], d[rows, near]), axis=1)[:, :k]
+        tb = tiebreak[near] if tiebreak.ndim == 1 else tiebreak[start + rows, near]
+        order = np.lexsort((tb, d[rows, near]), axis=1)[:, :k]
         out[start : start + _BLOCK] = near[rows, order]
     return out
 
 
 def _class_distances(d2, codes, n_classes) -> np.ndarray:
-    """(n, n_classes) distance from each row to the nearest training sample of each class."""
-    return np.sqrt(np.column_stack([d2[:, codes == c].min(axis=1) for c in range(n_classes)]))
+    """(n, n_classes) distance from each row to the nearest training sample of each class (inf: none).
+
+    One pass over ``d2``: its columns are read by class, in blocks (``codes`` sorted, as a fitted KNN keeps them).
+    """
+    codes = np.asarray(codes)
+    if np.any(codes[1:] < codes[:-1]):
+        order = np.argsort(codes, kind="stable")
+        d2, codes = d2[:, order], codes[order]
+    out = np.full((len(d2), n_classes), np.inf)
+    present, starts = np.unique(codes, return_index=True)
+    if present.size:
+        out[:, present] = np.minimum.reduceat(d2, starts, axis=1)
+    return np.sqrt(out)
 
 
 def _posterior(neighbour_codes, class_dist, scale):

@@ -23,7 +23,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["SHORTLIST", "FreeStack", "SparseRows", "nearest_classes", "spread"]
+__all__ = ["SCREEN_ROWS", "SHORTLIST", "FreeStack", "SparseRows", "knn_shortlist", "nearest_classes", "spread"]
 
 #: Objects scored in full per touch, and hypotheses a forecast holds, by default.
 SHORTLIST = 16
@@ -153,3 +153,84 @@ class SparseRows:
         hit = np.nonzero(col >= 0)
         out[(*hit[:-1], col[hit])] = self.values[hit]
         return out
+
+
+#: Training rows per object that screen a query's candidate objects in :func:`knn_shortlist`.
+SCREEN_ROWS = 16
+
+
+def knn_shortlist(model, X, H: int, candidates: int | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """A fitted :class:`~classify.recognizers.classifiers.KNN`'s posteriors of each row's ``H`` most probable
+    objects, computed against the training rows of a few candidate objects only.
+
+    Each row's ``candidates`` objects (default ``2 H``) are those whose
+    :data:`SCREEN_ROWS` training rows, spread over each object's rows, lie
+    nearest; its neighbours and its distances to each object are then read
+    among those objects' training rows, with the same distances, tie breaks
+    and posterior as ``model.predict_proba``, the posterior normalized over
+    the candidates.  A row costs the candidates' rows and the screening
+    rows, not the training set: over a set that grows with the objects, the
+    work grows with the objects, not their square.  With every object a
+    candidate, the values are ``predict_proba``'s, bit for bit.
+
+    Parameters
+    ----------
+    model : KNN, fitted
+    X : (n, d) float64, queries
+    H : int, objects kept per row
+    candidates : int, objects screened in per row (at least ``H``)
+
+    Returns
+    -------
+    values : (n, min(H, C)) float64, classes : (n, min(H, C)) int64 (indices into ``model.classes_``, increasing)
+    """
+    from classify.recognizers.classifiers import _SOFT, _distances_to, _on_grid, _ranked, _Rows
+
+    X = np.asarray(X, np.float64)
+    codes, C = model.codes_, len(model.classes_)
+    J = min(C, max(int(H), int(candidates or 2 * H)))
+    starts = np.searchsorted(codes, np.arange(C + 1))
+    exact = model.grid_rows_ is not None and _on_grid(X)
+    every = model.grid_rows_ if exact else _Rows.of(model.X_, False)
+    rows_of = [
+        _Rows(every.values[starts[c] : starts[c + 1]], every.sq[starts[c] : starts[c + 1]], exact) for c in range(C)
+    ]
+    if J < C:
+        picks = np.concatenate([starts[c] + spread(starts[c + 1] - starts[c], SCREEN_ROWS) for c in range(C)])
+        screen = _Rows(every.values[picks], every.sq[picks], exact)
+        first = np.searchsorted(codes[picks], np.arange(C))
+    R = int(np.diff(starts).max())
+    T = min(int(H), C)
+    values, classes = np.empty((len(X), T)), np.empty((len(X), T), np.int64)
+    step = max(1, _BLOCK // (J * R))
+    for a in range(0, len(X), step):
+        q = X[a : a + step]
+        if J < C:
+            cand = nearest_classes(np.minimum.reduceat(_distances_to(q, screen), first, axis=1), J)
+        else:
+            cand = np.tile(np.arange(C), (len(q), 1))
+        d2 = np.full((len(q), J, R), np.inf)
+        tie = np.zeros((len(q), J, R), np.uint64)
+        # The (row, slot) pairs of each candidate object, object by object: one sort, not a scan per object.
+        pairs = np.argsort(cand.ravel(), kind="stable")
+        bounds = np.searchsorted(cand.ravel()[pairs], np.arange(C + 1))
+        for c in np.flatnonzero(np.diff(bounds)):
+            who, slot = np.divmod(pairs[bounds[c] : bounds[c + 1]], J)
+            m = starts[c + 1] - starts[c]
+            d2[who, slot, :m] = _distances_to(q[who], rows_of[c])
+            tie[who, slot, :m] = model.tiebreak_[starts[c] : starts[c + 1]]
+        flat = d2.reshape(len(q), J * R)
+        order = _ranked(flat, tie.reshape(len(q), J * R), model.k_)
+        votes = np.zeros((len(q), J))
+        np.add.at(votes, (np.arange(len(q))[:, None], order // R), 1.0)
+        dist = np.sqrt(d2.min(axis=2))
+        soft = np.exp(-(dist - dist.min(axis=1, keepdims=True)) / model.scale_)
+        soft /= soft.sum(axis=1, keepdims=True)
+        P = (votes + _SOFT * soft) / (order.shape[1] + _SOFT)
+        top = np.sort(nearest_classes(-P, T), axis=1) if T < J else np.tile(np.arange(J), (len(q), 1))
+        # Back to object indices, in increasing order.
+        objects = np.take_along_axis(cand, top, axis=1)
+        by = np.argsort(objects, axis=1)
+        classes[a : a + step] = np.take_along_axis(objects, by, axis=1)
+        values[a : a + step] = np.take_along_axis(np.take_along_axis(P, top, axis=1), by, axis=1)
+    return values, classes
