@@ -15,11 +15,13 @@ Past 16 objects the place-aware recognizer and ``info_gain`` work on
 shortlists of 16 objects (``classify.recognizers.shortlist``): their
 rates there are the shortlisted model's, below what the full model gives.
 
-    python -m meshsal.util.reproducible .venv/bin/python benchmarks/bench_scaling.py [--counts 16,64,256,1000]
+    python -m meshsal.util.reproducible .venv/bin/python benchmarks/bench_scaling.py [--counts 16,64,256,1000] [--keep DIR]
 """
 
 from __future__ import annotations
 
+import datetime
+import hashlib
 import json
 import subprocess
 import sys
@@ -27,6 +29,10 @@ from pathlib import Path
 
 import numpy as np
 from benchlib import DEFAULT_MESHES, arguments, run
+
+from classify.runtime.cache import code_fingerprint, file_fingerprint
+from meshsal.util.atomic import atomic_path
+from meshsal.util.pages import machine
 
 CORPUS = DEFAULT_MESHES.parent / "corpus" / "random-objects"
 PNG = Path(__file__).resolve().parents[1] / "docs" / "benchmarks" / "bench_scaling.png"
@@ -64,13 +70,27 @@ def _files(count: int) -> list[str]:
 def main() -> int:
     parser = arguments(__doc__, 1, meshes_dir=False)
     parser.add_argument("--counts", default="16,64,256,1000", help="comma-separated object counts")
+    parser.add_argument(
+        "--keep",
+        metavar="DIR",
+        help="keep each count's row in DIR as it is measured; a row kept for the same code is read back "
+        "instead of measured again, so a long run resumes where it stopped",
+    )
     args = parser.parse_args()
     counts = [int(c) for c in args.counts.split(",")]
     if not CORPUS.is_dir():
         print(f"bench_scaling: error: {CORPUS} not found", file=sys.stderr)
         return 1
+    # Rows are kept under the code they measured: the toolkit's sources and this script.
+    code = code_fingerprint("meshsal", "tactile", "classify") + file_fingerprint(__file__)
+    code = hashlib.sha256(code.encode()).hexdigest()[:16]
     rows = []
     for count in counts:
+        kept = Path(args.keep) / f"{count}-{code}.json" if args.keep else None
+        if kept is not None and kept.is_file():
+            rows.append(json.loads(kept.read_text()))
+            print(f"{count} objects: kept from {rows[-1]['measured']}", file=sys.stderr)
+            continue
         done = subprocess.run(
             [sys.executable, "-c", _ONE, json.dumps(_files(count))], capture_output=True, text=True, check=False
         )
@@ -78,6 +98,11 @@ def main() -> int:
             print(f"bench_scaling: {count} objects failed:\n{done.stderr[-2000:]}", file=sys.stderr)
             return 1
         rows.append(json.loads(done.stdout.strip().splitlines()[-1]))
+        rows[-1]["measured"] = f"{datetime.datetime.now(datetime.UTC):%Y-%m-%d %H:%M} UTC, {machine()}"
+        if kept is not None:
+            kept.parent.mkdir(parents=True, exist_ok=True)
+            with atomic_path(kept) as tmp:
+                Path(tmp).write_text(json.dumps(rows[-1]))
         print(f"{count} objects: {rows[-1]['timings']['total']:.0f} s", file=sys.stderr)
     stages = [s for s in rows[0]["timings"] if s not in ("total", "cpu_total")]
     print(
@@ -98,6 +123,9 @@ def main() -> int:
             + " | ".join(f"{m:.1f} [{lo:.1f}, {hi:.1f}]" for m, lo, hi in r["rates"].values())
             + " |"
         )
+    print()
+    for r in rows:
+        print(f"- {r['objects']} objects measured {r['measured']}")
     per = [r["timings"]["total"] / r["objects"] for r in rows]
     print(f"\ntime per object, largest over smallest: {max(per) / min(per):.2f}x (target <= 1.5x)")
     _plot(rows, stages)
@@ -121,8 +149,6 @@ def _plot(rows, stages) -> None:
     ax.set_ylabel("wall seconds per object")
     ax.legend(fontsize=7)
     fig.tight_layout()
-    from meshsal.util.atomic import atomic_path
-
     with atomic_path(PNG) as tmp:
         fig.savefig(tmp, dpi=120)
 
