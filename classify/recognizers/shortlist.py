@@ -169,8 +169,8 @@ def knn_shortlist(model, X, H: int, candidates: int | None = None) -> tuple[np.n
     among those objects' training rows, with the same distances, tie breaks
     and posterior as ``model.predict_proba``, the posterior normalized over
     the candidates.  A row costs the candidates' rows and the screening
-    rows, not the training set: over a set that grows with the objects, the
-    work grows with the objects, not their square.  With every object a
+    rows, not the whole training set; the screening still reads every
+    object, on :data:`SCREEN_ROWS` rows of each.  With every object a
     candidate, the values are ``predict_proba``'s, bit for bit.
 
     Parameters
@@ -184,7 +184,7 @@ def knn_shortlist(model, X, H: int, candidates: int | None = None) -> tuple[np.n
     -------
     values : (n, min(H, C)) float64, classes : (n, min(H, C)) int64 (indices into ``model.classes_``, increasing)
     """
-    from classify.recognizers.classifiers import _SOFT, _distances_to, _on_grid, _ranked, _Rows
+    from classify.recognizers.classifiers import _distances_to, _on_grid, _posterior, _ranked, _Rows
 
     X = np.asarray(X, np.float64)
     codes, C = model.codes_, len(model.classes_)
@@ -221,12 +221,8 @@ def knn_shortlist(model, X, H: int, candidates: int | None = None) -> tuple[np.n
             tie[who, slot, :m] = model.tiebreak_[starts[c] : starts[c + 1]]
         flat = d2.reshape(len(q), J * R)
         order = _ranked(flat, tie.reshape(len(q), J * R), model.k_)
-        votes = np.zeros((len(q), J))
-        np.add.at(votes, (np.arange(len(q))[:, None], order // R), 1.0)
-        dist = np.sqrt(d2.min(axis=2))
-        soft = np.exp(-(dist - dist.min(axis=1, keepdims=True)) / model.scale_)
-        soft /= soft.sum(axis=1, keepdims=True)
-        P = (votes + _SOFT * soft) / (order.shape[1] + _SOFT)
+        # The neighbours' slots stand for their objects: KNN's posterior over the candidates.
+        P = _posterior(order // R, np.sqrt(d2.min(axis=2)), model.scale_)
         top = np.sort(nearest_classes(-P, T), axis=1) if T < J else np.tile(np.arange(J), (len(q), 1))
         # Back to object indices, in increasing order.
         objects = np.take_along_axis(cand, top, axis=1)
