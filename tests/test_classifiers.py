@@ -229,7 +229,7 @@ def test_evolutionary_svm_two_classes_decision_sign_follows_classes():
 
 
 def test_knn_neighbours_are_the_first_k_of_the_full_sort_ties_included():
-    from classify.recognizers.classifiers import _ranked
+    from classify.recognizers.distances import ranked
 
     rng = np.random.default_rng(0)
     for trial in range(60):
@@ -241,11 +241,11 @@ def test_knn_neighbours_are_the_first_k_of_the_full_sort_ties_included():
         tiebreak = rng.permutation(m).astype(np.uint64)
         full = np.lexsort((np.broadcast_to(tiebreak, d2.shape), d2), axis=1)
         for k in (1, 3, 9, m):
-            np.testing.assert_array_equal(_ranked(d2, tiebreak, k), full[:, : min(k, m)])
+            np.testing.assert_array_equal(ranked(d2, tiebreak, k), full[:, : min(k, m)])
 
 
 def test_knn_class_distances_are_each_class_nearest_sample_in_any_order_of_codes():
-    from classify.recognizers.classifiers import _class_distances
+    from classify.recognizers.distances import class_distances
 
     rng = np.random.default_rng(3)
     for sort in (True, False):
@@ -257,11 +257,12 @@ def test_knn_class_distances_are_each_class_nearest_sample_in_any_order_of_codes
         expected = np.array(
             [[np.sqrt(row[codes == c].min()) if (codes == c).any() else np.inf for c in range(6)] for row in d2]
         )
-        np.testing.assert_array_equal(_class_distances(d2, codes, 6), expected)
+        np.testing.assert_array_equal(class_distances(d2, codes, 6), expected)
 
 
 def test_knn_posteriors_from_prepared_training_rows_are_those_from_the_raw_rows():
-    from classify.recognizers.classifiers import _class_distances, _posterior, _ranked, _sq_distances
+    from classify.recognizers.classifiers import _posterior
+    from classify.recognizers.distances import class_distances, ranked, sq_distances
 
     rng = np.random.default_rng(4)
     for grid in (True, False):
@@ -270,11 +271,36 @@ def test_knn_posteriors_from_prepared_training_rows_are_those_from_the_raw_rows(
             X, Q = np.round(X * 255) / 255, np.round(Q * 255) / 255
         model = classify.make("knn").fit(X, np.arange(60) % 3)
         assert (model.grid_rows_ is not None) == grid
-        d2 = _sq_distances(Q, model.X_)
+        d2 = sq_distances(Q, model.X_)
         assert np.allclose(d2, ((Q[:, None] - model.X_[None]) ** 2).sum(axis=2), atol=1e-9)
-        order = _ranked(d2, model.tiebreak_, model.k_)
-        expected = _posterior(model.codes_[order], _class_distances(d2, model.codes_, 3), model.scale_)
+        order = ranked(d2, model.tiebreak_, model.k_)
+        expected = _posterior(model.codes_[order], class_distances(d2, model.codes_, 3), model.scale_)
         np.testing.assert_array_equal(model.predict_proba(Q), expected)
+
+
+def test_knn_blocks_of_queries_shrink_with_the_training_set_and_change_no_result(monkeypatch):
+    from classify.recognizers import classifiers, distances
+
+    rng = np.random.default_rng(5)
+    X, Q = np.round(rng.random((300, 6)) * 255) / 255, np.round(rng.random((40, 6)) * 255) / 255
+    y = np.arange(300) % 4
+    wide = classify.make("knn").fit(X, y, groups=np.arange(300) % 12)
+    expected = wide.predict_proba(Q)
+    seen = []
+    real = distances.distances_to
+
+    def spy(A, rows):
+        seen.append(len(A) * len(rows.values))
+        return real(A, rows)
+
+    # 1,000 distances a block: 3 queries against 300 rows, where the default takes all 40 at once.
+    monkeypatch.setattr(distances, "CELLS", 1000)
+    assert distances.block_rows(300) == 3 and distances.block_rows(10**9) == 1
+    monkeypatch.setattr(classifiers, "distances_to", spy)
+    narrow = classify.make("knn").fit(X, y, groups=np.arange(300) % 12)
+    assert (narrow.k_, narrow.scale_, narrow.cv_scores_) == (wide.k_, wide.scale_, wide.cv_scores_)
+    np.testing.assert_array_equal(narrow.predict_proba(Q), expected)
+    assert seen and max(seen) <= 1000
 
 
 def test_the_evolution_strategy_is_importable_beside_its_estimator():

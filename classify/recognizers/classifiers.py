@@ -27,7 +27,6 @@ from __future__ import annotations
 
 import hashlib
 import numbers
-from dataclasses import dataclass
 
 import numpy as np
 from sklearn.base import BaseEstimator, ClassifierMixin
@@ -37,6 +36,7 @@ from sklearn.neural_network import MLPClassifier
 from sklearn.tree import DecisionTreeClassifier
 from sklearn.utils.validation import check_is_fitted
 
+from classify.recognizers.distances import Rows, block_rows, class_distances, distances_to, on_grid, ranked
 from classify.recognizers.evolutionary_svm import EvolutionarySVM, as_matrix
 from classify.recognizers.folds import GroupFolds
 from classify.recognizers.place import PlaceAware
@@ -244,7 +244,7 @@ class KNN(ClassifierMixin, BaseEstimator):
         self.k_ = min(self.k_, len(X))
         self.X_ = X
         # Every prediction compares with the training rows' integer codes: computed once.
-        self.grid_rows_ = _Rows.of(X, True) if _on_grid(X) else None
+        self.grid_rows_ = Rows.of(X, True) if on_grid(X) else None
         self.codes_ = codes
         self.tiebreak_ = keys
         self.n_features_in_ = X.shape[1]
@@ -257,13 +257,14 @@ class KNN(ClassifierMixin, BaseEstimator):
         if X.shape[1] != self.n_features_in_:
             raise ValueError(f"KNN: X has {X.shape[1]} features, the model was fitted with {self.n_features_in_}")
         out = np.empty((len(X), len(self.classes_)))
-        rows = self.grid_rows_ if self.grid_rows_ is not None and _on_grid(X) else _Rows.of(self.X_, False)
-        for start in range(0, len(X), _BLOCK):  # a block of distances at a time: memory stays flat
-            block = X[start : start + _BLOCK]
-            d2 = _distances_to(block, rows)
-            order = _ranked(d2, self.tiebreak_, self.k_)
-            dist = _class_distances(d2, self.codes_, len(self.classes_))
-            out[start : start + _BLOCK] = _posterior(self.codes_[order], dist, self.scale_)
+        rows = self.grid_rows_ if self.grid_rows_ is not None and on_grid(X) else Rows.of(self.X_, False)
+        step = block_rows(len(self.X_))
+        for start in range(0, len(X), step):  # a block of distances at a time: memory stays flat
+            block = X[start : start + step]
+            d2 = distances_to(block, rows)
+            order = ranked(d2, self.tiebreak_, self.k_)
+            dist = class_distances(d2, self.codes_, len(self.classes_))
+            out[start : start + step] = _posterior(self.codes_[order], dist, self.scale_)
         return out
 
     def predict(self, X):
@@ -271,8 +272,6 @@ class KNN(ClassifierMixin, BaseEstimator):
 
 
 _SOFT = 0.5  # weight of the distance term: under one vote, so it never overturns a majority
-_LEVELS = 255.0  # an 8-bit ADC's grid
-_BLOCK = 512
 
 
 def _inner_folds(codes, groups, cv) -> int:
@@ -287,49 +286,6 @@ def _split(codes, groups, folds, seed):
     if groups is None:
         return StratifiedKFold(folds, shuffle=True, random_state=seed).split(codes, codes)
     return GroupFolds(folds, shuffle=True, random_state=seed).split(codes, codes, groups)
-
-
-def _on_grid(X) -> bool:
-    codes = X * _LEVELS
-    return bool(np.all(np.abs(codes - np.round(codes)) < 1e-3))
-
-
-@dataclass(frozen=True, eq=False)
-class _Rows:
-    """Training rows ready for distances: ``values`` the integer codes of rows on the ADC's grid (``exact``),
-    else the rows as given; ``sq`` (n,) their squared norms.  Prepared once, read by every block of queries."""
-
-    values: np.ndarray
-    sq: np.ndarray
-    exact: bool
-
-    @staticmethod
-    def of(B, exact: bool) -> _Rows:
-        values = np.round(B * _LEVELS) if exact else B
-        return _Rows(values, np.einsum("ij,ij->i", values, values), exact)
-
-
-def _sq_distances(A, B, exact: bool | None = None) -> np.ndarray:
-    """(len(A), len(B)) squared Euclidean distances, the same on every CPU (see KNN's Notes).
-
-    ``exact`` says whether both are on the ADC's grid (default: checked here).
-    """
-    if exact is None:
-        exact = _on_grid(A) and _on_grid(B)
-    return _distances_to(A, _Rows.of(B, exact))
-
-
-def _distances_to(A, rows: _Rows) -> np.ndarray:
-    """(len(A), len(rows.values)) squared distances from ``A`` to prepared rows (as :func:`_sq_distances`)."""
-    if rows.exact:
-        A = np.round(A * _LEVELS)
-    out = np.empty((len(A), len(rows.values)))
-    for start in range(0, len(A), _BLOCK):
-        a = A[start : start + _BLOCK]
-        d2 = np.einsum("ij,ij->i", a, a)[:, None] + rows.sq[None, :] - 2.0 * (a @ rows.values.T)
-        out[start : start + _BLOCK] = np.maximum(d2, 0.0)
-    # Integer codes: every sum is an integer below 2**53, exact in any order.
-    return out / _LEVELS**2 if rows.exact else np.round(out, 9)
 
 
 def _scan_training_set(X, codes, keys, splits, ks, n_classes, scored) -> tuple[dict, float]:
@@ -352,18 +308,19 @@ def _scan_training_set(X, codes, keys, splits, ks, n_classes, scored) -> tuple[d
     for f, (_, test) in enumerate(splits):
         fold[test] = f
     nearest = np.empty(len(scored))
-    rows_all = _Rows.of(X, _on_grid(X))
-    for start in range(0, len(scored), _BLOCK):
-        block = scored[start : start + _BLOCK]
-        d2 = _distances_to(X[block], rows_all)
+    rows_all = Rows.of(X, on_grid(X))
+    step = block_rows(n)
+    for start in range(0, len(scored), step):
+        block = scored[start : start + step]
+        d2 = distances_to(X[block], rows_all)
         for f, (train, _) in enumerate(splits):
             usable = [k for k in ks if k <= len(train)]
             rows = np.flatnonzero(fold[block] == f)
             if not usable or rows.size == 0:
                 continue
             sub = d2[np.ix_(rows, train)]
-            order = _ranked(sub, keys[train], max(usable))
-            dist = _class_distances(sub, codes[train], n_classes)
+            order = ranked(sub, keys[train], max(usable))
+            dist = class_distances(sub, codes[train], n_classes)
             for k in usable:
                 # The argmax does not depend on the scale, so the fold's own is not needed.
                 proba = _posterior(codes[train][order[:, :k]], dist, 1.0)
@@ -389,52 +346,6 @@ def _row_keys(X, codes, seed) -> np.ndarray:
         ],
         dtype=np.uint64,
     )
-
-
-def _ranked(d2, tiebreak, k: int) -> np.ndarray:
-    """The ``k`` nearest training indices by increasing distance, equal distances in ``tiebreak`` order, (n, k).
-
-    ``tiebreak`` is (m,), one key per column, or (n, m), each row's own.
-
-    Only the candidates no farther than each row's k-th distance are sorted
-    (all of them, ties at that distance included), so the result is the first
-    ``k`` columns of the full sort.
-    """
-    n, m = d2.shape
-    k = min(int(k), m)
-    out = np.empty((n, k), np.int64)
-    for start in range(0, n, _BLOCK):
-        d = d2[start : start + _BLOCK]
-        near = np.argpartition(d, k - 1, axis=1)
-        kth = np.take_along_axis(d, near[:, k - 1 : k], axis=1)
-        wide = int((d <= kth).sum(axis=1).max())
-        if wide >= m:
-            near = np.broadcast_to(np.arange(m), d.shape)
-        elif wide > k:  # ties at the k-th distance: take them all
-            near = np.argpartition(d, wide - 1, axis=1)[:, :wide]
-        else:
-            near = near[:, :k]
-        rows = np.arange(len(d))[:, None]
-        tb = tiebreak[near] if tiebreak.ndim == 1 else tiebreak[start + rows, near]
-        order = np.lexsort((tb, d[rows, near]), axis=1)[:, :k]
-        out[start : start + _BLOCK] = near[rows, order]
-    return out
-
-
-def _class_distances(d2, codes, n_classes) -> np.ndarray:
-    """(n, n_classes) distance from each row to the nearest training sample of each class (inf: none).
-
-    One pass over ``d2``: its columns are read by class, in blocks (``codes`` sorted, as a fitted KNN keeps them).
-    """
-    codes = np.asarray(codes)
-    if np.any(codes[1:] < codes[:-1]):
-        order = np.argsort(codes, kind="stable")
-        d2, codes = d2[:, order], codes[order]
-    out = np.full((len(d2), n_classes), np.inf)
-    present, starts = np.unique(codes, return_index=True)
-    if present.size:
-        out[:, present] = np.minimum.reduceat(d2, starts, axis=1)
-    return np.sqrt(out)
 
 
 def _posterior(neighbour_codes, class_dist, scale):

@@ -184,20 +184,21 @@ def knn_shortlist(model, X, H: int, candidates: int | None = None) -> tuple[np.n
     -------
     values : (n, min(H, C)) float64, classes : (n, min(H, C)) int64 (indices into ``model.classes_``, increasing)
     """
-    from classify.recognizers.classifiers import _distances_to, _on_grid, _posterior, _ranked, _Rows
+    from classify.recognizers.classifiers import _posterior
+    from classify.recognizers.distances import Rows, distances_to, on_grid, ranked
 
     X = np.asarray(X, np.float64)
     codes, C = model.codes_, len(model.classes_)
     J = min(C, max(int(H), int(candidates or 2 * H)))
     starts = np.searchsorted(codes, np.arange(C + 1))
-    exact = model.grid_rows_ is not None and _on_grid(X)
-    every = model.grid_rows_ if exact else _Rows.of(model.X_, False)
+    exact = model.grid_rows_ is not None and on_grid(X)
+    every = model.grid_rows_ if exact else Rows.of(model.X_, False)
     rows_of = [
-        _Rows(every.values[starts[c] : starts[c + 1]], every.sq[starts[c] : starts[c + 1]], exact) for c in range(C)
+        Rows(every.values[starts[c] : starts[c + 1]], every.sq[starts[c] : starts[c + 1]], exact) for c in range(C)
     ]
     if J < C:
         picks = np.concatenate([starts[c] + spread(starts[c + 1] - starts[c], SCREEN_ROWS) for c in range(C)])
-        screen = _Rows(every.values[picks], every.sq[picks], exact)
+        screen = Rows(every.values[picks], every.sq[picks], exact)
         first = np.searchsorted(codes[picks], np.arange(C))
     R = int(np.diff(starts).max())
     T = min(int(H), C)
@@ -206,7 +207,7 @@ def knn_shortlist(model, X, H: int, candidates: int | None = None) -> tuple[np.n
     for a in range(0, len(X), step):
         q = X[a : a + step]
         if J < C:
-            cand = nearest_classes(np.minimum.reduceat(_distances_to(q, screen), first, axis=1), J)
+            cand = nearest_classes(np.minimum.reduceat(distances_to(q, screen), first, axis=1), J)
         else:
             cand = np.tile(np.arange(C), (len(q), 1))
         d2 = np.full((len(q), J, R), np.inf)
@@ -217,10 +218,10 @@ def knn_shortlist(model, X, H: int, candidates: int | None = None) -> tuple[np.n
         for c in np.flatnonzero(np.diff(bounds)):
             who, slot = np.divmod(pairs[bounds[c] : bounds[c + 1]], J)
             m = starts[c + 1] - starts[c]
-            d2[who, slot, :m] = _distances_to(q[who], rows_of[c])
+            d2[who, slot, :m] = distances_to(q[who], rows_of[c])
             tie[who, slot, :m] = model.tiebreak_[starts[c] : starts[c + 1]]
         flat = d2.reshape(len(q), J * R)
-        order = _ranked(flat, tie.reshape(len(q), J * R), model.k_)
+        order = ranked(flat, tie.reshape(len(q), J * R), model.k_)
         # The neighbours' slots stand for their objects: KNN's posterior over the candidates.
         P = _posterior(order // R, np.sqrt(d2.min(axis=2)), model.scale_)
         top = np.sort(nearest_classes(-P, T), axis=1) if T < J else np.tile(np.arange(J), (len(q), 1))

@@ -1,0 +1,149 @@
+"""Nearest-neighbour distances that do not depend on the CPU, the thread count or the block size.
+
+Imprints on an ADC's grid (multiples of ``1 / LEVELS``) are compared through
+their integer codes, where float64 sums are exact in any order; other rows
+have their squared distances rounded to 1e-9.  Training rows are prepared
+once (:class:`Rows`), queries are read a block at a time whose distances stay
+under :data:`CELLS` values, and neighbours at equal distance are ranked by a
+key, never by position (:func:`ranked`).  ``classify.recognizers.classifiers.KNN``
+and ``classify.recognizers.shortlist.knn_shortlist`` share them.
+
+Examples
+--------
+>>> A = np.array([[0.0, 0.0], [3 / 255, 4 / 255]])
+>>> (sq_distances(A, A) * 255**2).round(6).tolist()
+[[0.0, 25.0], [25.0, 0.0]]
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+__all__ = [
+    "LEVELS",
+    "BLOCK",
+    "CELLS",
+    "block_rows",
+    "on_grid",
+    "Rows",
+    "sq_distances",
+    "distances_to",
+    "ranked",
+    "class_distances",
+]
+
+#: An 8-bit ADC's grid: imprints on it are multiples of ``1 / LEVELS``.
+LEVELS = 255.0
+#: Queries per block of distances.
+BLOCK = 512
+#: Distances a block of queries holds at most (128 MB of float64): past ``CELLS / BLOCK`` training rows a
+#: block holds fewer queries, so memory does not grow with the training set.
+CELLS = 1 << 24
+
+
+def block_rows(n: int) -> int:
+    """Queries per block against ``n`` training rows: :data:`BLOCK`, fewer past ``CELLS / BLOCK`` rows.
+
+    Examples
+    --------
+    >>> block_rows(1000), block_rows(200_000)
+    (512, 83)
+    """
+    return max(1, min(BLOCK, CELLS // max(int(n), 1)))
+
+
+def on_grid(X) -> bool:
+    """Whether every value of ``X`` is a multiple of ``1 / LEVELS`` (to 1e-3 of a level)."""
+    codes = X * LEVELS
+    return bool(np.all(np.abs(codes - np.round(codes)) < 1e-3))
+
+
+@dataclass(frozen=True, eq=False)
+class Rows:
+    """Training rows ready for distances: ``values`` the integer codes of rows on the ADC's grid (``exact``),
+    else the rows as given; ``sq`` (n,) their squared norms.  Prepared once, read by every block of queries."""
+
+    values: np.ndarray
+    sq: np.ndarray
+    exact: bool
+
+    @staticmethod
+    def of(B, exact: bool) -> Rows:
+        values = np.round(B * LEVELS) if exact else B
+        return Rows(values, np.einsum("ij,ij->i", values, values), exact)
+
+
+def sq_distances(A, B, exact: bool | None = None) -> np.ndarray:
+    """(len(A), len(B)) squared Euclidean distances, the same on every CPU (see ``classify.recognizers.classifiers.KNN``'s Notes).
+
+    ``exact`` says whether both are on the ADC's grid (default: checked here).
+    """
+    if exact is None:
+        exact = on_grid(A) and on_grid(B)
+    return distances_to(A, Rows.of(B, exact))
+
+
+def distances_to(A, rows: Rows) -> np.ndarray:
+    """(len(A), len(rows.values)) squared distances from ``A`` to prepared rows (as :func:`sq_distances`)."""
+    if rows.exact:
+        A = np.round(A * LEVELS)
+    out = np.empty((len(A), len(rows.values)))
+    step = block_rows(len(rows.values))
+    for start in range(0, len(A), step):
+        a = A[start : start + step]
+        d2 = np.einsum("ij,ij->i", a, a)[:, None] + rows.sq[None, :] - 2.0 * (a @ rows.values.T)
+        np.maximum(d2, 0.0, out=out[start : start + step])
+    # Integer codes: every sum is an integer below 2**53, exact in any order.
+    if rows.exact:
+        out /= LEVELS**2
+        return out
+    return np.round(out, 9, out=out)
+
+
+def ranked(d2, tiebreak, k: int) -> np.ndarray:
+    """The ``k`` nearest training indices by increasing distance, equal distances in ``tiebreak`` order, (n, k).
+
+    ``tiebreak`` is (m,), one key per column, or (n, m), each row's own.
+
+    Only the candidates no farther than each row's k-th distance are sorted
+    (all of them, ties at that distance included), so the result is the first
+    ``k`` columns of the full sort.
+    """
+    n, m = d2.shape
+    k = min(int(k), m)
+    out = np.empty((n, k), np.int64)
+    step = block_rows(m)
+    for start in range(0, n, step):
+        d = d2[start : start + step]
+        near = np.argpartition(d, k - 1, axis=1)
+        kth = np.take_along_axis(d, near[:, k - 1 : k], axis=1)
+        wide = int((d <= kth).sum(axis=1).max())
+        if wide >= m:
+            near = np.broadcast_to(np.arange(m), d.shape)
+        elif wide > k:  # ties at the k-th distance: take them all
+            near = np.argpartition(d, wide - 1, axis=1)[:, :wide]
+        else:
+            near = near[:, :k]
+        rows = np.arange(len(d))[:, None]
+        tb = tiebreak[near] if tiebreak.ndim == 1 else tiebreak[start + rows, near]
+        order = np.lexsort((tb, d[rows, near]), axis=1)[:, :k]
+        out[start : start + step] = near[rows, order]
+    return out
+
+
+def class_distances(d2, codes, n_classes) -> np.ndarray:
+    """(n, n_classes) distance from each row to the nearest training sample of each class (inf: none).
+
+    One pass over ``d2``: its columns are read by class, in blocks (``codes`` sorted, as a fitted KNN keeps them).
+    """
+    codes = np.asarray(codes)
+    if np.any(codes[1:] < codes[:-1]):
+        order = np.argsort(codes, kind="stable")
+        d2, codes = d2[:, order], codes[order]
+    out = np.full((len(d2), n_classes), np.inf)
+    present, starts = np.unique(codes, return_index=True)
+    if present.size:
+        out[:, present] = np.minimum.reduceat(d2, starts, axis=1)
+    return np.sqrt(out)
