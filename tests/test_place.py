@@ -274,3 +274,15 @@ def test_a_registration_onto_places_it_cannot_match_never_collapses_the_shape(se
     size = np.sqrt(((fixed - fixed.mean(0)) ** 2).sum(1).mean() / ((moving - moving.mean(0)) ** 2).sum(1).mean())
     assert 1e-3 * size < s < 1e3 * size and np.allclose(R @ R.T, np.eye(3)) and np.isfinite(t).all()
     assert np.isfinite(landmarks_in(moving, fixed, rng=seed)).all()
+
+
+def test_registration_misfits_are_the_einsum_and_norm_bit_for_bit():
+    from meshsal.points.places import _misfits
+
+    rng = np.random.default_rng(7)
+    for k in (3, 17, 110, 331):
+        S, T = rng.uniform(0.2, 3.0, 200), rng.normal(size=(200, 3)) * 30
+        R = np.linalg.qr(rng.normal(size=(200, 3, 3)))[0]
+        M, target = rng.normal(size=(k, 3)) * [40, 20, 10], rng.normal(size=(k, 3)) * 25
+        moved = S[:, None, None] * np.einsum("bij,kj->bki", R, M) + T[:, None, :]
+        np.testing.assert_array_equal(_misfits(S, R, T, M, target), np.linalg.norm(moved - target[None], axis=2))

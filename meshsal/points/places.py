@@ -212,8 +212,7 @@ def register(moving, fixed, rng=0, rounds: int = 200, keep: int = 5) -> tuple[fl
     tol = 0.05 * scale
     picks = np.argsort(rng.random((rounds, len(M))), axis=1)[:, :3]
     S, R, T = similarity_fit(M[picks], F[pair[picks]])
-    moved = S[:, None, None] * np.einsum("bij,kj->bki", R, M) + T[:, None, :]
-    counts = (np.linalg.norm(moved - F[pair][None], axis=2) < tol).sum(axis=1)
+    counts = (_misfits(S, R, T, M, F[pair]) < tol).sum(axis=1)
     counts[~_plausible(S, size)] = -1
     b = int(np.argmax(counts))
     if counts[b] < 0:  # every sample collapses the shape: the sizes and centroids are all that can be matched
@@ -228,6 +227,21 @@ def register(moving, fixed, rng=0, rounds: int = 200, keep: int = 5) -> tuple[fl
         close = dist <= np.quantile(dist, 0.8)
         s, R, t = _unless_collapsed(similarity_fit(M[close], F[nearest[close]]), (s, R, t), size)
     return float(s), R, t
+
+
+def _misfits(S, R, T, M, target) -> np.ndarray:
+    """(b, k) distances from ``S[b] R[b] M[k] + T[b]`` to ``target[k]``, for b similarities at once.
+
+    Coordinate by coordinate on (b, k) arrays; each sum is taken in the
+    order ``np.einsum("bij,kj->bki")`` takes it, so the distances are those
+    of the einsum and ``np.linalg.norm``, bit for bit, at a fraction of the cost.
+    """
+    x, y, z = M[:, 0], M[:, 1], M[:, 2]
+    d = []
+    for i in range(3):
+        turned = (R[:, i, 0, None] * x + R[:, i, 2, None] * z) + R[:, i, 1, None] * y
+        d.append(S[:, None] * turned + T[:, i, None] - target[:, i])
+    return np.sqrt((d[0] * d[0] + d[1] * d[1]) + d[2] * d[2])
 
 
 def _plausible(s, size: float):
