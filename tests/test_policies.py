@@ -129,3 +129,26 @@ def test_the_stopping_rule_stops_at_the_first_touch_whose_belief_reaches_the_lev
     )
     assert used.tolist() == [[1, 1], [3, 2], [3, 2]]
     assert correct.tolist() == [[1, 0], [1, 1], [1, 1]]
+
+
+def test_a_place_sample_pickles_its_adc_readings_as_codes_and_comes_back_bit_for_bit():
+    import pickle
+
+    from classify.policies import PlaceSample
+    from classify.policies.knowledge import Places
+
+    rng = np.random.default_rng(0)
+    places = Places(
+        np.arange(6), rng.normal(size=(6, 3)), rng.normal(size=(6, 3)), rng.random((6, 4)), np.ones(6, bool)
+    )
+    read = (np.round(rng.random((1, 6, 16, 16)) * 255) / 255).astype(np.float32)  # an 8-bit ADC's readings
+    codebook = rng.random((6, 8, 42)).astype(np.float32)
+    for imprints, packed in ((read, True), (rng.random((1, 6, 16, 16)).astype(np.float32), False), (read * 2, False)):
+        sample = PlaceSample(places, imprints, codebook)
+        back = pickle.loads(pickle.dumps(sample))
+        assert back.imprints.dtype == np.float32
+        np.testing.assert_array_equal(back.imprints.view(np.int32), imprints.view(np.int32))
+        np.testing.assert_array_equal(back.codebook, codebook)
+        np.testing.assert_array_equal(back.places.positions, places.positions)
+        # Codes take a byte a taxel where float32 takes four.
+        assert (len(pickle.dumps(PlaceSample(places, imprints))) < imprints.nbytes / 2) == packed

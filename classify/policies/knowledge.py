@@ -106,6 +106,34 @@ class PlaceSample:
         """(LANDMARKS, 3) the instance's first pool places, which locate any point on it (``signatures``)."""
         return self.places.positions[:LANDMARKS]
 
+    def __reduce__(self):
+        # A job sends every instance's samples to a worker: imprints an 8-bit ADC read travel as its codes.
+        codes = _adc_codes(self.imprints)
+        if codes is None:
+            return (PlaceSample, (self.places, self.imprints, self.codebook))
+        return (_from_adc_codes, (self.places, codes, self.codebook))
+
+
+def _adc_codes(imprints) -> np.ndarray | None:
+    """The uint8 codes of float32 imprints that are exactly an 8-bit ADC's readings (``k / 255``), else None."""
+    a = np.ascontiguousarray(imprints)
+    if a.dtype != np.float32 or not a.size:
+        return None
+    codes = np.rint(a * np.float32(255.0))
+    if not (codes.min() >= 0.0 and codes.max() <= 255.0):  # also False with a NaN
+        return None
+    codes = codes.astype(np.uint8)
+    return codes if np.array_equal(_readings(codes).view(np.int32), a.view(np.int32)) else None
+
+
+def _readings(codes: np.ndarray) -> np.ndarray:
+    """float32 readings of uint8 ADC codes, rounded as the ADC rounds them (``tactile.perturbation``)."""
+    return (codes / 255.0).astype(np.float32)
+
+
+def _from_adc_codes(places: Places, codes: np.ndarray, codebook) -> PlaceSample:
+    return PlaceSample(places, _readings(codes), codebook)
+
 
 def signatures(places: Places) -> np.ndarray:
     """Where each place lies on its shape, whatever the pose and size: (P, LANDMARKS) float64.
@@ -329,10 +357,11 @@ def _held_out(recognizer, F, y, inst, groups, C: int, H: int, block: int = 4096)
         out = inst == i
         model = recognizer.fit(F[~out], y[~out], groups[~out])
         mine = np.flatnonzero(out)
-        # Past H objects a block of rows at a time, so that memory stays linear in the objects; a kNN then
-        # reads the training rows of each row's candidate objects only, and a few rows of every other.
+        # Past H objects a block of rows at a time, so that memory stays linear in the objects; a kNN instead
+        # reads the training rows of each row's candidate objects only, and a few rows of every other, in
+        # blocks of its own: one call prepares the objects' rows once.
         screened = not dense and isinstance(model, KNN) and len(model.classes_) > H
-        step = mine.size if dense else block
+        step = mine.size if dense or screened else block
         for a in range(0, mine.size, step):
             rows = mine[a : a + step]
             hit = np.isin(rows, pick)
