@@ -4,9 +4,9 @@ Prints Markdown tables: time per channel for all 72 views at 256 x 256 of
 the textured cow and of the hand toy at 150 mm (concave, painted per
 vertex), stacks of views in a thread pool as ``saliency_views`` takes them;
 the full ``saliency_views`` (all channels + combination), beside it with one
-view per stack (the per-view calls on small maps that stacks avoid), with
-OpenCV's own threads off (``cv2.setNumThreads(1)``: does OpenCV's pool
-fight the views' pool?) and on one thread; and mesh
+view per stack (the per-view calls on small maps that stacks avoid), and
+on one thread (``saliency_views`` caps OpenCV's own pool at one thread
+while its views' pool runs: the two would fight for the cores); and mesh
 saliency on nefertiti (a relief), on a subdivided nefertiti of about 200k
 vertices and on the hand refined to 124k faces.  Times are medians of
 ``--repeats`` runs, wall and process CPU time (all threads); the machine
@@ -115,7 +115,6 @@ def bench_channels(mesh, label: str, size: int, repeats: int, threads: int) -> N
     default = cv2.getNumThreads()
     cv2.setNumThreads(1)
     try:
-        rows.append(("saliency_views, OpenCV's own threads off", *median_time(whole(threads), repeats)))
         rows.append(("saliency_views on one thread", *median_time(whole(1), repeats)))
     finally:
         cv2.setNumThreads(default)

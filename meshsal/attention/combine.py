@@ -456,7 +456,8 @@ def saliency_views(
     views : sequence of View
     mesh : Mesh
     weights, vertex_saliency, normalize : as in :func:`saliency`
-    threads : int, optional, worker threads (default: the CPU count)
+    threads : int, optional, worker threads (default: the CPU count); with more than one, OpenCV's own
+        threads are capped at one for the call (process-wide), then restored
     quiet : bool, no progress bar on stderr
 
     Returns
@@ -484,9 +485,18 @@ def saliency_views(
     if workers == 1 or len(stacks) <= 1:
         done = progress(map(one, stacks), total=len(stacks), desc="saliency", quiet=quiet)
         return [r for results in done for r in results]
-    with ThreadPoolExecutor(max_workers=workers) as pool:
-        done = progress(pool.map(one, stacks), total=len(stacks), desc="saliency", quiet=quiet)
-        return [r for results in done for r in results]
+    import cv2
+
+    # The pool's threads fill the cores: OpenCV's own threads within each call would only contend with them.
+    # The cap is process-wide, for the call's duration; every OpenCV call here gives the same bits either way.
+    before = cv2.getNumThreads()
+    cv2.setNumThreads(1)
+    try:
+        with ThreadPoolExecutor(max_workers=workers) as pool:
+            done = progress(pool.map(one, stacks), total=len(stacks), desc="saliency", quiet=quiet)
+            return [r for results in done for r in results]
+    finally:
+        cv2.setNumThreads(before)
 
 
 def _stacks(views: list, size: int) -> list[list]:
