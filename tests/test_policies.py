@@ -131,10 +131,10 @@ def test_the_stopping_rule_stops_at_the_first_touch_whose_belief_reaches_the_lev
     assert correct.tolist() == [[1, 0], [1, 1], [1, 1]]
 
 
-def test_a_place_sample_pickles_its_adc_readings_as_codes_and_comes_back_bit_for_bit():
+def test_a_place_sample_packs_an_adc_s_readings_as_codes_and_unpacks_them_bit_for_bit():
     import pickle
 
-    from classify.policies import PlaceSample
+    from classify.policies import PackedPlaceSample, PlaceSample
     from classify.policies.knowledge import Places
 
     rng = np.random.default_rng(0)
@@ -143,12 +143,17 @@ def test_a_place_sample_pickles_its_adc_readings_as_codes_and_comes_back_bit_for
     )
     read = (np.round(rng.random((1, 6, 16, 16)) * 255) / 255).astype(np.float32)  # an 8-bit ADC's readings
     codebook = rng.random((6, 8, 42)).astype(np.float32)
-    for imprints, packed in ((read, True), (rng.random((1, 6, 16, 16)).astype(np.float32), False), (read * 2, False)):
+    for imprints, packs in ((read, True), (rng.random((1, 6, 16, 16)).astype(np.float32), False), (read * 2, False)):
         sample = PlaceSample(places, imprints, codebook)
-        back = pickle.loads(pickle.dumps(sample))
-        assert back.imprints.dtype == np.float32
+        packed = sample.packed()
+        assert isinstance(packed, PackedPlaceSample) == packs and (packed is sample) != packs
+        # Through a pickle, as a job takes it to a worker.
+        back = pickle.loads(pickle.dumps(packed)).unpacked()
+        assert isinstance(back, PlaceSample) and back.imprints.dtype == np.float32
         np.testing.assert_array_equal(back.imprints.view(np.int32), imprints.view(np.int32))
         np.testing.assert_array_equal(back.codebook, codebook)
-        np.testing.assert_array_equal(back.places.positions, places.positions)
-        # Codes take a byte a taxel where float32 takes four.
-        assert (len(pickle.dumps(PlaceSample(places, imprints))) < imprints.nbytes / 2) == packed
+        np.testing.assert_array_equal(packed.landmarks, sample.landmarks)
+        for name, a in sample.to_arrays().items():
+            np.testing.assert_array_equal(packed.to_arrays()[name], a)
+        if packs:  # a byte a taxel where float32 takes four
+            assert packed.codes.dtype == np.uint8 and packed.codes.nbytes * 4 == imprints.nbytes

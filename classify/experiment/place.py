@@ -110,22 +110,24 @@ class PlaceOutcome:
 def place_job(job: PlaceJob) -> PlaceOutcome:
     """Fit the place-aware recognizer on the training codebooks, then recognize every plan and run every policy."""
     n, K, L = len(job.names), job.touches, len(job.stop_levels)
+    training = {k: s.unpacked() for k, s in job.training.items()}
+    tests = tuple(t.unpacked() for t in job.tests)
     with threadpool_limits(1):
-        knowledge = fit_place_knowledge(job.training, job.params)
+        knowledge = fit_place_knowledge(training, job.params)
         plans = []
         for m in job.methods:
-            X, y, sig, inst, keys = place_touches(job.training, job.names, points=job.plans[m])
+            X, y, sig, inst, keys = place_touches(training, job.names, points=job.plans[m])
             model = knowledge.model.with_places(X, y, signatures=sig, instances=inst, places=keys)
             located = dataclasses.replace(knowledge, model=model)
             proba = [
                 located.posterior_at(plan.imprints[0], plan.positions, test.places)
-                for plan, test in zip(job.test_plans[m], job.tests)
+                for plan, test in zip(job.test_plans[m], tests)
             ]
             plans.append(plan_outcome(proba, job.names, K, job.sets_per_k, job.seed, job.replicate, job.stop_levels))
         if job.policies:
             policy = run_policies(
                 knowledge,
-                job.tests,
+                tests,
                 job.names,
                 job.policies,
                 K,
@@ -161,7 +163,7 @@ def place_jobs(stage: InstanceStage, objects: ObjectSet, n: int, config: Experim
         tests = tuple(stage.places[r, i, 0] for i in order)
         test_plans = {m: tuple(stage.samples[SampleKey(r, m, i, 0)] for i in order) for m in config.methods}
         if config.control is not None:
-            tests = shuffled_places(tests, names, settings.seed, r, config.control)
+            tests = shuffled_places(tuple(t.unpacked() for t in tests), names, settings.seed, r, config.control)
             test_plans = {
                 m: tuple(
                     dataclasses.replace(t, imprints=imprints[None])

@@ -82,10 +82,10 @@ class PolicyOutcome:
 def policy_job(job: PolicyJob) -> PolicyOutcome:
     """Fit the touch knowledge on the training instances, then run every policy on every test instance."""
     with threadpool_limits(1):
-        knowledge = fit_knowledge(job.training, job.recognizer)
+        knowledge = fit_knowledge({k: s.unpacked() for k, s in job.training.items()}, job.recognizer)
         return run_policies(
             knowledge,
-            job.tests,
+            tuple(s.unpacked() for s in job.tests),
             job.names,
             job.policies,
             job.touches,
@@ -149,7 +149,7 @@ def policy_jobs(stage, objects, n: int, config: ExperimentConfig) -> list:
         }
         tests = tuple(stage.places[r, i, 0] for i in order)
         if config.control is not None:
-            tests = shuffled_places(tests, names, settings.seed, r, config.control)
+            tests = shuffled_places(tuple(t.unpacked() for t in tests), names, settings.seed, r, config.control)
         # The place-aware recognizer's policies run in its own job (classify.experiment.place).
         for c in (c for c in config.classifiers if c != "place"):
             jobs.append(

@@ -186,7 +186,8 @@ class SampleKey(NamedTuple):
 @dataclass(frozen=True, eq=False)
 class InstanceStage:
     """Every instance's sample for every method (by :class:`SampleKey`), each replicate's touch model, and with
-    touch policies every instance's places (``classify.policies.PlaceSample`` by (replicate, object, instance))."""
+    touch policies every instance's places (``classify.policies.PlaceSample`` by (replicate, object, instance),
+    packed: ``PlaceSample.packed``)."""
 
     samples: dict
     models: tuple = ()
@@ -200,7 +201,9 @@ def _paper_sample(task: PaperSampleTask) -> TouchSample:
 
 def _instance_samples(task: SampleTask):
     with threadpool_limits(1), naming(task.name):
-        return instance_samples(task)
+        out = instance_samples(task)
+    # The run holds every instance's places until its last stage: packed, a third of the bytes.
+    return out if out.places is None else dataclasses.replace(out, places=out.places.packed())
 
 
 def _fit_model(surveys: dict):

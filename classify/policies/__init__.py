@@ -19,6 +19,7 @@ from classify.policies.episodes import (
 from classify.policies.knowledge import (
     LANDMARKS,
     Forecast,
+    PackedPlaceSample,
     Places,
     PlaceSample,
     TouchKnowledge,
@@ -54,6 +55,7 @@ __all__ = [
     "place_keys",
     "place_touches",
     "PlaceKnowledge",
+    "PackedPlaceSample",
     "Places",
     "PlaceSample",
     "PlanPolicy",
