@@ -37,6 +37,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from classify.recognizers.distances import LEVELS
 from classify.recognizers.shortlist import SHORTLIST
 from meshsal.points.places import LANDMARKS
 
@@ -156,12 +157,12 @@ class PackedPlaceSample:
 
 
 def _adc_codes(imprints) -> np.ndarray | None:
-    """The uint8 codes of float32 imprints that are exactly an 8-bit ADC's readings (``k / 255``), else None."""
+    """The uint8 codes of float32 imprints that are exactly an 8-bit ADC's readings (``k / LEVELS``), else None."""
     a = np.ascontiguousarray(imprints)
     if a.dtype != np.float32 or not a.size:
         return None
-    codes = np.rint(a * np.float32(255.0))
-    if not (codes.min() >= 0.0 and codes.max() <= 255.0):  # also False with a NaN
+    codes = np.rint(a * np.float32(LEVELS))
+    if not (codes.min() >= 0.0 and codes.max() <= LEVELS):  # also False with a NaN
         return None
     codes = codes.astype(np.uint8)
     return codes if np.array_equal(_readings(codes).view(np.int32), a.view(np.int32)) else None
@@ -169,7 +170,7 @@ def _adc_codes(imprints) -> np.ndarray | None:
 
 def _readings(codes: np.ndarray) -> np.ndarray:
     """float32 readings of uint8 ADC codes, rounded as the ADC rounds them (``tactile.perturbation``)."""
-    return (codes / 255.0).astype(np.float32)
+    return (codes / LEVELS).astype(np.float32)
 
 
 def signatures(places: Places) -> np.ndarray:
