@@ -30,7 +30,6 @@ from threadpoolctl import threadpool_limits
 from classify.experiment.config import ExperimentConfig
 from classify.experiment.controls import shuffled_imprints, shuffled_places
 from classify.experiment.protocols import plan_outcome
-from classify.experiment.samples import TouchSample
 from classify.experiment.sequential import policy_measurement, run_policies
 from classify.experiment.stages import (
     InstanceStage,
@@ -195,16 +194,16 @@ def place_jobs(stage: InstanceStage, objects: ObjectSet, n: int, config: Experim
     return jobs
 
 
-def _arrays(job: PlaceJob) -> list:
-    """Every array a job's outcome depends on, for its cache key."""
-    out = []
-    for sample in (*job.training.values(), *job.tests):
-        out += [*sample.to_arrays().values(), *([] if sample.codebook is None else [sample.codebook])]
+def _arrays(job: PlaceJob):
+    """Every array a job's outcome depends on, for its cache key, one at a time (packed places unpack to give
+    theirs)."""
+    samples = [*job.training.values(), *job.tests]
     for m in job.methods:
-        for sample in (*job.plans[m].values(), *job.test_plans[m]):
-            sample: TouchSample
-            out += [*sample.to_arrays().values(), *([] if sample.codebook is None else [sample.codebook])]
-    return out
+        samples += [*job.plans[m].values(), *job.test_plans[m]]
+    for sample in samples:
+        yield from sample.to_arrays().values()
+        if sample.codebook is not None:
+            yield sample.codebook
 
 
 def place_recognition(
@@ -217,7 +216,7 @@ def place_recognition(
     names = objects.names[:n]
     key = recognition_key(
         "place",
-        [a for job in jobs for a in _arrays(job)],
+        (a for job in jobs for a in _arrays(job)),
         [
             config.settings.key(),
             config.settings.codebook_draws,

@@ -16,6 +16,7 @@ the method.
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
@@ -144,8 +145,11 @@ def policy_jobs(stage, objects, n: int, config: ExperimentConfig) -> list:
     names = tuple(objects.names[i] for i in order)
     jobs = []
     for r in range(config.replicates):
+        # The place-free knowledge reads imprints only: the codebooks (the place-aware recognizer's) stay behind.
         training = {
-            (objects.names[i], j): stage.places[r, i, j] for i in order for j in range(1, settings.train_instances + 1)
+            (objects.names[i], j): dataclasses.replace(stage.places[r, i, j], codebook=None)
+            for i in order
+            for j in range(1, settings.train_instances + 1)
         }
         tests = tuple(stage.places[r, i, 0] for i in order)
         if config.control is not None:
@@ -178,12 +182,12 @@ def policy_recognition(
         return []
     jobs = policy_jobs(stage, objects, n, config)
     back = np.argsort(objects.by_name(n))
-    arrays = [
+    arrays = (
         a
         for job in jobs[:: len(free)]
         for sample in (*job.training.values(), *job.tests)
         for a in sample.to_arrays().values()
-    ]
+    )
     key = recognition_key(
         "sequential",
         arrays,

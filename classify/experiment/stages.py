@@ -335,8 +335,10 @@ def run_jobs(runtime: Runtime, key: str, cls, run, jobs: list, desc: str, outcom
 
 
 def recognition_key(kind, arrays, parts):
+    """The cache key of a recognition stage: its kind, the arrays (any iterable, read one at a time), the
+    parts, the code and the libraries."""
     code = cache_mod.code_fingerprint("classify", "tactile")
-    return cache_mod.cache_key(kind, cache_mod.hash_arrays(*arrays), parts, code, cache_mod.library_versions())
+    return cache_mod.cache_key(kind, cache_mod.hash_array_stream(arrays), parts, code, cache_mod.library_versions())
 
 
 def _recognizers(config: ExperimentConfig):

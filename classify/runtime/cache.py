@@ -34,6 +34,7 @@ from meshsal.util.npzfile import NpzError, read_npz
 __all__ = [
     "default_dir",
     "hash_arrays",
+    "hash_array_stream",
     "code_fingerprint",
     "file_fingerprint",
     "library_versions",
@@ -62,6 +63,18 @@ def hash_arrays(*arrays) -> str:
     True
     >>> hash_arrays(np.zeros(3)) == hash_arrays(np.zeros(3, np.float32))
     False
+    """
+    return hash_array_stream(arrays)
+
+
+def hash_array_stream(arrays) -> str:
+    """:func:`hash_arrays` of the arrays an iterable yields, read one at a time: a generator that makes each
+    array when asked never holds them all.
+
+    Examples
+    --------
+    >>> hash_array_stream(np.full(2, k) for k in range(3)) == hash_arrays(*(np.full(2, k) for k in range(3)))
+    True
     """
     h = hashlib.sha256()
     for a in arrays:
