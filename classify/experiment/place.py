@@ -52,7 +52,8 @@ class PlaceJob:
 
     Attributes
     ----------
-    training : dict (object name, instance) -> classify.policies.PlaceSample with its codebook, training instances
+    training : dict (object name, instance) -> classify.policies.PlaceSample (or packed) with its codebook, training
+        instances
     plans : dict method -> dict (object name, instance) -> TouchSample with its codebook, training instances
     tests : tuple of PlaceSample, the test instances in the order of ``names``
     test_plans : dict method -> tuple of TouchSample, the test instances' plans in the order of ``names``
@@ -109,13 +110,14 @@ class PlaceOutcome:
 def place_job(job: PlaceJob) -> PlaceOutcome:
     """Fit the place-aware recognizer on the training codebooks, then recognize every plan and run every policy."""
     n, K, L = len(job.names), job.touches, len(job.stop_levels)
-    training = {k: s.unpacked() for k, s in job.training.items()}
+    # Packed training places unpack one at a time, as the knowledge reads them; the tests, read at every touch,
+    # unpack once.
     tests = tuple(t.unpacked() for t in job.tests)
     with threadpool_limits(1):
-        knowledge = fit_place_knowledge(training, job.params)
+        knowledge = fit_place_knowledge(job.training, job.params)
         plans = []
         for m in job.methods:
-            X, y, sig, inst, keys = place_touches(training, job.names, points=job.plans[m])
+            X, y, sig, inst, keys = place_touches(job.training, job.names, points=job.plans[m])
             model = knowledge.model.with_places(X, y, signatures=sig, instances=inst, places=keys)
             located = dataclasses.replace(knowledge, model=model)
             proba = [

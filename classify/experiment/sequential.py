@@ -83,7 +83,8 @@ class PolicyOutcome:
 def policy_job(job: PolicyJob) -> PolicyOutcome:
     """Fit the touch knowledge on the training instances, then run every policy on every test instance."""
     with threadpool_limits(1):
-        knowledge = fit_knowledge({k: s.unpacked() for k, s in job.training.items()}, job.recognizer)
+        # Packed training places unpack one at a time, as the knowledge reads them.
+        knowledge = fit_knowledge(job.training, job.recognizer)
         return run_policies(
             knowledge,
             tuple(s.unpacked() for s in job.tests),

@@ -298,7 +298,7 @@ def fit_knowledge(training: dict, recognizer):
 
     Parameters
     ----------
-    training : dict (object name, instance index) -> PlaceSample
+    training : dict (object name, instance index) -> PlaceSample or PackedPlaceSample
         Training instances only (index >= 1); every session of every place is a training touch.
     recognizer : classify.recognizers.touches.Recognizer
         The single-touch classifier (selection is not applied: every place counts).  The place-aware
@@ -321,21 +321,23 @@ def fit_knowledge(training: dict, recognizer):
 
         return fit_place_knowledge(training, recognizer.params or {})
     keys = sorted(training, key=lambda k: (names.index(k[0]), k[1]))
-    X, y, inst, vertex = [], [], [], []
+    X, y, inst, vertex, located = [], [], [], [], []
     for name, j in keys:
         sample = training[name, j]
-        sessions, P = sample.imprints.shape[:2]
-        X.append(sample.imprints.reshape(-1, *sample.imprints.shape[2:]))
+        imprints = sample.imprints  # read once: a packed sample unpacks on each read
+        sessions, P = imprints.shape[:2]
+        X.append(imprints.reshape(-1, *imprints.shape[2:]))
         y.append(np.full(sessions * P, names.index(name)))
         inst.append(np.full(sessions * P, j))
         vertex.append(np.tile(sample.places.vertex_ids, sessions))
-    X, y, inst, vertex = (np.concatenate(a) for a in (X, y, inst, vertex))
+        located += [signatures(sample.places)] * sessions
+    X, y, inst, vertex, located = (np.concatenate(a) for a in (X, y, inst, vertex, located))
     F = describe(X, recognizer.features)
+    del X  # the descriptors are all that is read from here on
     groups = point_groups(y, vertex, inst)
     C = len(names)
     held, calibration = _held_out(recognizer, F, y, inst, groups, C, TouchKnowledge.hypotheses)
     model = recognizer.fit(F, y, groups)
-    located = np.concatenate([signatures(training[k].places) for k in keys for _ in range(len(training[k].imprints))])
     from classify.recognizers.shortlist import SparseRows
 
     place_ids, located_places, posteriors, weights = [], [], [], []

@@ -38,7 +38,7 @@ def place_touches(samples: dict, names: tuple, points=None) -> tuple:
 
     Parameters
     ----------
-    samples : dict (object name, instance index) -> PlaceSample with a codebook
+    samples : dict (object name, instance index) -> PlaceSample (or PackedPlaceSample) with a codebook
     names : tuple of str, the classes in order
     points : dict (object name, instance index) -> a fixed plan's training sample, optional
         Its ``positions`` (k, 3) and ``codebook`` (k, draws, d): the plan's
