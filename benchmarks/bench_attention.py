@@ -41,6 +41,7 @@ from meshsal import attention
 from meshsal.attention import combine
 from meshsal.attention.combine import image_channels_stack
 from meshsal.mesh.curvature import mesh_saliency
+from meshsal.util.threads import opencv_threads
 from meshsal.views import cameras as cameras_mod
 from meshsal.views import render
 
@@ -113,11 +114,8 @@ def bench_channels(mesh, label: str, size: int, repeats: int, threads: int) -> N
     rows.append(("saliency_views (8 channels + combination)", *stacked))
     rows.append(("saliency_views, one view per stack", *single))
     default = cv2.getNumThreads()
-    cv2.setNumThreads(1)
-    try:
+    with opencv_threads(1):
         rows.append(("saliency_views on one thread", *median_time(whole(1), repeats)))
-    finally:
-        cv2.setNumThreads(default)
 
     n = len(views)
     print(

@@ -80,16 +80,12 @@ def one_thread():
     ...     cv2.getNumThreads()
     1
     """
-    import cv2
     from threadpoolctl import threadpool_limits
 
-    before = cv2.getNumThreads()
-    cv2.setNumThreads(1)
-    try:
-        with threadpool_limits(1):
-            yield
-    finally:
-        cv2.setNumThreads(before)
+    from meshsal.util.threads import opencv_threads
+
+    with opencv_threads(1), threadpool_limits(1):
+        yield
 
 
 def _die_with_parent() -> None:

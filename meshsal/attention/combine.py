@@ -485,18 +485,13 @@ def saliency_views(
     if workers == 1 or len(stacks) <= 1:
         done = progress(map(one, stacks), total=len(stacks), desc="saliency", quiet=quiet)
         return [r for results in done for r in results]
-    import cv2
+    from meshsal.util.threads import opencv_threads
 
     # The pool's threads fill the cores: OpenCV's own threads within each call would only contend with them.
     # The cap is process-wide, for the call's duration; every OpenCV call here gives the same bits either way.
-    before = cv2.getNumThreads()
-    cv2.setNumThreads(1)
-    try:
-        with ThreadPoolExecutor(max_workers=workers) as pool:
-            done = progress(pool.map(one, stacks), total=len(stacks), desc="saliency", quiet=quiet)
-            return [r for results in done for r in results]
-    finally:
-        cv2.setNumThreads(before)
+    with opencv_threads(1), ThreadPoolExecutor(max_workers=workers) as pool:
+        done = progress(pool.map(one, stacks), total=len(stacks), desc="saliency", quiet=quiet)
+        return [r for results in done for r in results]
 
 
 def _stacks(views: list, size: int) -> list[list]:
