@@ -19,6 +19,8 @@ __all__ = ["FEATURES", "polar_fourier", "describe"]
 
 #: Descriptor names accepted by :func:`describe`.
 FEATURES = ("raw", "polar")
+#: Imprints :func:`polar_fourier` describes at once.
+_ROWS = 4096
 
 
 def polar_fourier(imprints, rings: int = 7, samples: int = 32, harmonics: int = 6) -> np.ndarray:
@@ -43,7 +45,7 @@ def polar_fourier(imprints, rings: int = 7, samples: int = 32, harmonics: int = 
     >>> a.shape, bool(np.allclose(a, b))
     ((1, 42), True)
     """
-    X = np.asarray(imprints, dtype=np.float64)
+    X = np.asarray(imprints)
     if X.ndim != 3:
         raise ValueError(f"imprints must have shape (N, rows, cols), got {X.shape}")
     if not (1 <= harmonics <= samples // 2 + 1 and rings >= 1):
@@ -58,15 +60,22 @@ def polar_fourier(imprints, rings: int = 7, samples: int = 32, harmonics: int = 
     y0 = np.clip(np.floor(ys).astype(int), 0, rows - 2)
     x0 = np.clip(np.floor(xs).astype(int), 0, cols - 2)
     wy, wx = ys - y0, xs - x0
-    flat = X.reshape(n, -1)
-    ring = (
-        flat[:, y0 * cols + x0] * ((1 - wy) * (1 - wx))
-        + flat[:, y0 * cols + x0 + 1] * ((1 - wy) * wx)
-        + flat[:, (y0 + 1) * cols + x0] * (wy * (1 - wx))
-        + flat[:, (y0 + 1) * cols + x0 + 1] * (wy * wx)
+    corners = (
+        (y0 * cols + x0, (1 - wy) * (1 - wx)),
+        (y0 * cols + x0 + 1, (1 - wy) * wx),
+        ((y0 + 1) * cols + x0, wy * (1 - wx)),
+        ((y0 + 1) * cols + x0 + 1, wy * wx),
     )
-    spectrum = np.abs(np.fft.rfft(ring.reshape(n, rings, samples), axis=2))[:, :, :harmonics] / samples
-    return spectrum.reshape(n, rings * harmonics)
+    out = np.empty((n, rings * harmonics))
+    # A block of imprints at a time: each row's descriptor is its own, and the rings and spectra of a whole
+    # training set (some kilobytes per imprint) would otherwise be held at once.
+    for a in range(0, n, _ROWS):
+        flat = np.asarray(X[a : a + _ROWS], dtype=np.float64).reshape(-1, rows * cols)
+        (i0, w0), (i1, w1), (i2, w2), (i3, w3) = corners
+        ring = flat[:, i0] * w0 + flat[:, i1] * w1 + flat[:, i2] * w2 + flat[:, i3] * w3
+        spectrum = np.abs(np.fft.rfft(ring.reshape(-1, rings, samples), axis=2))[:, :, :harmonics] / samples
+        out[a : a + _ROWS] = spectrum.reshape(-1, rings * harmonics)
+    return out
 
 
 def describe(imprints, features: str = "raw") -> np.ndarray:

@@ -14,6 +14,17 @@ def test_quarter_turns_leave_the_descriptor_unchanged_exactly():
         assert np.allclose(polar_fourier(img), polar_fourier(np.rot90(img, k, axes=(1, 2))), atol=1e-12)
 
 
+def test_a_stack_is_described_block_by_block_as_each_imprint_alone(monkeypatch):
+    import tactile.features as features
+
+    stack = np.random.default_rng(1).random((11, 16, 16)).astype(np.float32)
+    one_by_one = np.concatenate([polar_fourier(img[None]) for img in stack])
+    monkeypatch.setattr(features, "_ROWS", 4)  # blocks of 4, 4 and 3
+    blocked = polar_fourier(stack)
+    assert blocked.dtype == np.float64 and np.array_equal(blocked, one_by_one)
+    assert np.array_equal(blocked, polar_fourier(stack.astype(np.float64)))
+
+
 def test_a_radially_symmetric_imprint_has_no_angular_harmonics():
     yy, xx = np.mgrid[0:16, 0:16] - 7.5
     dome = np.clip(1.0 - np.hypot(yy, xx) / 8.0, 0, 1)[None]

@@ -73,6 +73,20 @@ def test_calibration_scored_on_a_spread_sample_fits_what_the_whole_set_does():
     assert nll(some) < 1.02 * nll(whole) < nll(fusion.Calibration())
 
 
+def test_calibration_fitted_a_block_of_rows_at_a_time_matches_the_whole_grid_scored_at_once(monkeypatch):
+    rng = np.random.default_rng(5)
+    truth = rng.dirichlet(np.ones(40) * 0.2, 500)
+    y = np.array([rng.choice(40, p=row) for row in truth])
+    P = truth**3 / (truth**3).sum(axis=1, keepdims=True)
+    # The reference: every grid point scored on all rows at once.
+    grid = [fusion.Calibration(e, t) for e in fusion._EPS_GRID for t in fusion._T_GRID]
+    nll = [-np.mean(np.log(np.maximum(fusion.calibrate(P, c)[np.arange(len(y)), y], 1e-12))) for c in grid]
+    whole = grid[int(np.argmin(nll))]
+    assert 0.1 < whole.temperature < 20.0  # an inner optimum, not the grid's edge
+    monkeypatch.setattr(fusion, "_CELLS", 7 * 40)  # blocks of 7 rows
+    assert fusion.fit_calibration(P, y) == whole
+
+
 def test_touch_sets_are_distinct_exhaustive_when_few_and_seeded():
     rng = np.random.default_rng(0)
     assert len(fusion.touch_sets(15, 14, 50, rng)) == 15  # C(15, 14) = 15 < 50: all of them

@@ -146,12 +146,13 @@ def fit_replicate_model(surveys: dict, alpha: float = 1.0):
     names = sorted({name for name, _ in used})
     if len(names) < 2:
         raise ValueError(f"a touch model needs training instances of at least two objects, got {names}")
+    label = {name: c for c, name in enumerate(names)}
     features, descriptors, labels, instances = [], [], [], []
     for name, j in used:
         survey = surveys[name, j]
         features.append(survey.features)
         descriptors.append(survey.descriptors)
-        labels.append(np.full(len(survey.features), names.index(name)))
+        labels.append(np.full(len(survey.features), label[name]))
         instances.append(np.full(len(survey.features), j))
     margin = distinctiveness(np.concatenate(descriptors), np.concatenate(labels), np.concatenate(instances))
     return fit_touch_model(np.concatenate(features), margin, alpha, trained_on=tuple(f"{name}/{j}" for name, j in used))

@@ -320,20 +320,20 @@ def fit_knowledge(training: dict, recognizer):
         from classify.policies.place_knowledge import fit_place_knowledge
 
         return fit_place_knowledge(training, recognizer.params or {})
-    keys = sorted(training, key=lambda k: (names.index(k[0]), k[1]))
-    X, y, inst, vertex, located = [], [], [], [], []
+    label = {name: c for c, name in enumerate(names)}
+    keys = sorted(training, key=lambda k: (label[k[0]], k[1]))
+    F, y, inst, vertex, located = [], [], [], [], []
     for name, j in keys:
         sample = training[name, j]
         imprints = sample.imprints  # read once: a packed sample unpacks on each read
         sessions, P = imprints.shape[:2]
-        X.append(imprints.reshape(-1, *imprints.shape[2:]))
-        y.append(np.full(sessions * P, names.index(name)))
+        # Described sample by sample: the descriptors are all that is read from here on.
+        F.append(describe(imprints.reshape(-1, *imprints.shape[2:]), recognizer.features))
+        y.append(np.full(sessions * P, label[name]))
         inst.append(np.full(sessions * P, j))
         vertex.append(np.tile(sample.places.vertex_ids, sessions))
         located += [signatures(sample.places)] * sessions
-    X, y, inst, vertex, located = (np.concatenate(a) for a in (X, y, inst, vertex, located))
-    F = describe(X, recognizer.features)
-    del X  # the descriptors are all that is read from here on
+    F, y, inst, vertex, located = (np.concatenate(a) for a in (F, y, inst, vertex, located))
     groups = point_groups(y, vertex, inst)
     C = len(names)
     held, calibration = _held_out(recognizer, F, y, inst, groups, C, TouchKnowledge.hypotheses)

@@ -50,8 +50,9 @@ def place_touches(samples: dict, names: tuple, points=None) -> tuple:
     """
     from meshsal.points.places import signatures as located
 
+    label = {name: c for c, name in enumerate(names)}
     X, y, sig, inst, keys = [], [], [], [], []
-    for (name, j), sample in sorted(samples.items(), key=lambda kv: (names.index(kv[0][0]), kv[0][1])):
+    for (name, j), sample in sorted(samples.items(), key=lambda kv: (label[kv[0][0]], kv[0][1])):
         if sample.codebook is None:
             raise ValueError(f"{name}, training instance {j}: no touch codebook (run with the place-aware recognizer)")
         if points is None:
@@ -64,7 +65,7 @@ def place_touches(samples: dict, names: tuple, points=None) -> tuple:
             book = plan.codebook
         draws = book.shape[1]
         X.append(book.reshape(-1, book.shape[2]))
-        y.append(np.full(book.shape[0] * draws, names.index(name)))
+        y.append(np.full(book.shape[0] * draws, label[name]))
         sig.append(np.repeat(where, draws, axis=0))
         inst.append(np.full(book.shape[0] * draws, j))
         keys.append(np.repeat(place_keys(where), draws))
@@ -76,11 +77,12 @@ def _session_touches(samples: dict, names: tuple) -> tuple:
     signatures, instances."""
     from tactile.features import polar_fourier
 
+    label = {name: c for c, name in enumerate(names)}
     X, y, sig, inst = [], [], [], []
-    for (name, j), sample in sorted(samples.items(), key=lambda kv: (names.index(kv[0][0]), kv[0][1])):
+    for (name, j), sample in sorted(samples.items(), key=lambda kv: (label[kv[0][0]], kv[0][1])):
         ok = sample.places.touchable
         X.append(polar_fourier(sample.imprints[0][ok]))
-        y.append(np.full(ok.sum(), names.index(name)))
+        y.append(np.full(ok.sum(), label[name]))
         sig.append(signatures(sample.places)[ok])
         inst.append(np.full(ok.sum(), j))
     return tuple(np.concatenate(a) for a in (X, y, sig, inst))
@@ -199,7 +201,9 @@ def fit_place_knowledge(training: dict, params: dict | None = None) -> PlaceKnow
         X, y, signatures=sig, instances=inst, places=keys, session=_session_touches(training, names)
     )
     table, weights = model.forecast_table()
-    references = tuple(
-        training[min((k for k in training if k[0] == name), key=lambda k: k[1])].places.positions for name in names
-    )
+    # Each object's first training instance.
+    first = {}
+    for name, j in sorted(training):
+        first.setdefault(name, j)
+    references = tuple(training[name, first[name]].places.positions for name in names)
     return PlaceKnowledge(names, model, table, weights, references)

@@ -92,9 +92,13 @@ def distances_to(A, rows: Rows) -> np.ndarray:
     out = np.empty((len(A), len(rows.values)))
     step = block_rows(len(rows.values))
     for start in range(0, len(A), step):
-        a = A[start : start + step]
-        d2 = np.einsum("ij,ij->i", a, a)[:, None] + rows.sq[None, :] - 2.0 * (a @ rows.values.T)
-        np.maximum(d2, 0.0, out=out[start : start + step])
+        a, d2 = A[start : start + step], out[start : start + step]
+        # (|a|^2 + |b|^2) - 2 a.b, written into the output: one temporary block, the same sums in the same order.
+        np.add(np.einsum("ij,ij->i", a, a)[:, None], rows.sq[None, :], out=d2)
+        cross = a @ rows.values.T
+        cross *= 2.0
+        d2 -= cross
+        np.maximum(d2, 0.0, out=d2)
     # Integer codes: every sum is an integer below 2**53, exact in any order.
     if rows.exact:
         out /= LEVELS**2
