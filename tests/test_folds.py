@@ -40,3 +40,13 @@ def test_ties_between_equally_even_folds_go_to_the_emptier_fold():
     ours = _splits(GroupFolds, y, groups, 3, 4)
     assert ours == _splits(StratifiedGroupKFold, y, groups, 3, 4)
     assert [len(test) for _, test in ours] == [4, 4, 4]
+
+
+def test_the_same_splits_when_the_groups_spreads_are_computed_a_few_rows_at_a_time(monkeypatch):
+    import classify.recognizers.folds as folds
+
+    rng = np.random.default_rng(7)
+    y = np.repeat(np.arange(40), 9)
+    groups = rng.permutation(len(y)) // 2  # pairs of rows, some of two classes
+    monkeypatch.setattr(folds, "_CELLS", 3 * 40)  # three groups' rows of the table at a time
+    assert _splits(GroupFolds, y, groups, 4, 1) == _splits(StratifiedGroupKFold, y, groups, 4, 1)
