@@ -60,7 +60,7 @@ def polar_fourier(imprints, rings: int = 7, samples: int = 32, harmonics: int = 
     y0 = np.clip(np.floor(ys).astype(int), 0, rows - 2)
     x0 = np.clip(np.floor(xs).astype(int), 0, cols - 2)
     wy, wx = ys - y0, xs - x0
-    corners = (
+    (i0, w0), (i1, w1), (i2, w2), (i3, w3) = (
         (y0 * cols + x0, (1 - wy) * (1 - wx)),
         (y0 * cols + x0 + 1, (1 - wy) * wx),
         ((y0 + 1) * cols + x0, wy * (1 - wx)),
@@ -71,7 +71,6 @@ def polar_fourier(imprints, rings: int = 7, samples: int = 32, harmonics: int = 
     # training set (some kilobytes per imprint) would otherwise be held at once.
     for a in range(0, n, _ROWS):
         flat = np.asarray(X[a : a + _ROWS], dtype=np.float64).reshape(-1, rows * cols)
-        (i0, w0), (i1, w1), (i2, w2), (i3, w3) = corners
         ring = flat[:, i0] * w0 + flat[:, i1] * w1 + flat[:, i2] * w2 + flat[:, i3] * w3
         spectrum = np.abs(np.fft.rfft(ring.reshape(-1, rings, samples), axis=2))[:, :, :harmonics] / samples
         out[a : a + _ROWS] = spectrum.reshape(-1, rings * harmonics)

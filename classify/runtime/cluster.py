@@ -80,6 +80,11 @@ def one_thread():
     ...     cv2.getNumThreads()
     1
     """
+    # threadpool_limits reaches the thread pools already loaded: load those a task would otherwise load inside
+    # the block, unlimited (SciPy's BLAS, scikit-learn's and PyMeshLab's OpenMP).
+    import pymeshlab  # noqa: F401
+    import scipy.linalg  # noqa: F401
+    import sklearn.utils._openmp_helpers  # noqa: F401
     from threadpoolctl import threadpool_limits
 
     from meshsal.util.threads import opencv_threads
