@@ -12,7 +12,9 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import errno
+import signal
 import sys
+import threading
 import time
 from dataclasses import dataclass
 
@@ -193,8 +195,16 @@ def capture(
     sensor = session.sensor
     last_valid = time.monotonic()
     garbage = 0
+    # Ctrl-C sets a flag that the loop reads between reads, so it never lands inside a commit; a run in another
+    # thread (no signal handler there) stops on the KeyboardInterrupt instead.
+    interrupted: list[int] = []
+    handles = threading.current_thread() is threading.main_thread()
+    if handles:
+        # None: a handler not set from Python, which cannot be set back; Python's own then.
+        previous = signal.getsignal(signal.SIGINT) or signal.default_int_handler
+        signal.signal(signal.SIGINT, lambda signum, frame: interrupted.append(signum))
     try:
-        while True:
+        while not interrupted:
             try:
                 data = ser.read(ser.in_waiting or 1)
             except Exception as exc:  # pyserial raises SerialException or OSError subclasses
@@ -257,10 +267,13 @@ def capture(
                 if o.presses is not None and len(stored) >= o.presses:
                     return _result(stored, "presses", parser)
     except KeyboardInterrupt:
-        say(f"interrupted; {len(stored)} presses of this run are stored in {session.path}")
-        return _result(stored, "interrupted", parser)
+        pass
     finally:
+        if handles:
+            signal.signal(signal.SIGINT, previous)
         ser.close()
+    say(f"interrupted; {len(stored)} presses of this run are stored in {session.path}")
+    return _result(stored, "interrupted", parser)
 
 
 def _result(stored, stopped, parser) -> CaptureResult:

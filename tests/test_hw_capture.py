@@ -222,6 +222,28 @@ def _wait_for(predicate, timeout=30.0):
     return False
 
 
+def test_ctrl_c_stops_between_presses_keeps_them_and_gives_the_handler_back(tmp_path):
+    if threading.current_thread() is not threading.main_thread():
+        pytest.skip("signals reach the main thread only")
+    before = signal.getsignal(signal.SIGINT)
+    path = tmp_path / "s.sqlite"
+
+    def interrupt_after_two_presses():
+        _wait_for(lambda: len(stored(path)) >= 2)
+        os.kill(os.getpid(), signal.SIGINT)
+
+    with sim_thread(blobs(40, seed=3), idle_frames=30) as (port, _):
+        with Session(path) as session:
+            interrupter = threading.Thread(target=interrupt_after_two_presses)
+            interrupter.start()
+            result = capture(port, session, "blobs", quiet=True)
+            interrupter.join()
+            kept = session.presses()
+    assert result.stopped == "interrupted" and len(result.point_ids) >= 2
+    assert [p.point_id for p in kept] == list(result.point_ids)
+    assert signal.getsignal(signal.SIGINT) is before
+
+
 def test_killed_capture_keeps_every_completed_press_and_resumes(tmp_path):
     session = tmp_path / "s.sqlite"
     imprints = blobs(40, seed=11)
