@@ -1,4 +1,4 @@
-"""Stratified folds of whole groups: scikit-learn's assignment, in memory and time linear in the groups.
+"""Stratified folds of whole groups: scikit-learn's assignment, in memory linear in the groups.
 
 :class:`StratifiedGroupKFold` places each group (an instance's point, its
 re-touches) in the fold that keeps the class proportions most even.
@@ -7,10 +7,11 @@ group against every class, one candidate fold at a time in Python: a third
 of the recognition time on the demo, and at 1,000 objects (200,000 groups)
 gigabytes of memory and time that grows with the square of the objects.
 :class:`GroupFolds` keeps each group's counts of its own classes only and
-rescores only those classes' columns; the other columns' spreads, and every
-sum and mean, are the ones scikit-learn computes, in the same order, so the
-folds are the same, split for split (``tests/test_folds.py`` checks it
-against scikit-learn's).
+rescores only those classes' columns (k x C values per group, one mean per
+fold, instead of k x k x C); the other columns' spreads, and every sum and
+mean, are the ones scikit-learn computes, in the same order, so the folds
+are the same, split for split (``tests/test_folds.py`` checks it against
+scikit-learn's).
 """
 
 from __future__ import annotations
@@ -31,7 +32,7 @@ _CELLS = 1 << 22
 
 
 class GroupFolds(StratifiedGroupKFold):
-    """:class:`sklearn.model_selection.StratifiedGroupKFold`, the same splits, faster and in linear memory.
+    """:class:`sklearn.model_selection.StratifiedGroupKFold`, the same splits, faster and without the dense table.
 
     Parameters
     ----------
