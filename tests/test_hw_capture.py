@@ -228,16 +228,22 @@ def test_ctrl_c_stops_between_presses_keeps_them_and_gives_the_handler_back(tmp_
     before = signal.getsignal(signal.SIGINT)
     path = tmp_path / "s.sqlite"
 
+    done = threading.Event()
+
     def interrupt_after_two_presses():
-        _wait_for(lambda: len(stored(path)) >= 2)
-        os.kill(os.getpid(), signal.SIGINT)
+        # Never after the capture ended on its own: the signal would stop the test run instead.
+        if _wait_for(lambda: len(stored(path)) >= 2 or done.is_set()) and not done.is_set():
+            os.kill(os.getpid(), signal.SIGINT)
 
     with sim_thread(blobs(40, seed=3), idle_frames=30) as (port, _):
         with Session(path) as session:
             interrupter = threading.Thread(target=interrupt_after_two_presses)
             interrupter.start()
-            result = capture(port, session, "blobs", quiet=True)
-            interrupter.join()
+            try:
+                result = capture(port, session, "blobs", quiet=True)
+            finally:
+                done.set()
+                interrupter.join()
             kept = session.presses()
     assert result.stopped == "interrupted" and len(result.point_ids) >= 2
     assert [p.point_id for p in kept] == list(result.point_ids)
