@@ -293,6 +293,20 @@ class TouchKnowledge:
         return Forecast(out, weight, None if classes is None else J)
 
 
+def in_object_order(training: dict, names) -> list:
+    """``training``'s samples as ``(label, name, instance, sample)``: objects in the order of ``names`` (the label is
+    the index there), each object's instances in increasing order.
+
+    Examples
+    --------
+    >>> [(c, name, j) for c, name, j, _ in in_object_order({("b", 1): 0, ("a", 2): 0, ("a", 1): 0}, ("b", "a"))]
+    [(0, 'b', 1), (1, 'a', 1), (1, 'a', 2)]
+    """
+    label = {name: c for c, name in enumerate(names)}
+    keys = sorted(training, key=lambda k: (label[k[0]], k[1]))
+    return [(label[name], name, j, training[name, j]) for name, j in keys]
+
+
 def fit_knowledge(training: dict, recognizer):
     """Touch knowledge from training instances' place samples.
 
@@ -320,16 +334,13 @@ def fit_knowledge(training: dict, recognizer):
         from classify.policies.place_knowledge import fit_place_knowledge
 
         return fit_place_knowledge(training, recognizer.params or {})
-    label = {name: c for c, name in enumerate(names)}
-    keys = sorted(training, key=lambda k: (label[k[0]], k[1]))
     F, y, inst, vertex, located = [], [], [], [], []
-    for name, j in keys:
-        sample = training[name, j]
+    for c, _, j, sample in in_object_order(training, names):
         imprints = sample.imprints  # read once: a packed sample unpacks on each read
         sessions, P = imprints.shape[:2]
         # Described sample by sample: the descriptors are all that is read from here on.
         F.append(describe(imprints.reshape(-1, *imprints.shape[2:]), recognizer.features))
-        y.append(np.full(sessions * P, label[name]))
+        y.append(np.full(sessions * P, c))
         inst.append(np.full(sessions * P, j))
         vertex.append(np.tile(sample.places.vertex_ids, sessions))
         located += [signatures(sample.places)] * sessions

@@ -13,7 +13,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from classify.policies.knowledge import Forecast, Places, signatures
+from classify.policies.knowledge import Forecast, Places, in_object_order, signatures
 
 __all__ = ["PlaceKnowledge", "fit_place_knowledge", "place_keys", "place_touches"]
 
@@ -50,9 +50,8 @@ def place_touches(samples: dict, names: tuple, points=None) -> tuple:
     """
     from meshsal.points.places import signatures as located
 
-    label = {name: c for c, name in enumerate(names)}
     X, y, sig, inst, keys = [], [], [], [], []
-    for (name, j), sample in sorted(samples.items(), key=lambda kv: (label[kv[0][0]], kv[0][1])):
+    for c, name, j, sample in in_object_order(samples, names):
         if sample.codebook is None:
             raise ValueError(f"{name}, training instance {j}: no touch codebook (run with the place-aware recognizer)")
         if points is None:
@@ -65,7 +64,7 @@ def place_touches(samples: dict, names: tuple, points=None) -> tuple:
             book = plan.codebook
         draws = book.shape[1]
         X.append(book.reshape(-1, book.shape[2]))
-        y.append(np.full(book.shape[0] * draws, label[name]))
+        y.append(np.full(book.shape[0] * draws, c))
         sig.append(np.repeat(where, draws, axis=0))
         inst.append(np.full(book.shape[0] * draws, j))
         keys.append(np.repeat(place_keys(where), draws))
@@ -77,12 +76,11 @@ def _session_touches(samples: dict, names: tuple) -> tuple:
     signatures, instances."""
     from tactile.features import polar_fourier
 
-    label = {name: c for c, name in enumerate(names)}
     X, y, sig, inst = [], [], [], []
-    for (name, j), sample in sorted(samples.items(), key=lambda kv: (label[kv[0][0]], kv[0][1])):
+    for c, _, j, sample in in_object_order(samples, names):
         ok = sample.places.touchable
         X.append(polar_fourier(sample.imprints[0][ok]))
-        y.append(np.full(ok.sum(), label[name]))
+        y.append(np.full(ok.sum(), c))
         sig.append(signatures(sample.places)[ok])
         inst.append(np.full(ok.sum(), j))
     return tuple(np.concatenate(a) for a in (X, y, sig, inst))
@@ -203,7 +201,7 @@ def fit_place_knowledge(training: dict, params: dict | None = None) -> PlaceKnow
     table, weights = model.forecast_table()
     # Each object's first training instance.
     first = {}
-    for name, j in sorted(training):
-        first.setdefault(name, j)
-    references = tuple(training[name, first[name]].places.positions for name in names)
+    for _, name, _, sample in in_object_order(training, names):
+        first.setdefault(name, sample)
+    references = tuple(first[name].places.positions for name in names)
     return PlaceKnowledge(names, model, table, weights, references)

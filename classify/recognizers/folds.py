@@ -109,8 +109,9 @@ class GroupFolds(StratifiedGroupKFold):
             fold_of[g] = best
             # The group's fold now holds what that fold's trial held.
             base[cc] = spreads[best]
+        row_fold = fold_of[groups_inv]
         for i in range(k):
-            yield np.flatnonzero(fold_of[groups_inv] == i)
+            yield np.flatnonzero(row_fold == i)
 
 
 def _best_fold(evals: list, samples: list) -> int:

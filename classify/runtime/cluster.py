@@ -80,17 +80,21 @@ def one_thread():
     ...     cv2.getNumThreads()
     1
     """
-    # threadpool_limits reaches the thread pools already loaded: load those a task would otherwise load inside
-    # the block, unlimited (SciPy's BLAS, scikit-learn's and PyMeshLab's OpenMP).
-    import pymeshlab  # noqa: F401
-    import scipy.linalg  # noqa: F401
-    import sklearn.utils._openmp_helpers  # noqa: F401
     from threadpoolctl import threadpool_limits
 
     from meshsal.util.threads import opencv_threads
 
+    _load_thread_pools()
     with opencv_threads(1), threadpool_limits(1):
         yield
+
+
+def _load_thread_pools() -> None:
+    """Load the thread pools a task would otherwise load later: ``threadpool_limits`` reaches only those already
+    loaded (SciPy's BLAS, scikit-learn's and PyMeshLab's OpenMP)."""
+    import pymeshlab  # noqa: F401
+    import scipy.linalg  # noqa: F401
+    import sklearn.utils._openmp_helpers  # noqa: F401
 
 
 def _die_with_parent() -> None:
@@ -118,6 +122,7 @@ def _start_worker(preload=()):
     from threadpoolctl import threadpool_limits
 
     _die_with_parent()
+    _load_thread_pools()
     threadpool_limits(1)
     cv2.setNumThreads(1)
     for name in preload:
