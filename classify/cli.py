@@ -14,7 +14,7 @@ import warnings
 
 def register(subparsers) -> None:
     """Add the recognition subcommands (``experiment``, ``batch``)."""
-    from classify.experiment import DEFAULT_REPLICATES, FULL_REPLICATES
+    from classify.experiment import DEFAULT_REPLICATES, FULL_REPLICATES, REPLICATES_AT_ONCE
     from classify.experiment.config import CONTROLS, MISMATCHES
     from classify.experiment.protocols import PROTOCOL_REGISTRY, PROTOCOLS
     from classify.policies import POLICIES
@@ -98,6 +98,14 @@ def register(subparsers) -> None:
         f"a quick run; --full gives {FULL_REPLICATES})",
     )
     p.add_argument("--full", action="store_true", help=f"a full run: {FULL_REPLICATES} replicates")
+    p.add_argument(
+        "--replicates-at-once",
+        type=int,
+        default=REPLICATES_AT_ONCE,
+        metavar="N",
+        help=f"replicates whose instances are held in memory at a time (default {REPLICATES_AT_ONCE}): the "
+        "memory grows with the objects, not with --replicates; results do not depend on it",
+    )
     p.add_argument("--train-instances", type=int, default=3, help="training instances per object and replicate")
     p.add_argument("--train-sessions", type=int, default=2, help="acquisition sessions per training instance")
     p.add_argument("--folds", type=int, default=5, help="paper protocol: cross-validation folds")
@@ -302,6 +310,8 @@ def _experiment(args) -> int:
 
     if args.full and args.replicates is not None:
         raise ValueError("give --full or --replicates, not both")
+    if args.replicates_at_once < 1:
+        raise ValueError(f"--replicates-at-once must be at least 1, got {args.replicates_at_once}")
     sensor = tactile.Sensor() if args.mode is None else tactile.Sensor(mode=args.mode)
     settings = Settings(
         n_points=args.n_points,
@@ -343,6 +353,7 @@ def _experiment(args) -> int:
             out_dir=args.out,
             quiet=args.quiet,
             skip_bad=args.skip_bad,
+            replicates_at_once=args.replicates_at_once,
         )
     print(format_tables(result))
     if not args.quiet:

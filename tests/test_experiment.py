@@ -1,6 +1,7 @@
 """The experiment end to end: twins at chance, the same tables for any thread count, the CLI, bad input."""
 
 import csv
+import dataclasses
 import json
 
 import numpy as np
@@ -168,6 +169,8 @@ def test_unknown_object_method_or_baseline_is_refused_by_name(capsys):
         experiment.run_experiment(_objects(), methods=("telepathy",), quiet=True, cache_dir=None)
     with pytest.raises(ValueError, match="baseline 'random'"):
         experiment.run_experiment(_objects(), methods=("uniform",), baseline="random", quiet=True, cache_dir=None)
+    assert main(["experiment", "--objects", "cow,cup", "--replicates-at-once", "0", "--quiet"]) != 0
+    assert "--replicates-at-once must be at least 1, got 0" in capsys.readouterr().err
 
 
 def test_real_imprint_set_gives_table_2_with_folds_grouped_by_point(tmp_path, capsys):
@@ -435,3 +438,101 @@ def test_the_cpu_time_of_a_run_counts_the_workers_still_running():
         assert _cpu_seconds() - before >= 0.5
     finally:
         child.communicate("")
+
+
+def _comparable(path):
+    """A results.json without what changes from run to run (timings, provenance)."""
+    document = json.loads(path.read_text())
+    document.pop("timings_s")
+    document["settings"].pop("provenance")
+    return document
+
+
+def test_replicates_measured_a_few_at_a_time_give_the_results_of_all_at_once_and_hold_one_block(tmp_path, monkeypatch):
+    import gc
+    import weakref
+
+    from classify.experiment import run as run_mod
+
+    config = QUICK.replace(
+        methods=("uniform", "learned"),
+        protocols=("instance",),
+        classifiers=("knn", "place"),
+        policies=("info_gain",),
+        replicates=3,
+    )
+    whole = quick.run(_objects()[:2], config, out_dir=tmp_path / "whole", replicates_at_once=3, n_jobs=1)
+    stages, asked = [], []
+    build = run_mod.instance_stage
+
+    def one_block_alive(objects, methods, settings, replicates, runtime, **options):
+        gc.collect()
+        assert all(s() is None for s in stages), "a finished block's instances are still held"
+        asked.append(tuple(replicates))
+        stage = build(objects, methods, settings, replicates, runtime, **options)
+        stages.append(weakref.ref(stage))
+        return stage
+
+    monkeypatch.setattr(run_mod, "instance_stage", one_block_alive)
+    single = quick.run(_objects()[:2], config, out_dir=tmp_path / "single", replicates_at_once=1, n_jobs=1)
+    assert asked == [(0,), (1,), (2,)]
+    assert _comparable(tmp_path / "single" / "results.json") == _comparable(tmp_path / "whole" / "results.json")
+    for name in ("results.csv", "stopping.csv", "confusion_place.png", "touches.png"):
+        assert (tmp_path / "single" / name).read_bytes() == (tmp_path / "whole" / name).read_bytes(), name
+    assert sorted(p.name for p in (tmp_path / "single" / "touch_models").iterdir()) == [
+        f"replicate_{r:02d}.json" for r in range(3)
+    ]
+    for key, R in whole.rates.items():
+        np.testing.assert_array_equal(single.rates[key], R)
+    assert single.selection_kept == whole.selection_kept and whole.selection_kept
+    with pytest.raises(ValueError, match="replicates_at_once must be at least 1"):
+        quick.run(_objects(), config, replicates_at_once=0)
+
+
+def test_joined_blocks_of_replicates_sum_as_one_block_bit_for_bit():
+    from classify.experiment.stages import Measurement, join_replicates
+    from classify.reporting import stats
+    from classify.reporting.results import ConfusionMatrix
+
+    rng = np.random.default_rng(3)
+    R, K, n, L = 7, 4, 9, 3
+    back = rng.permutation(n)
+
+    def measured(replicates):
+        # As the recognition stages build one: np.stack of per-replicate outcomes, objects put back in order.
+        rates = np.stack([100.0 * rng_rates[r] for r in replicates])[:, :, back]
+        stop = np.stack([rng_stop[r] for r in replicates])[:, :, back]
+        counts = sum(rng_counts[r] for r in replicates)
+        return Measurement(
+            "uniform",
+            "instance",
+            "knn",
+            n,
+            True,
+            {k: rates[:, k - 1, :] for k in range(1, K + 1)},
+            {k: int(min(rng_sets[r][k - 1] for r in replicates)) for k in range(1, K + 1)},
+            ConfusionMatrix("uniform", "instance", "knn", n, True, tuple("abcdefghi"), counts),
+            tuple(float(rng_kept[r]) for r in replicates),
+            (stop, stop + 1.0),
+        )
+
+    rng_rates, rng_stop = rng.random((R, K, n)) / 3.0, rng.random((R, L, n)) * 7.0
+    rng_counts, rng_sets = rng.integers(0, 5, (R, n, n)), rng.integers(1, 20, (R, K))
+    rng_kept = rng.random(R)
+    whole = measured(range(R))
+    (joined,) = join_replicates([[measured(b)] for b in ((0, 1, 2), (3,), (4, 5), (6,))])
+    for k, rates in whole.rates.items():
+        np.testing.assert_array_equal(joined.rates[k], rates)
+        assert stats.summarize(joined.rates[k], 0) == stats.summarize(rates, 0)  # the same sums, in the same order
+        assert stats.paired_difference(joined.rates[k], whole.rates[1], 0) == stats.paired_difference(
+            rates, whole.rates[1], 0
+        )
+    for mine, theirs in zip(joined.stopping, whole.stopping):
+        np.testing.assert_array_equal(mine, theirs)
+        assert stats.summarize(mine[:, 1], 0) == stats.summarize(theirs[:, 1], 0)
+    np.testing.assert_array_equal(joined.confusion.counts, whole.confusion.counts)
+    assert joined.touch_sets == whole.touch_sets and joined.kept == whole.kept
+    assert join_replicates([[whole]]) == [whole]
+    other = dataclasses.replace(whole, method="random")
+    with pytest.raises(ValueError, match="measured different things"):
+        join_replicates([[whole], [other]])

@@ -154,12 +154,12 @@ def place_job(job: PlaceJob) -> PlaceOutcome:
 
 
 def place_jobs(stage: InstanceStage, objects: ObjectSet, n: int, config: ExperimentConfig) -> list:
-    """One :class:`PlaceJob` per replicate, for the first ``n`` objects (with ``config.control`` applied)."""
+    """One :class:`PlaceJob` per replicate of the stage, for the first ``n`` objects (with ``config.control`` applied)."""
     settings = config.settings
     order = objects.by_name(n)
     names = tuple(objects.names[i] for i in order)
     jobs = []
-    for r in range(config.replicates):
+    for r in stage.replicates:
         train = [(objects.names[i], i, j) for i in order for j in range(1, settings.train_instances + 1)]
         tests = tuple(stage.places[r, i, 0] for i in order)
         test_plans = {m: tuple(stage.samples[SampleKey(r, m, i, 0)] for i in order) for m in config.methods}
@@ -228,6 +228,7 @@ def place_recognition(
             config.touch_sets_per_object,
             config.stop_levels,
             config.control,
+            list(stage.replicates),
         ],
     )
     outcomes = run_jobs(runtime, key, PlaceOutcome, place_job, jobs, f"place-aware, {n} objects")

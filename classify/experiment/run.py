@@ -32,6 +32,7 @@ from classify.experiment.stages import (
     Runtime,
     instance_recognition,
     instance_stage,
+    join_replicates,
     load_objects,
     paper_recognition,
     paper_stage,
@@ -55,6 +56,7 @@ __all__ = [
     "METHODS",
     "DEFAULT_REPLICATES",
     "FULL_REPLICATES",
+    "REPLICATES_AT_ONCE",
     "ExperimentConfig",
     "Settings",
     "ObjectSet",
@@ -110,6 +112,11 @@ def _provenance() -> dict:
     }
 
 
+#: Replicates whose instances a run holds at once, by default: its memory is that of two replicates however many it
+#: measures, and a block gives each of two workers a recognition job.
+REPLICATES_AT_ONCE = 2
+
+
 def _object_sets(n_all: int) -> tuple:
     return tuple(sorted({min(4, n_all), n_all}))
 
@@ -143,7 +150,7 @@ def _summarize(measurements: list, config: ExperimentConfig, names) -> dict:
             key = CellKey(m.method, m.protocol, m.classifier, m.n_objects, m.selection, k)
             rates[key], sets[key] = R, m.touch_sets[k]
         if m.kept is not None:
-            kept[f"{m.method}/{m.protocol}/{m.n_objects}"] = m.kept
+            kept[f"{m.method}/{m.protocol}/{m.n_objects}"] = float(np.mean(m.kept))
         if m.stopping is not None and not m.selection:
             correct, used = m.stopping
             stopping_rates[m.method, m.protocol, m.classifier, m.n_objects] = m.stopping
@@ -197,6 +204,66 @@ def _summarize(measurements: list, config: ExperimentConfig, names) -> dict:
     }
 
 
+def _replicate_blocks(replicates: int, at_once: int) -> list[tuple]:
+    """Replicates 0 to ``replicates - 1`` in consecutive blocks of at most ``at_once``.
+
+    Examples
+    --------
+    >>> _replicate_blocks(5, 2)
+    [(0, 1), (2, 3), (4,)]
+    """
+    return [tuple(range(a, min(a + at_once, replicates))) for a in range(0, replicates, at_once)]
+
+
+def _timed(timings: dict, name: str, work):
+    """``work()``, its wall time added to ``timings[name]``."""
+    t0 = time.perf_counter()
+    out = work()
+    timings[name] = timings.get(name, 0.0) + time.perf_counter() - t0
+    return out
+
+
+def _instance_block(objects: ObjectSet, config: ExperimentConfig, runtime: Runtime, block, timings) -> InstanceStage:
+    """The instances of a block of replicates (:func:`instance_stage`)."""
+    place = "place" in config.classifiers
+    return _timed(
+        timings,
+        "instance_points_and_imprints",
+        lambda: instance_stage(
+            objects,
+            config.methods,
+            config.settings,
+            block,
+            runtime,
+            places=bool(config.policies) or place,
+            codebook=place,
+        ),
+    )
+
+
+def _instance_measurements(stage: InstanceStage, objects: ObjectSet, config: ExperimentConfig, runtime, timings):
+    """Every instance-protocol measurement of a block of replicates: fixed plans, touch policies, place-aware."""
+    sets = _object_sets(len(objects))
+    out = _timed(
+        timings,
+        "instance_recognition",
+        lambda: [
+            x for m in config.methods for n in sets for x in instance_recognition(m, n, stage, objects, config, runtime)
+        ],
+    )
+    if config.policies:
+        out += _timed(
+            timings,
+            "sequential",
+            lambda: [x for n in sets for x in policy_recognition(n, stage, objects, config, runtime)],
+        )
+    if "place" in config.classifiers:
+        out += _timed(
+            timings, "place", lambda: [x for n in sets for x in place_recognition(n, stage, objects, config, runtime)]
+        )
+    return out
+
+
 def run_experiment(
     objects=None,
     config: ExperimentConfig | None = None,
@@ -207,6 +274,7 @@ def run_experiment(
     out_dir=None,
     quiet: bool = False,
     skip_bad: bool = False,
+    replicates_at_once: int = REPLICATES_AT_ONCE,
     **changes,
 ) -> ExperimentResult:
     """Interest points -> imprints -> recognition, under the paper and instance protocols.
@@ -234,6 +302,12 @@ def run_experiment(
     skip_bad : bool
         Run on the objects that load when some do not (they are listed in a
         warning); by default they are listed in an error before any work.
+    replicates_at_once : int
+        The instance protocol's replicates are measured in blocks of this
+        many, one block's instances in memory at a time (its samples, places
+        and codebooks; the memory then grows with the objects, not with the
+        replicates).  Results do not depend on it; each block's jobs give the
+        workers one recognition job per replicate.
 
     Returns
     -------
@@ -248,13 +322,15 @@ def run_experiment(
 
     started, cpu_started = time.perf_counter(), _cpu_seconds()
     config = (config or ExperimentConfig()).replace(**changes).checked()
+    if int(replicates_at_once) < 1:
+        raise ValueError(f"replicates_at_once must be at least 1, got {replicates_at_once}")
     warn_if_unpinned("run_experiment")
     settings = config.settings
     if cache_dir == "default":
         cache_dir = cache_mod.default_dir()
     # A touch model needs training instances: the paper protocol has none.
     paper_methods = [m for m in config.methods if m not in MODEL_METHODS]
-    timings, measurements, stage = {}, [], InstanceStage({})
+    timings, measurements, models = {}, [], []
     workers = nullcontext(executor) if executor is not None else worker_pool(n_jobs, preload=WORKER_MODULES)
     with threadpool_limits(1), workers as pool:
         # Local workers start while the objects load, and build the toys; a bad file still stops the run before any work.
@@ -267,33 +343,18 @@ def run_experiment(
             measurements += _paper_measurements(objects, paper_methods, config, runtime)
             timings["paper"] = time.perf_counter() - t0
         if "instance" in config.protocols:
-            t0 = time.perf_counter()
-            place = "place" in config.classifiers
-            stage = instance_stage(
-                objects,
-                config.methods,
-                settings,
-                config.replicates,
-                runtime,
-                places=bool(config.policies) or place,
-                codebook=place,
-            )
-            timings["instance_points_and_imprints"] = time.perf_counter() - t0
-            t0 = time.perf_counter()
-            for m in config.methods:
-                for n in _object_sets(len(objects)):
-                    measurements += instance_recognition(m, n, stage, objects, config, runtime)
-            timings["instance_recognition"] = time.perf_counter() - t0
-            if config.policies:
-                t0 = time.perf_counter()
-                for n in _object_sets(len(objects)):
-                    measurements += policy_recognition(n, stage, objects, config, runtime)
-                timings["sequential"] = time.perf_counter() - t0
-            if place:
-                t0 = time.perf_counter()
-                for n in _object_sets(len(objects)):
-                    measurements += place_recognition(n, stage, objects, config, runtime)
-                timings["place"] = time.perf_counter() - t0
+            blocks = []
+            for block in _replicate_blocks(config.replicates, int(replicates_at_once)):
+                here = runtime
+                if len(block) < config.replicates:
+                    here = dataclasses.replace(
+                        runtime, label=f"replicates {block[0] + 1}-{block[-1] + 1} of {config.replicates}: "
+                    )
+                stage = _instance_block(objects, config, here, block, timings)
+                models += stage.models
+                blocks.append(_instance_measurements(stage, objects, config, here, timings))
+                del stage  # the next block's instances take its place
+            measurements += join_replicates(blocks)
 
     summary = _summarize(measurements, config, objects.names)
     timings["total"] = time.perf_counter() - started
@@ -304,7 +365,7 @@ def run_experiment(
         **config.to_json(),
         "libraries": cache_mod.library_versions(),
         "cache_dir": None if cache_dir is None else str(cache_dir),
-        "learned_channel_weights": [m.channel_weights for m in stage.models],
+        "learned_channel_weights": [m.channel_weights for m in models],
         "provenance": _provenance(),
     }
     result = ExperimentResult(
@@ -317,7 +378,7 @@ def run_experiment(
     )
     if out_dir is not None:
         write_outputs(result, out_dir)
-        for r, model in enumerate(stage.models):
+        for r, model in enumerate(models):
             model.save(Path(out_dir) / "touch_models" / f"replicate_{r:02d}.json")
     return result
 

@@ -140,12 +140,12 @@ def run_policies(
 
 
 def policy_jobs(stage, objects, n: int, config: ExperimentConfig) -> list:
-    """One :class:`PolicyJob` per replicate and classifier, for the first ``n`` objects."""
+    """One :class:`PolicyJob` per replicate of the stage and classifier, for the first ``n`` objects."""
     settings = config.settings
     order = objects.by_name(n)
     names = tuple(objects.names[i] for i in order)
     jobs = []
-    for r in range(config.replicates):
+    for r in stage.replicates:
         # The place-free knowledge reads imprints only: the codebooks (the place-aware recognizer's) stay behind.
         training = {
             (objects.names[i], j): dataclasses.replace(stage.places[r, i, j], codebook=None)
@@ -199,7 +199,7 @@ def policy_recognition(
             list(config.policies),
             free,
             config.stop_levels,
-            config.replicates,
+            list(stage.replicates),
             config.control,
         ],
     )

@@ -57,6 +57,7 @@ __all__ = [
     "paper_stage",
     "instance_stage",
     "Measurement",
+    "join_replicates",
     "paper_recognition",
     "instance_recognition",
     "run_jobs",
@@ -162,16 +163,18 @@ class Runtime:
     ``pool`` anything with an ordered ``map`` (``classify.runtime.cluster``);
     ``cache_dir`` the cache (None: none); ``threads`` rendering and attention
     threads per task (None: the CPU count; changes nothing); ``quiet`` no
-    progress bars.
+    progress bars; ``label`` what every progress bar's description starts with
+    (e.g. the block of replicates it works on).
     """
 
     pool: object
     cache_dir: object = None
     threads: int | None = None
     quiet: bool = True
+    label: str = ""
 
     def map(self, fn, tasks: list, desc: str):
-        return list(progress(self.pool.map(fn, tasks), total=len(tasks), desc=desc, quiet=self.quiet))
+        return list(progress(self.pool.map(fn, tasks), total=len(tasks), desc=self.label + desc, quiet=self.quiet))
 
 
 class SampleKey(NamedTuple):
@@ -185,13 +188,14 @@ class SampleKey(NamedTuple):
 
 @dataclass(frozen=True, eq=False)
 class InstanceStage:
-    """Every instance's sample for every method (by :class:`SampleKey`), each replicate's touch model, and with
-    touch policies every instance's places (``classify.policies.PlaceSample`` by (replicate, object, instance),
-    packed: ``PlaceSample.packed``)."""
+    """The instances of some replicates: every instance's sample for every method (by :class:`SampleKey`), each
+    replicate's touch model (in the order of ``replicates``), and with touch policies every instance's places
+    (``classify.policies.PlaceSample`` by (replicate, object, instance), packed: ``PlaceSample.packed``)."""
 
     samples: dict
     models: tuple = ()
     places: dict = None
+    replicates: tuple = ()
 
 
 def _paper_sample(task: PaperSampleTask) -> TouchSample:
@@ -225,12 +229,16 @@ def instance_stage(
     objects: ObjectSet,
     methods,
     settings: Settings,
-    replicates: int,
+    replicates,
     runtime: Runtime,
     places: bool = False,
     codebook: bool = False,
 ) -> InstanceStage:
     """Every instance's points and imprints for every method, and each replicate's touch model.
+
+    ``replicates``: how many (replicates 0 to n - 1), or which ones.  A
+    replicate's instances, model and recognition depend on no other
+    replicate, so a run may take its replicates a few at a time.
 
     One task per instance computes all methods that need no model, sharing
     its rendering, plus its touch survey when a model method is asked for,
@@ -242,9 +250,8 @@ def instance_stage(
     """
     plain = tuple(m for m in methods if m not in MODEL_METHODS)
     learned = tuple(m for m in methods if m in MODEL_METHODS)
-    where = [
-        (r, i, j) for r in range(replicates) for i in range(len(objects)) for j in range(settings.train_instances + 1)
-    ]
+    replicates = tuple(range(replicates)) if isinstance(replicates, int) else tuple(int(r) for r in replicates)
+    where = [(r, i, j) for r in replicates for i in range(len(objects)) for j in range(settings.train_instances + 1)]
 
     def task(r, i, j, methods, **more):
         return SampleTask(
@@ -267,20 +274,21 @@ def instance_stage(
     samples = {SampleKey(r, m, i, j): out.by_method[m] for (r, i, j), out in zip(where, done) for m in plain}
     found = {(r, i, j): out.places for (r, i, j), out in zip(where, done)} if places else None
     if not learned:
-        return InstanceStage(samples, (), found)
+        return InstanceStage(samples, (), found, replicates)
     surveys = {(r, i, j): out.survey for (r, i, j), out in zip(where, done)}
     models = runtime.map(
         _fit_model,
-        [{(objects.names[i], j): surveys[r, i, j] for q, i, j in where if q == r} for r in range(replicates)],
+        [{(objects.names[i], j): surveys[r, i, j] for q, i, j in where if q == r} for r in replicates],
         "instances: touch models",
     )
+    model_of = dict(zip(replicates, models))
     done = runtime.map(
         _instance_samples,
-        [task(r, i, j, learned, model=models[r], surveyed=surveys[r, i, j], codebook=codebook) for r, i, j in where],
+        [task(r, i, j, learned, model=model_of[r], surveyed=surveys[r, i, j], codebook=codebook) for r, i, j in where],
         "instances: learned points+imprints",
     )
     samples.update({SampleKey(r, m, i, j): out.by_method[m] for (r, i, j), out in zip(where, done) for m in learned})
-    return InstanceStage(samples, tuple(models), found)
+    return InstanceStage(samples, tuple(models), found, replicates)
 
 
 @dataclass(frozen=True, eq=False)
@@ -291,10 +299,11 @@ class Measurement:
     objects) rate matrix in percent, objects in the order given;
     ``touch_sets`` the fewest distinct touch sets any object offered at that
     many touches (0 for the paper protocol); ``confusion`` the single-touch
-    counts; ``kept`` the mean fraction of training imprints selection kept
-    (with selection only); ``stopping`` (correct, touches), each (replicates,
-    levels, objects): the stopping rule at each of the config's
-    ``stop_levels``, 100 where right at the stop and the touches used.
+    counts; ``kept`` the fraction of training imprints selection kept, one
+    per replicate or repeat (with selection only); ``stopping`` (correct,
+    touches), each (replicates, levels, objects): the stopping rule at each of
+    the config's ``stop_levels``, 100 where right at the stop and the touches
+    used.
     """
 
     method: str
@@ -305,8 +314,67 @@ class Measurement:
     rates: dict
     touch_sets: dict
     confusion: ConfusionMatrix | None = None
-    kept: float | None = None
+    kept: tuple | None = None
     stopping: tuple | None = None
+
+
+def join_replicates(blocks) -> list[Measurement]:
+    """The measurements of blocks of replicates, joined: each as if all the replicates had been measured at once.
+
+    Parameters
+    ----------
+    blocks : list of lists of Measurement
+        One list per block of replicates, in replicate order; every block
+        measured the same things in the same order.
+
+    Returns
+    -------
+    list of Measurement
+        Rates, stopping and selection's ``kept`` have the blocks' replicates
+        one after the other, confusion counts are summed and touch sets are
+        the fewest of any block: the same values, bit for bit, as one block of
+        all the replicates gives.
+
+    Raises
+    ------
+    ValueError
+        If the blocks did not measure the same things.
+    """
+    blocks = [list(b) for b in blocks]
+    if len(blocks) <= 1:
+        return blocks[0] if blocks else []
+    what = [[(m.method, m.protocol, m.classifier, m.n_objects, m.selection) for m in b] for b in blocks]
+    if any(w != what[0] for w in what[1:]):
+        raise ValueError("blocks of replicates measured different things; they cannot be joined")
+    joined = []
+    for ms in zip(*blocks):
+        first = ms[0]
+        touches = list(first.rates)
+        rates = _as_measured([np.stack([m.rates[k] for k in touches], axis=1) for m in ms])
+        confusion = first.confusion
+        if confusion is not None:
+            confusion = dataclasses.replace(confusion, counts=sum(m.confusion.counts for m in ms))
+        joined.append(
+            dataclasses.replace(
+                first,
+                rates={k: rates[:, t, :] for t, k in enumerate(touches)},
+                touch_sets={k: min(m.touch_sets[k] for m in ms) for k in first.touch_sets},
+                confusion=confusion,
+                kept=None if first.kept is None else tuple(v for m in ms for v in m.kept),
+                stopping=None
+                if first.stopping is None
+                else tuple(_as_measured([m.stopping[a] for m in ms]) for a in range(len(first.stopping))),
+            )
+        )
+    return joined
+
+
+def _as_measured(parts) -> np.ndarray:
+    """(replicates, k, objects) arrays of consecutive replicates, joined in the memory layout a measurement's
+    ``np.stack(...)[:, :, back]`` gives: numpy sums an array in an order that follows its layout, and the intervals
+    are sums."""
+    joined = np.concatenate(parts)
+    return joined[:, :, np.arange(joined.shape[2])]
 
 
 def _outcome_arrays(outcomes) -> dict:
@@ -402,7 +470,7 @@ def paper_recognition(
                 {1: np.stack([o.rates for o in mine])[:, back]},
                 {1: 0},
                 confusion,
-                float(np.mean([o.kept for o in mine])) if s else None,
+                tuple(o.kept for o in mine) if s else None,
             )
         )
     return out
@@ -445,8 +513,8 @@ def instance_recognition(
     names = objects.names[:n]
     order = objects.by_name(n)
     back = np.argsort(order)
-    data = [instance_data(stage, r, method, objects, order, settings, config.control) for r in range(config.replicates)]
-    jobs = [(r, c, s) for r in range(config.replicates) for c, s in _recognizers(config)]
+    data = {r: instance_data(stage, r, method, objects, order, settings, config.control) for r in stage.replicates}
+    jobs = [(r, c, s) for r in stage.replicates for c, s in _recognizers(config)]
     work = [
         InstanceJob(
             data[r],
@@ -459,7 +527,7 @@ def instance_recognition(
         )
         for r, c, s in jobs
     ]
-    arrays = [a for d in data for a in (d.train_X, d.train_y, d.train_instance, d.train_point, *d.test)]
+    arrays = [a for d in data.values() for a in (d.train_X, d.train_y, d.train_instance, d.train_point, *d.test)]
     key = recognition_key(
         "instance",
         arrays,
@@ -498,7 +566,7 @@ def instance_recognition(
                 rates,
                 sets,
                 confusion,
-                float(np.mean([o.kept for o in mine])) if s else None,
+                tuple(o.kept for o in mine) if s else None,
                 stopping,
             )
         )
