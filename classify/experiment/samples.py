@@ -202,13 +202,21 @@ def _point_seed(settings: Settings, name: str, replicate: int, index: int) -> in
     return int(instance_rng(settings.seed, name, replicate, index, Stream.POINTS).integers(2**31 - 1))
 
 
-def _key(kind, nominal, name, method, settings, *parts):
+def _keys(nominal, name, settings):
+    """``key(kind, method, *parts)``: the cache keys of an object's entries.
+
+    The mesh, the settings, the code and the libraries are hashed once here,
+    not once per key: the code's hash reads every source file of two packages.
+    """
     code = cache_mod.code_fingerprint("meshsal", "tactile") + cache_mod.file_fingerprint(
         __file__, codebooks_mod.__file__
     )
-    return cache_mod.cache_key(
-        kind, mesh_hash(nominal), name, method, settings.key(), list(parts), code, cache_mod.library_versions()
-    )
+    mesh, setting, libraries = mesh_hash(nominal), settings.key(), cache_mod.library_versions()
+
+    def key(kind, method, *parts):
+        return cache_mod.cache_key(kind, mesh, name, method, setting, list(parts), code, libraries)
+
+    return key
 
 
 def paper_sample(task: PaperSampleTask) -> TouchSample:
@@ -231,7 +239,7 @@ def paper_sample(task: PaperSampleTask) -> TouchSample:
         ).to_arrays()
 
     return TouchSample.from_arrays(
-        cache_mod.cached(task.cache_dir, _key("paper", task.nominal, task.name, task.method, settings), compute)
+        cache_mod.cached(task.cache_dir, _keys(task.nominal, task.name, settings)("paper", task.method), compute)
     )
 
 
@@ -359,9 +367,10 @@ def instance_samples(task: SampleTask) -> InstanceSamples:
     model_part = [] if task.model is None else [_model_hash(task.model)]
     # A test instance of a mismatch arm is another instance; training instances are the same in every arm.
     arm = [list(settings.mismatch)] if task.index == 0 and settings.mismatch else []
+    keys_of = _keys(task.nominal, task.name, settings)
 
     def key(kind, method="", *more):
-        return _key(kind, task.nominal, task.name, method, settings, task.replicate, task.index, *arm, *more)
+        return keys_of(kind, method, task.replicate, task.index, *arm, *more)
 
     keys = {m: key("instance", m, *(model_part if m in MODEL_METHODS else [])) for m in methods}
     survey_key, places_key = key("survey"), key("places")
