@@ -448,7 +448,9 @@ def _comparable(path):
     return document
 
 
-def test_replicates_measured_a_few_at_a_time_give_the_results_of_all_at_once_and_hold_one_block(tmp_path, monkeypatch):
+def test_replicates_measured_a_few_at_a_time_give_the_results_of_all_at_once_and_hold_one_block(
+    tmp_path, monkeypatch, capsys
+):
     import gc
     import weakref
 
@@ -474,8 +476,15 @@ def test_replicates_measured_a_few_at_a_time_give_the_results_of_all_at_once_and
         return stage
 
     monkeypatch.setattr(run_mod, "instance_stage", one_block_alive)
-    single = quick.run(_objects()[:2], config, out_dir=tmp_path / "single", replicates_at_once=1, n_jobs=1)
+    single = experiment.run_experiment(
+        _objects()[:2], config, cache_dir=None, out_dir=tmp_path / "single", replicates_at_once=1, n_jobs=1
+    )
     assert asked == [(0,), (1,), (2,)]
+    told = capsys.readouterr().err.splitlines()
+    assert any(line.startswith("replicates 2 of 3: instances: points+imprints [") for line in told)
+    ends = [line for line in told if " measured in " in line]
+    assert [line.split(" measured")[0] for line in ends] == [f"replicates 1-{r} of 3" for r in (1, 2, 3)]
+    assert ends[0].endswith(" left") and not ends[-1].endswith(" left")
     assert _comparable(tmp_path / "single" / "results.json") == _comparable(tmp_path / "whole" / "results.json")
     for name in ("results.csv", "stopping.csv", "confusion_place.png", "touches.png"):
         assert (tmp_path / "single" / name).read_bytes() == (tmp_path / "whole" / name).read_bytes(), name

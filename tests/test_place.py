@@ -286,3 +286,25 @@ def test_registration_misfits_are_the_einsum_and_norm_bit_for_bit():
         M, target = rng.normal(size=(k, 3)) * [40, 20, 10], rng.normal(size=(k, 3)) * 25
         moved = S[:, None, None] * np.einsum("bij,kj->bki", R, M) + T[:, None, :]
         np.testing.assert_array_equal(_misfits(S, R, T, M, target), np.linalg.norm(moved - target[None], axis=2))
+
+
+def test_places_pair_by_signatures_a_few_rows_at_a_time_as_all_at_once():
+    from meshsal.mesh.curvature import mesh_saliency
+    from meshsal.objects import toys
+    from meshsal.points.places import _pairs, candidate_places, signatures
+
+    def at_once(gm, gf, keep):
+        d = np.partition(np.abs(gm[:, None, :] - gf[None, :, :]), keep - 1, axis=2)[:, :, :keep]
+        return np.argmin((d**2).sum(axis=2), axis=1)
+
+    cow, cup = (nominal_mesh(toys.make(name), SETTINGS) for name in ("cow", "cup"))
+    P, Q = (m.vertices[candidate_places(m, mesh_saliency(m), 15)] for m in (cow, cup))
+    rng = np.random.default_rng(2)
+    cases = [(signatures(P, P[:8]), signatures(Q, Q[:8]), 5), (signatures(P, P[:8]), signatures(P, P[:8]), 5)]
+    for _ in range(20):  # sizes around the block, few and many coordinates, ties
+        m, n, L = int(rng.integers(1, 40)), int(rng.integers(1, 60)), int(rng.integers(1, 9))
+        cases.append(
+            (np.round(rng.random((m, L)) * 8) / 4, np.round(rng.random((n, L)) * 8) / 4, int(rng.integers(1, L + 1)))
+        )
+    for gm, gf, keep in cases:
+        np.testing.assert_array_equal(_pairs(gm, gf, keep), at_once(gm, gf, keep))

@@ -26,7 +26,7 @@ def test_a_log_gets_a_line_per_tenth_with_the_time_left(monkeypatch):
     "seconds, text", [(42.4, "42 s"), (7 * 60 + 10, "7 min"), (2 * 3600 + 5 * 60, "2 h 05 min"), (3599.9, "60 min")]
 )
 def test_time_left_reads_as_an_estimate(seconds, text):
-    assert progress_mod._duration(seconds) == text
+    assert progress_mod.duration(seconds) == text
 
 
 def test_quiet_draws_nothing():

@@ -254,15 +254,17 @@ def test_saliency_views_does_not_depend_on_how_views_are_stacked(sphere, monkeyp
 
 @pytest.mark.parametrize("q", [0.0, 12.5, 50.0, 50.5, 87.0, 99.9, 100.0])
 def test_percentiles_of_rows_are_numpys_bit_for_bit(q):
-    from meshsal.attention.combine import _percentiles
+    from meshsal.util.quantiles import percentiles
 
     rng = np.random.default_rng(int(q * 10))
-    for n in (1, 2, 7, 1000, 16383):
-        values = rng.random((3, n), dtype=np.float32)
-        values[1] = np.round(values[1] * 4) / 4  # ties
-        got = _percentiles(values, q)
-        assert got.dtype == np.float32
-        np.testing.assert_array_equal(got, [np.float32(np.percentile(row, q)) for row in values])
+    for dtype in (np.float32, np.float64):
+        for n in (1, 2, 7, 331, 1000, 16383):
+            values = rng.random((3, n), dtype=dtype) * 40.0
+            values[1] = np.round(values[1] * 4) / 4  # ties
+            got = percentiles(values, q)
+            assert got.dtype == dtype
+            np.testing.assert_array_equal(got, [dtype(np.percentile(row, q)) for row in values])
+            np.testing.assert_array_equal(got, [dtype(np.quantile(row, q / 100.0)) for row in values])
 
 
 def _combine_on_whole_images(channels, mask, erode=None, normalize=True, floor=50.0):
@@ -270,8 +272,8 @@ def _combine_on_whole_images(channels, mask, erode=None, normalize=True, floor=5
     silhouette (zero elsewhere), scaled to its maximum, lowered by its floor percentile, weighted by N(.)."""
     import cv2
 
-    from meshsal.attention.combine import _percentiles
     from meshsal.attention.pyramid import normalize_maps, scale_to_max
+    from meshsal.util.quantiles import percentiles
 
     inside = erode_mask(mask, erode)
     h, w = inside.shape
@@ -279,7 +281,7 @@ def _combine_on_whole_images(channels, mask, erode=None, normalize=True, floor=5
     for name in CHANNELS:
         cut = scale_to_max(np.where(inside, channels[name], 0.0).astype(np.float32))
         if floor is not None and inside.any():
-            cut = np.maximum(cut - _percentiles(cut[inside][None], floor)[0], np.float32(0.0))
+            cut = np.maximum(cut - percentiles(cut[inside][None], floor)[0], np.float32(0.0))
         gain = 1.0
         if normalize and cut.any():
             small = cv2.resize(cut, (max(1, w // 16), max(1, h // 16)), interpolation=cv2.INTER_AREA)

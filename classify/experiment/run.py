@@ -215,6 +215,17 @@ def _replicate_blocks(replicates: int, at_once: int) -> list[tuple]:
     return [tuple(range(a, min(a + at_once, replicates))) for a in range(0, replicates, at_once)]
 
 
+def _report_block(block, replicates: int, elapsed: float) -> None:
+    """A line on stderr as a block of replicates ends: the time so far and, at that pace, the time left."""
+    import sys
+
+    from meshsal.util.progress import duration
+
+    done = block[-1] + 1
+    left = f", about {duration(elapsed / done * (replicates - done))} left" if done < replicates else ""
+    print(f"replicates 1-{done} of {replicates} measured in {duration(elapsed)}{left}", file=sys.stderr)
+
+
 def _timed(timings: dict, name: str, work):
     """``work()``, its wall time added to ``timings[name]``."""
     t0 = time.perf_counter()
@@ -343,17 +354,19 @@ def run_experiment(
             measurements += _paper_measurements(objects, paper_methods, config, runtime)
             timings["paper"] = time.perf_counter() - t0
         if "instance" in config.protocols:
-            blocks = []
-            for block in _replicate_blocks(config.replicates, int(replicates_at_once)):
+            blocks, instance_started = [], time.perf_counter()
+            by_block = _replicate_blocks(config.replicates, int(replicates_at_once))
+            for block in by_block:
                 here = runtime
                 if len(block) < config.replicates:
-                    here = dataclasses.replace(
-                        runtime, label=f"replicates {block[0] + 1}-{block[-1] + 1} of {config.replicates}: "
-                    )
+                    which = f"{block[0] + 1}-{block[-1] + 1}" if len(block) > 1 else f"{block[0] + 1}"
+                    here = dataclasses.replace(runtime, label=f"replicates {which} of {config.replicates}: ")
                 stage = _instance_block(objects, config, here, block, timings)
                 models += stage.models
                 blocks.append(_instance_measurements(stage, objects, config, here, timings))
                 del stage  # the next block's instances take its place
+                if not quiet and len(by_block) > 1:
+                    _report_block(block, config.replicates, time.perf_counter() - instance_started)
             measurements += join_replicates(blocks)
 
     summary = _summarize(measurements, config, objects.names)

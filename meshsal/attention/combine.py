@@ -16,6 +16,7 @@ from meshsal.attention.itti import color, color_stack, intensity, intensity_stac
 from meshsal.attention.local import contrast, contrast_stack, entropy, entropy_stack
 from meshsal.attention.pyramid import _stack_to_max, normalize_maps
 from meshsal.attention.symmetry import symmetry, symmetry_stack
+from meshsal.util.quantiles import percentiles
 from meshsal.util.registry import Registry
 
 __all__ = [
@@ -245,28 +246,6 @@ def _check_weights(weights: Mapping[str, float] | None) -> dict[str, float]:
     return out
 
 
-def _percentiles(values: np.ndarray, q: float) -> np.ndarray:
-    """``np.percentile(row, q)`` of each row of a float32 array (c, n), bit for bit, from two order statistics.
-
-    NumPy's default ("linear") method partitions at four places; the two
-    values it interpolates between are all it needs (0.04 against 0.38 ms
-    for 16k values).  It interpolates as NumPy does for a Python float
-    ``q``, in float32.
-    """
-    n = values.shape[1]
-    virtual = (n - 1) * (float(q) / 100.0)
-    if virtual >= n - 1:
-        return values.max(axis=1)
-    k = int(np.floor(virtual))
-    gamma = virtual - k
-    ordered = np.partition(values, k, axis=1)
-    below, above = ordered[:, k], ordered[:, k + 1 :].min(axis=1)
-    step = above - below
-    if gamma >= 0.5:
-        return above - step * np.float32(1.0 - gamma)
-    return below + step * np.float32(gamma)
-
-
 def combine_maps(
     channels: Mapping[str, np.ndarray],
     mask: np.ndarray,
@@ -339,7 +318,7 @@ def combine_maps(
     _stack_to_max(cuts)
     if floor is not None and pixels.size:
         # Not rescaled (see ``floor``).
-        cuts -= _percentiles(cuts, floor)[:, None]
+        cuts -= percentiles(cuts, floor)[:, None]
         np.maximum(cuts, np.float32(0.0), out=cuts)
     if normalize:
         # N(.) of every channel that responds, in one pass.

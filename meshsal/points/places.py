@@ -22,6 +22,7 @@ import numpy as np
 
 from meshsal.mesh import Mesh, normal_defined
 from meshsal.points.sampling import farthest_points, field_peaks
+from meshsal.util.quantiles import percentiles
 
 __all__ = [
     "POOL_FACTOR",
@@ -165,6 +166,25 @@ def similarity_fit(source, target) -> tuple[float, np.ndarray, np.ndarray]:
     return (s, R, t) if batch else (float(s[0]), R[0], t[0])
 
 
+# Moving places paired at a time (:func:`_pairs`).
+_PAIR_ROWS = 8
+
+
+def _pairs(gm: np.ndarray, gf: np.ndarray, keep: int) -> np.ndarray:
+    """For each moving signature (row of ``gm``, (m, L)), the fixed one (row of ``gf``, (n, L)) nearest on the
+    ``keep`` coordinates that agree best: (m,) int64 indices into ``gf``.
+
+    A few moving rows at a time keep their (rows, n, L) differences in
+    cache (1.6x faster at 330 places); each row pairs on its own, so the
+    pairs are those of all rows at once, bit for bit.
+    """
+    pair = np.empty(len(gm), np.int64)
+    for a in range(0, len(gm), _PAIR_ROWS):
+        d = np.partition(np.abs(gm[a : a + _PAIR_ROWS, None, :] - gf[None, :, :]), keep - 1, axis=2)[:, :, :keep]
+        pair[a : a + _PAIR_ROWS] = np.argmin((d**2).sum(axis=2), axis=1)
+    return pair
+
+
 def register(moving, fixed, rng=0, rounds: int = 200, keep: int = 5) -> tuple[float, np.ndarray, np.ndarray]:
     """The similarity that lays the candidate places of one instance onto those of another of the same shape.
 
@@ -204,9 +224,7 @@ def register(moving, fixed, rng=0, rounds: int = 200, keep: int = 5) -> tuple[fl
     rng = rng if isinstance(rng, np.random.Generator) else np.random.default_rng(rng)
     L = min(LANDMARKS, len(M), len(F))
     gm, gf = signatures(M, M[:L]), signatures(F, F[:L])
-    keep = min(keep, L)
-    d = np.partition(np.abs(gm[:, None, :] - gf[None, :, :]), keep - 1, axis=2)[:, :, :keep]
-    pair = np.argmin((d**2).sum(axis=2), axis=1)
+    pair = _pairs(gm, gf, min(keep, L))
     scale = np.sqrt(((F - F.mean(axis=0)) ** 2).sum(axis=1).mean())
     size = scale / max(np.sqrt(((M - M.mean(axis=0)) ** 2).sum(axis=1).mean()), 1e-300)
     tol = 0.05 * scale
@@ -224,7 +242,7 @@ def register(moving, fixed, rng=0, rounds: int = 200, keep: int = 5) -> tuple[fl
     tree = cKDTree(F)
     for _ in range(10):
         dist, nearest = tree.query(s * M @ R.T + t)
-        close = dist <= np.quantile(dist, 0.8)
+        close = dist <= percentiles(dist[None], 80.0)[0]  # np.quantile(dist, 0.8), bit for bit
         s, R, t = _unless_collapsed(similarity_fit(M[close], F[nearest[close]]), (s, R, t), size)
     return float(s), R, t
 

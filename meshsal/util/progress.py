@@ -47,7 +47,7 @@ def progress(
             bar = "#" * int(frac * 30) + "." * (30 - int(frac * 30))
             text = f"{desc} [{bar}] {k}/{total} {elapsed:5.1f}s"
             if 0 < k < total:
-                text += f", about {_duration(elapsed / k * (total - k))} left"
+                text += f", about {duration(elapsed / k * (total - k))} left"
         else:
             text = f"{desc} {k} {elapsed:5.1f}s"
         if unit:
@@ -66,7 +66,7 @@ def progress(
         stream.flush()
 
 
-def _duration(seconds: float) -> str:
+def duration(seconds: float) -> str:
     """``42 s``, ``7 min``, ``2 h 05 min``: as precise as an estimate deserves."""
     if seconds < 60:
         return f"{seconds:.0f} s"
