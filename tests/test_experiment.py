@@ -506,6 +506,9 @@ def test_joined_blocks_of_replicates_sum_as_one_block_bit_for_bit():
     rng = np.random.default_rng(3)
     R, K, n, L = 7, 4, 9, 3
     back = rng.permutation(n)
+    rng_rates, rng_stop = rng.random((R, K, n)) / 3.0, rng.random((R, L, n)) * 7.0
+    rng_counts, rng_sets = rng.integers(0, 5, (R, n, n)), rng.integers(1, 20, (R, K))
+    rng_kept = rng.random(R)
 
     def measured(replicates):
         # As the recognition stages build one: np.stack of per-replicate outcomes, objects put back in order.
@@ -525,9 +528,6 @@ def test_joined_blocks_of_replicates_sum_as_one_block_bit_for_bit():
             (stop, stop + 1.0),
         )
 
-    rng_rates, rng_stop = rng.random((R, K, n)) / 3.0, rng.random((R, L, n)) * 7.0
-    rng_counts, rng_sets = rng.integers(0, 5, (R, n, n)), rng.integers(1, 20, (R, K))
-    rng_kept = rng.random(R)
     whole = measured(range(R))
     (joined,) = join_replicates([[measured(b)] for b in ((0, 1, 2), (3,), (4, 5), (6,))])
     for k, rates in whole.rates.items():
