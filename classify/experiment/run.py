@@ -234,10 +234,14 @@ def _timed(timings: dict, name: str, work):
     return out
 
 
-def _instance_block(objects: ObjectSet, config: ExperimentConfig, runtime: Runtime, block, timings) -> InstanceStage:
-    """The instances of a block of replicates (:func:`instance_stage`)."""
+def _measure_block(objects: ObjectSet, config: ExperimentConfig, runtime: Runtime, block, timings) -> tuple:
+    """A block of replicates measured under the instance protocol: (its touch models, its measurements).
+
+    Its instances (:func:`instance_stage`) live only in this call, so the next block's take their place.
+    """
     place = "place" in config.classifiers
-    return _timed(
+    sets = _object_sets(len(objects))
+    stage = _timed(
         timings,
         "instance_points_and_imprints",
         lambda: instance_stage(
@@ -250,11 +254,6 @@ def _instance_block(objects: ObjectSet, config: ExperimentConfig, runtime: Runti
             codebook=place,
         ),
     )
-
-
-def _instance_measurements(stage: InstanceStage, objects: ObjectSet, config: ExperimentConfig, runtime, timings):
-    """Every instance-protocol measurement of a block of replicates: fixed plans, touch policies, place-aware."""
-    sets = _object_sets(len(objects))
     out = _timed(
         timings,
         "instance_recognition",
@@ -268,11 +267,11 @@ def _instance_measurements(stage: InstanceStage, objects: ObjectSet, config: Exp
             "sequential",
             lambda: [x for n in sets for x in policy_recognition(n, stage, objects, config, runtime)],
         )
-    if "place" in config.classifiers:
+    if place:
         out += _timed(
             timings, "place", lambda: [x for n in sets for x in place_recognition(n, stage, objects, config, runtime)]
         )
-    return out
+    return stage.models, out
 
 
 def run_experiment(
@@ -361,10 +360,9 @@ def run_experiment(
                 if len(block) < config.replicates:
                     which = f"{block[0] + 1}-{block[-1] + 1}" if len(block) > 1 else f"{block[0] + 1}"
                     here = dataclasses.replace(runtime, label=f"replicates {which} of {config.replicates}: ")
-                stage = _instance_block(objects, config, here, block, timings)
-                models += stage.models
-                blocks.append(_instance_measurements(stage, objects, config, here, timings))
-                del stage  # the next block's instances take its place
+                fitted, measured = _measure_block(objects, config, here, block, timings)
+                models += fitted
+                blocks.append(measured)
                 if not quiet and len(by_block) > 1:
                     _report_block(block, config.replicates, time.perf_counter() - instance_started)
             measurements += join_replicates(blocks)

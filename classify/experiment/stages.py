@@ -250,7 +250,9 @@ def instance_stage(
     """
     plain = tuple(m for m in methods if m not in MODEL_METHODS)
     learned = tuple(m for m in methods if m in MODEL_METHODS)
-    replicates = tuple(range(replicates)) if isinstance(replicates, int) else tuple(int(r) for r in replicates)
+    replicates = (
+        tuple(range(replicates)) if isinstance(replicates, int | np.integer) else tuple(int(r) for r in replicates)
+    )
     where = [(r, i, j) for r in replicates for i in range(len(objects)) for j in range(settings.train_instances + 1)]
 
     def task(r, i, j, methods, **more):
