@@ -244,6 +244,51 @@ def test_knn_neighbours_are_the_first_k_of_the_full_sort_ties_included():
             np.testing.assert_array_equal(ranked(d2, tiebreak, k), full[:, : min(k, m)])
 
 
+def test_knn_neighbours_screened_by_runs_of_columns_are_the_first_k_of_the_full_sort():
+    """Past a few hundred columns per neighbour, ranked screens runs of columns: the same neighbours, with ties at
+    the k-th distance, rows with few finite distances, a column count that leaves columns over, and row keys."""
+    from classify.recognizers.distances import ranked
+
+    rng = np.random.default_rng(1)
+    for trial in range(24):
+        n, m = int(rng.integers(1, 60)), int(rng.integers(600, 6000))
+        levels = int(rng.integers(2, 6)) if trial % 2 else 10**9
+        d2 = rng.integers(0, levels, size=(n, m)).astype(float)
+        if trial % 3 == 0:
+            d2[rng.random(d2.shape) < 0.995] = np.inf  # a few rows keep fewer than k finite distances
+        if trial % 4 == 1:
+            tiebreak = rng.permutation(n * m).reshape(n, m).astype(np.uint64)
+            full = np.lexsort((tiebreak, d2), axis=1)
+        else:
+            tiebreak = rng.permutation(m).astype(np.uint64)
+            full = np.lexsort((np.broadcast_to(tiebreak, d2.shape), d2), axis=1)
+        for k in (1, 5, 9):
+            np.testing.assert_array_equal(ranked(d2, tiebreak, k), full[:, :k])
+
+
+def test_knn_fitted_on_subsets_together_are_the_models_fitted_one_by_one():
+    """One pass over the distances serves every subset: each model is its own fit's, to the bit."""
+    rng = np.random.default_rng(4)
+    for grid in (True, False):
+        X = rng.normal(size=(300, 6))
+        if grid:
+            X = np.round(rng.random((300, 6)) * 6) / 255  # on the ADC's grid: many equal distances
+        y = np.repeat(np.arange(5), 60)
+        groups = np.arange(300) // 3
+        inst = np.tile(np.repeat([1, 2, 3], 1), 100)
+        subsets = [inst != 1, np.flatnonzero(inst != 2), np.flatnonzero(inst != 3), np.arange(300), np.arange(40, 130)]
+        template = classify.make("knn", cv_rows=70)  # fewer rows scored than a subset holds
+        together = list(template.fit_subsets(X, y, groups, subsets))
+        queries = rng.normal(size=(25, 6)) if not grid else np.round(rng.random((25, 6)) * 6) / 255
+        for model, rows in zip(together, subsets):
+            alone = classify.make("knn", cv_rows=70).fit(X[rows], y[rows], groups[rows])
+            assert model.k_ == alone.k_ and model.scale_ == alone.scale_ and model.cv_scores_ == alone.cv_scores_
+            np.testing.assert_array_equal(model.classes_, alone.classes_)
+            np.testing.assert_array_equal(model.X_, alone.X_)
+            np.testing.assert_array_equal(model.predict_proba(queries), alone.predict_proba(queries))
+        assert len({m.scale_ for m in together}) > 1  # the subsets' models differ
+
+
 def test_knn_class_distances_are_each_class_nearest_sample_in_any_order_of_codes():
     from classify.recognizers.distances import class_distances
 

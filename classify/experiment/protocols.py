@@ -167,7 +167,7 @@ def paper_job(job: PaperJob) -> tuple[PaperOutcome, ...]:
     A fold that two recognizers train the same model on (one classifier,
     its parameters and features, the same rows: selection kept every
     imprint) is fitted once; the models of one classifier are fitted
-    together (:meth:`Recognizer.fit_each`).  Returns one outcome per
+    together (:meth:`Recognizer.fit_subsets`).  Returns one outcome per
     recognizer, in order.
     """
     X, y = job.X, job.y
@@ -194,7 +194,7 @@ def paper_job(job: PaperJob) -> tuple[PaperOutcome, ...]:
                 uses.append((split, model, where[key]))
             plans.append((described[rec.features], pred, kept, uses))
         fitted = {
-            model: rec.fit_each([(described[model[2]][t], y[t], job.groups[t]) for t in rows])
+            model: list(rec.fit_subsets(described[model[2]], y, job.groups, rows))
             for model, (rec, rows) in trains.items()
         }
         for F, pred, _, uses in plans:
@@ -281,7 +281,7 @@ def _fit_selected(data: InstanceData, F, row_sets, rec: Recognizer):
     if rec.selection:
         row_sets = [select_training(X, y, rows, rec.threshold) for rows in row_sets]
     groups = point_groups(data.train_y, data.train_point, data.train_instance)
-    return rec.fit_each([(F[rows], y[rows], groups[rows]) for rows in row_sets]), row_sets
+    return list(rec.fit_subsets(F, y, groups, row_sets)), row_sets
 
 
 def _calibration(data: InstanceData, F, models, row_sets, n_classes: int):

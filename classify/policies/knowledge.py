@@ -347,8 +347,11 @@ def fit_knowledge(training: dict, recognizer):
     F, y, inst, vertex, located = (np.concatenate(a) for a in (F, y, inst, vertex, located))
     groups = point_groups(y, vertex, inst)
     C = len(names)
-    held, calibration = _held_out(recognizer, F, y, inst, groups, C, TouchKnowledge.hypotheses)
-    model = recognizer.fit(F, y, groups)
+    # The held-out instances' models, then the model of all of them: fitted together, handed over one at a time.
+    held_in = [np.flatnonzero(inst != i) for i in np.unique(inst)]
+    models = recognizer.fit_subsets(F, y, groups, [*held_in, np.arange(len(y))])
+    held, calibration = _held_out(models, F, y, inst, C, TouchKnowledge.hypotheses)
+    model = next(models)
     from classify.recognizers.shortlist import SparseRows
 
     place_ids, located_places, posteriors, weights = [], [], [], []
@@ -389,8 +392,9 @@ def fit_knowledge(training: dict, recognizer):
     )
 
 
-def _held_out(recognizer, F, y, inst, groups, C: int, H: int, block: int = 4096):
-    """Each training touch's calibrated posterior from a classifier fitted without its instance, as
+def _held_out(models, F, y, inst, C: int, H: int, block: int = 4096):
+    """Each training touch's calibrated posterior from a classifier fitted without its instance (the next of
+    ``models``, an iterator of one per instance in increasing order), as
     :class:`~classify.recognizers.shortlist.SparseRows` (N,): every object up to ``H``, past it each row's
     ``H`` most probable and one value for the others; and the calibration, fitted on those posteriors."""
     from classify.recognizers.classifiers import KNN
@@ -406,7 +410,7 @@ def _held_out(recognizer, F, y, inst, groups, C: int, H: int, block: int = 4096)
     values, classes, rest = np.zeros((len(y), T)), np.tile(np.arange(T), (len(y), 1)), np.zeros(len(y))
     for i in np.unique(inst):
         out = inst == i
-        model = recognizer.fit(F[~out], y[~out], groups[~out])
+        model = next(models)
         mine = np.flatnonzero(out)
         # Past H objects a block of rows at a time, so that memory stays linear in the objects; a kNN instead
         # reads the training rows of each row's candidate objects only, and a few rows of every other, in

@@ -27,9 +27,10 @@ from __future__ import annotations
 
 import hashlib
 import numbers
+from dataclasses import dataclass
 
 import numpy as np
-from sklearn.base import BaseEstimator, ClassifierMixin
+from sklearn.base import BaseEstimator, ClassifierMixin, clone
 from sklearn.model_selection import StratifiedKFold
 from sklearn.naive_bayes import GaussianNB
 from sklearn.neural_network import MLPClassifier
@@ -210,7 +211,41 @@ class KNN(ClassifierMixin, BaseEstimator):
 
     def fit(self, X, y, groups=None):
         """Choose k on inner folds of (X, y) grouped by ``groups`` (if given), then fit on all of it."""
-        ks = sorted({int(k) for k in self.ks})
+        X, y, groups = self._checked(X, y, groups)
+        inner = self._inner(X, y, groups, np.arange(len(X)))
+        ((hits, scale),) = _scan_training_sets(X, [inner], self._ks())
+        return self._adopt(X, inner, hits, scale)
+
+    def fit_subsets(self, X, y, groups=None, subsets=()):
+        """The models :meth:`fit` gives on each subset of the rows of (X, y, groups), one at a time.
+
+        One pass over the distances serves every subset's inner folds: a
+        row's distances to the others are computed once, however many
+        subsets score it (a subset's model is the same as its own ``fit``
+        would give, to the bit).  The models are built as they are asked
+        for, so only one is held at a time.
+
+        Parameters
+        ----------
+        X, y, groups : as in :meth:`fit`
+        subsets : sequence of (m_i,) int row indices, or bool masks
+
+        Yields
+        ------
+        KNN, fitted on ``X[subsets[i]]``, in the order of ``subsets``
+        """
+        X, y, groups = self._checked(X, y, groups)
+        rows = [np.flatnonzero(r) if np.asarray(r).dtype == bool else np.asarray(r, np.int64) for r in subsets]
+        inners = [self._inner(X[r], y[r], None if groups is None else groups[r], r) for r in rows]
+        found = _scan_training_sets(X, inners, self._ks())
+        for r, inner, (hits, scale) in zip(rows, inners, found):
+            yield clone(self)._adopt(X[r], inner, hits, scale)
+
+    def _ks(self) -> list:
+        return sorted({int(k) for k in self.ks})
+
+    def _checked(self, X, y, groups):
+        ks = self._ks()
         if not ks or ks[0] < 1:
             raise ValueError(f"KNN: ks must hold positive integers, got {self.ks!r}")
         if not (isinstance(self.cv, numbers.Integral) and self.cv >= 2):
@@ -221,32 +256,39 @@ class KNN(ClassifierMixin, BaseEstimator):
             raise ValueError(f"KNN: y must have shape ({len(X)},), got {y.shape}")
         if groups is not None and np.shape(groups) != (len(X),):
             raise ValueError(f"KNN: groups must have shape ({len(X)},), got {np.shape(groups)}")
-        rng = np.random.default_rng(self.random_state)
-        self.classes_, codes = np.unique(y, return_inverse=True)
+        return X, y, None if groups is None else np.asarray(groups)
+
+    def _inner(self, X, y, groups, rows) -> _InnerFolds:
+        """The inner folds of one training set, ``rows`` of the whole."""
+        classes, codes = np.unique(y, return_inverse=True)
         keys = _row_keys(X, codes, self.random_state)
         # A canonical order (label, then content hash): the inner folds, hence k, ignore the input's order.
         canonical = np.lexsort((keys, codes))
-        X, codes, keys = X[canonical], codes[canonical], keys[canonical]
-        groups = None if groups is None else np.asarray(groups)[canonical]
-        n_classes = len(self.classes_)
+        codes, keys = codes[canonical], keys[canonical]
+        groups = None if groups is None else groups[canonical]
         folds = _inner_folds(codes, groups, self.cv)
-        splits = list(_split(codes, groups, folds, self.random_state)) if folds >= 2 and n_classes >= 2 else []
+        splits = list(_split(codes, groups, folds, self.random_state)) if folds >= 2 and len(classes) >= 2 else []
         scored = np.sort(np.argsort(keys, kind="stable")[: int(self.cv_rows)])
-        hits, self.scale_ = _scan_training_set(X, codes, keys, splits, ks, n_classes, scored)
+        return _InnerFolds(rows[canonical], canonical, classes, codes, keys, splits, scored, on_grid(X))
+
+    def _adopt(self, X, inner: _InnerFolds, hits: dict, scale: float):
+        """Fitted on ``X`` (the training set of ``inner``) with its inner folds' hits and distance scale."""
+        ks = self._ks()
+        self.classes_, self.scale_ = inner.classes, scale
         self.cv_scores_ = {}
-        if splits:
-            self.cv_scores_ = {k: hits[k] / len(scored) for k in ks}
+        if inner.splits:
+            self.cv_scores_ = {k: hits[k] / len(inner.scored) for k in ks}
             best = max(self.cv_scores_.values())
             tied = [k for k in ks if self.cv_scores_[k] == best]
-            self.k_ = int(tied[rng.integers(len(tied))])
+            self.k_ = int(tied[np.random.default_rng(self.random_state).integers(len(tied))])
         else:
             self.k_ = ks[0]
         self.k_ = min(self.k_, len(X))
-        self.X_ = X
+        self.X_ = X[inner.canonical]
         # Every prediction compares with the training rows' integer codes: computed once.
-        self.grid_rows_ = Rows.of(X, True) if on_grid(X) else None
-        self.codes_ = codes
-        self.tiebreak_ = keys
+        self.grid_rows_ = Rows.of(self.X_, True) if inner.exact else None
+        self.codes_ = inner.codes
+        self.tiebreak_ = inner.keys
         self.n_features_in_ = X.shape[1]
         return self
 
@@ -288,49 +330,112 @@ def _split(codes, groups, folds, seed):
     return GroupFolds(folds, shuffle=True, random_state=seed).split(codes, codes, groups)
 
 
-def _scan_training_set(X, codes, keys, splits, ks, n_classes, scored) -> tuple[dict, float]:
-    """The inner folds' hits per k and the distance scale, from one pass over the scored rows' distances.
+@dataclass(frozen=True, eq=False)
+class _InnerFolds:
+    """One training set's inner folds, in its canonical order: ``rows`` its rows of the whole set, ``canonical``
+    the same as positions in the training set; ``splits`` (train, test) positions; ``scored`` the positions the
+    folds score; ``exact`` whether its rows lie on the ADC's grid."""
 
-    A block of the ``scored`` rows at a time, their distances to every
-    training row serve both: each inner fold reads its test rows' distances
-    to its training rows, and the scale the distance to the nearest other
-    row.  Rows are independent in every step, so the hits are those of
-    fold-by-fold distances.
+    rows: np.ndarray
+    canonical: np.ndarray
+    classes: np.ndarray
+    codes: np.ndarray
+    keys: np.ndarray
+    splits: list
+    scored: np.ndarray
+    exact: bool
+
+
+def _scan_training_sets(X, inners: list, ks) -> list[tuple[dict, float]]:
+    """Each training set's inner-fold hits per k and distance scale, from one pass over the scored rows' distances.
+
+    A block of the rows any set scores at a time, their distances to every
+    row of ``X`` serve every set: each inner fold of a set reads its test
+    rows' distances to its training rows, and the set's scale the distance
+    to the nearest other row of the set.  Rows are independent in every
+    step, and a distance is the same in any block, so the hits and scales
+    are those of each set scanned alone, fold by fold.
 
     Returns
     -------
-    hits : dict k -> right answers over the inner test folds (0 without splits)
-    scale : float, median distance from a row to its nearest other row (1.0 when undefined or zero)
+    list of (hits, scale), one per set: hits dict k -> right answers over the inner test folds (0 without
+    splits); scale the median distance from a row to its nearest other row (1.0 when undefined or zero)
     """
-    n = len(X)
-    hits = {k: 0 for k in ks}
-    fold = np.full(n, -1)
-    for f, (_, test) in enumerate(splits):
-        fold[test] = f
-    nearest = np.empty(len(scored))
-    rows_all = Rows.of(X, on_grid(X))
-    step = block_rows(n)
-    for start in range(0, len(scored), step):
-        block = scored[start : start + step]
+    found = [None] * len(inners)
+    # Sets on and off the ADC's grid compare rows differently: each kind in a pass of its own.
+    for exact in (True, False):
+        which = [i for i, inner in enumerate(inners) if inner.exact == exact]
+        if which:
+            for i, out in zip(which, _scan_pass(X, [inners[i] for i in which], ks, exact)):
+                found[i] = out
+    return found
+
+
+def _scan_pass(X, inners: list, ks, exact: bool) -> list[tuple[dict, float]]:
+    scored = [inner.rows[inner.scored] for inner in inners]
+    union = np.unique(np.concatenate(scored))
+    hits = [{k: 0 for k in ks} for _ in inners]
+    nearest = [[] for _ in inners]
+    # Columns by the sets that hold them (runs whose minima give each set's nearest other row), then in the
+    # canonical order of the largest set, so that each set reads its rows' distances in runs.
+    member = np.zeros((len(inners), len(X)), bool)
+    for s, inner in enumerate(inners):
+        member[s, inner.rows] = True
+    pattern = np.unique(member.T, axis=0, return_inverse=True)[1].reshape(-1)
+    largest = max(inners, key=lambda inner: len(inner.rows)).rows
+    after = np.full(len(X), len(X))
+    after[largest] = np.arange(largest.size)
+    order = np.lexsort((np.arange(len(X)), after, pattern))
+    column = np.empty(len(X), np.int64)
+    column[order] = np.arange(len(X))
+    starts = np.flatnonzero(np.r_[True, np.diff(pattern[order]) != 0])
+    runs_of = [np.flatnonzero(member[s, order[starts]]) for s in range(len(inners))]
+    # Each set's scored rows by their place in the union, with their positions in the set.
+    places, positions, folds = [], [], []
+    for inner, rows in zip(inners, scored):
+        by = np.argsort(rows, kind="stable")
+        places.append(np.searchsorted(union, rows[by]))
+        positions.append(inner.scored[by])
+        fold = np.full(len(inner.rows), -1)
+        for f, (_, test) in enumerate(inner.splits):
+            fold[test] = f
+        folds.append(fold)
+    rows_all = Rows.of(X[order], exact)
+    step = block_rows(len(X))
+    for start in range(0, union.size, step):
+        block = union[start : start + step]
         d2 = distances_to(X[block], rows_all)
-        for f, (train, _) in enumerate(splits):
-            usable = [k for k in ks if k <= len(train)]
-            rows = np.flatnonzero(fold[block] == f)
-            if not usable or rows.size == 0:
+        # A row is in its own inner test fold, never among its training rows: its distance to itself is read
+        # only as the nearest other row's, where it does not count.
+        d2[np.arange(block.size), column[block]] = np.inf
+        lows = np.minimum.reduceat(d2, starts, axis=1)
+        for s, inner in enumerate(inners):
+            lo, hi = np.searchsorted(places[s], [start, start + block.size])
+            if lo == hi:
                 continue
-            sub = d2[np.ix_(rows, train)]
-            order = ranked(sub, keys[train], max(usable))
-            dist = class_distances(sub, codes[train], n_classes)
-            for k in usable:
-                # The argmax does not depend on the scale, so the fold's own is not needed.
-                proba = _posterior(codes[train][order[:, :k]], dist, 1.0)
-                hits[k] += int(np.sum(np.argmax(proba, axis=1) == codes[block[rows]]))
-        d2[np.arange(len(block)), block] = np.inf
-        nearest[start : start + len(block)] = d2.min(axis=1)
-    if n < 2:
-        return hits, 1.0
-    scale = float(np.median(np.sqrt(nearest)))
-    return hits, (scale if scale > 0 else 1.0)
+            local, pos = places[s][lo:hi] - start, positions[s][lo:hi]
+            n_classes = len(inner.classes)
+            for f, (train, _) in enumerate(inner.splits):
+                usable = [k for k in ks if k <= len(train)]
+                mine = folds[s][pos] == f
+                if not usable or not mine.any():
+                    continue
+                sub = d2[np.ix_(local[mine], column[inner.rows[train]])]
+                ranks = ranked(sub, inner.keys[train], max(usable))
+                dist = class_distances(sub, inner.codes[train], n_classes)
+                for k in usable:
+                    # The argmax does not depend on the scale, so the fold's own is not needed.
+                    proba = _posterior(inner.codes[train][ranks[:, :k]], dist, 1.0)
+                    hits[s][k] += int(np.sum(np.argmax(proba, axis=1) == inner.codes[pos[mine]]))
+            nearest[s].append(lows[np.ix_(local, runs_of[s])].min(axis=1))
+    out = []
+    for s, inner in enumerate(inners):
+        if len(inner.rows) < 2:
+            out.append((hits[s], 1.0))
+            continue
+        scale = float(np.median(np.sqrt(np.concatenate(nearest[s]))))
+        out.append((hits[s], scale if scale > 0 else 1.0))
+    return out
 
 
 def _row_keys(X, codes, seed) -> np.ndarray:

@@ -68,6 +68,21 @@ class Recognizer:
     def fit(self, X, y, groups):
         return fit(self.classifier, self.params or {}, X, y, groups)
 
+    def fit_subsets(self, X, y, groups, subsets):
+        """:meth:`fit` on each subset of the rows of ``(X, y, groups)``, one model at a time (an iterator).
+
+        A kNN's fits share one pass over the distances
+        (``classify.recognizers.classifiers.KNN.fit_subsets``); other
+        classifiers are fitted subset by subset, as each model is asked for,
+        or together where the classifier can (:meth:`fit_each`).
+        """
+        model = _model(self.classifier, self.params or {})
+        if hasattr(model, "fit_subsets"):
+            return model.fit_subsets(X, y, groups, subsets)
+        if hasattr(model, "fit_each"):
+            return iter(self.fit_each([(X[rows], y[rows], groups[rows]) for rows in subsets]))
+        return (self.fit(X[rows], y[rows], groups[rows]) for rows in subsets)
+
     def fit_each(self, sets) -> list:
         """:meth:`fit` on each ``(X, y, groups)`` of ``sets``: the same models, fitted together where the
         classifier can (the evolutionary SVM solves the duals of all sets in one loop)."""
