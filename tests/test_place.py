@@ -276,6 +276,24 @@ def test_a_registration_onto_places_it_cannot_match_never_collapses_the_shape(se
     assert np.isfinite(landmarks_in(moving, fixed, rng=seed)).all()
 
 
+def test_a_registration_seeded_by_a_number_draws_as_a_new_generator_of_that_seed_each_time():
+    """Its RANSAC triples are drawn once per seed and size, then shared: every registration is that of a new
+    generator's draws, whatever registrations came before."""
+    from meshsal.points.places import _seeded_samples, register
+
+    rng = np.random.default_rng(5)
+    moving = rng.normal(size=(40, 3)) * [40, 20, 10]
+    turn = np.linalg.qr(rng.normal(size=(3, 3)))[0]
+    fixed = (1.3 * moving @ turn.T + 2.0)[rng.permutation(40)] + rng.normal(size=(40, 3)) * 3
+    for seed in (0, 3, np.int64(3)):
+        expected = register(moving, fixed, rng=np.random.default_rng(seed), rounds=30)
+        for _ in range(2):
+            got = register(moving, fixed, rng=seed, rounds=30)
+            assert all(np.array_equal(a, b) for a, b in zip(got, expected))
+    assert not _seeded_samples(3, 30, 40).flags.writeable
+    assert not np.array_equal(_seeded_samples(0, 30, 40), _seeded_samples(3, 30, 40))
+
+
 def test_registration_misfits_are_the_einsum_and_norm_bit_for_bit():
     from meshsal.points.places import _misfits
 

@@ -18,6 +18,8 @@ with the nearest signature.
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 
 from meshsal.mesh import Mesh, normal_defined
@@ -221,14 +223,16 @@ def register(moving, fixed, rng=0, rounds: int = 200, keep: int = 5) -> tuple[fl
     from scipy.spatial import cKDTree
 
     M, F = np.asarray(moving, np.float64), np.asarray(fixed, np.float64)
-    rng = rng if isinstance(rng, np.random.Generator) else np.random.default_rng(rng)
     L = min(LANDMARKS, len(M), len(F))
     gm, gf = signatures(M, M[:L]), signatures(F, F[:L])
     pair = _pairs(gm, gf, min(keep, L))
     scale = np.sqrt(((F - F.mean(axis=0)) ** 2).sum(axis=1).mean())
     size = scale / max(np.sqrt(((M - M.mean(axis=0)) ** 2).sum(axis=1).mean()), 1e-300)
     tol = 0.05 * scale
-    picks = np.argsort(rng.random((rounds, len(M))), axis=1)[:, :3]
+    if isinstance(rng, (int, np.integer)):
+        picks = _seeded_samples(int(rng), rounds, len(M))
+    else:
+        picks = _samples(rng if isinstance(rng, np.random.Generator) else np.random.default_rng(rng), rounds, len(M))
     S, R, T = similarity_fit(M[picks], F[pair[picks]])
     counts = (_misfits(S, R, T, M, F[pair]) < tol).sum(axis=1)
     counts[~_plausible(S, size)] = -1
@@ -245,6 +249,20 @@ def register(moving, fixed, rng=0, rounds: int = 200, keep: int = 5) -> tuple[fl
         close = dist <= percentiles(dist[None], 80.0)[0]  # np.quantile(dist, 0.8), bit for bit
         s, R, t = _unless_collapsed(similarity_fit(M[close], F[nearest[close]]), (s, R, t), size)
     return float(s), R, t
+
+
+def _samples(rng: np.random.Generator, rounds: int, m: int) -> np.ndarray:
+    """(rounds, 3) int64: the RANSAC's triples of distinct indices below ``m``, drawn from ``rng``."""
+    return np.argsort(rng.random((rounds, m)), axis=1)[:, :3]
+
+
+@functools.lru_cache(maxsize=16)
+def _seeded_samples(seed: int, rounds: int, m: int) -> np.ndarray:
+    """:func:`_samples` of a new generator seeded ``seed``: drawn once per seed and size (a test instance is
+    registered onto many objects with one seed), read-only."""
+    picks = _samples(np.random.default_rng(seed), rounds, m)
+    picks.flags.writeable = False
+    return picks
 
 
 def _misfits(S, R, T, M, target) -> np.ndarray:
