@@ -372,6 +372,7 @@ def _scan_training_sets(X, inners: list, ks) -> list[tuple[dict, float]]:
 
 
 def _scan_pass(X, inners: list, ks, exact: bool) -> list[tuple[dict, float]]:
+    """:func:`_scan_training_sets` of sets whose rows all lie on the ADC's grid (``exact``) or none do."""
     scored = [inner.rows[inner.scored] for inner in inners]
     union = np.unique(np.concatenate(scored))
     hits = [{k: 0 for k in ks} for _ in inners]
@@ -433,7 +434,7 @@ def _scan_pass(X, inners: list, ks, exact: bool) -> list[tuple[dict, float]]:
         if len(inner.rows) < 2:
             out.append((hits[s], 1.0))
             continue
-        scale = float(np.median(np.sqrt(np.concatenate(nearest[s]))))
+        scale = float(np.median(np.sqrt(np.concatenate(nearest[s]) if nearest[s] else np.empty(0))))
         out.append((hits[s], scale if scale > 0 else 1.0))
     return out
 
