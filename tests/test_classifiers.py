@@ -289,6 +289,22 @@ def test_knn_fitted_on_subsets_together_are_the_models_fitted_one_by_one():
         assert len({m.scale_ for m in together}) > 1  # the subsets' models differ
 
 
+@pytest.mark.parametrize("name", ["knn", "naive_bayes", "decision_tree"])
+def test_a_recognizer_fitted_on_subsets_predicts_as_fitted_on_each_subset_alone(name):
+    from classify.recognizers.touches import Recognizer
+
+    rng = np.random.default_rng(8)
+    X, y = rng.normal(size=(90, 4)), np.repeat([0, 1, 2], 30)
+    X[:, 0] += y
+    groups = np.arange(90) // 2
+    rec = Recognizer(name)
+    subsets = [np.arange(0, 90, 2), y != 1, np.arange(20, 90)]
+    for model, rows in zip(rec.fit_subsets(X, y, groups, subsets), subsets):
+        alone = rec.fit(X[rows], y[rows], groups[rows])
+        np.testing.assert_array_equal(model.classes_, alone.classes_)
+        np.testing.assert_array_equal(model.predict_proba(X), alone.predict_proba(X))
+
+
 def test_knn_class_distances_are_each_class_nearest_sample_in_any_order_of_codes():
     from classify.recognizers.distances import class_distances
 

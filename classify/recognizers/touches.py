@@ -79,9 +79,11 @@ class Recognizer:
         model = _model(self.classifier, self.params or {})
         if hasattr(model, "fit_subsets"):
             return model.fit_subsets(X, y, groups, subsets)
+        X, y = np.asarray(X), np.asarray(y)
+        part = [(rows, None if groups is None else np.asarray(groups)[rows]) for rows in subsets]
         if hasattr(model, "fit_each"):
-            return iter(self.fit_each([(X[rows], y[rows], groups[rows]) for rows in subsets]))
-        return (self.fit(X[rows], y[rows], groups[rows]) for rows in subsets)
+            return iter(self.fit_each([(X[rows], y[rows], g) for rows, g in part]))
+        return (self.fit(X[rows], y[rows], g) for rows, g in part)
 
     def fit_each(self, sets) -> list:
         """:meth:`fit` on each ``(X, y, groups)`` of ``sets``: the same models, fitted together where the
