@@ -275,7 +275,7 @@ def test_knn_fitted_on_subsets_together_are_the_models_fitted_one_by_one():
             X = np.round(rng.random((300, 6)) * 6) / 255  # on the ADC's grid: many equal distances
         y = np.repeat(np.arange(5), 60)
         groups = np.arange(300) // 3
-        inst = np.tile(np.repeat([1, 2, 3], 1), 100)
+        inst = np.tile([1, 2, 3], 100)
         subsets = [inst != 1, np.flatnonzero(inst != 2), np.flatnonzero(inst != 3), np.arange(300), np.arange(40, 130)]
         template = classify.make("knn", cv_rows=70)  # fewer rows scored than a subset holds
         together = list(template.fit_subsets(X, y, groups, subsets))

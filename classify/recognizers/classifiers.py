@@ -236,10 +236,14 @@ class KNN(ClassifierMixin, BaseEstimator):
         """
         X, y, groups = self._checked(X, y, groups)
         rows = [np.flatnonzero(r) if np.asarray(r).dtype == bool else np.asarray(r, np.int64) for r in subsets]
-        inners = [self._inner(X[r], y[r], None if groups is None else groups[r], r) for r in rows]
+        classes, codes = np.unique(y, return_inverse=True)
+        # A subset that holds every class labels its rows as the whole set does: the whole set's keys are its own.
+        whole = [np.unique(y[r]).size == classes.size for r in rows]
+        keys = _row_keys(X, codes, self.random_state) if any(whole) else None
+        inners = [self._inner(X, y, groups, r, keys if w else None) for r, w in zip(rows, whole)]
         found = _scan_training_sets(X, inners, self._ks())
-        for r, inner, (hits, scale) in zip(rows, inners, found):
-            yield clone(self)._adopt(X[r], inner, hits, scale)
+        for inner, (hits, scale) in zip(inners, found):
+            yield clone(self)._adopt(X, inner, hits, scale)
 
     def _ks(self) -> list:
         return sorted({int(k) for k in self.ks})
@@ -258,21 +262,23 @@ class KNN(ClassifierMixin, BaseEstimator):
             raise ValueError(f"KNN: groups must have shape ({len(X)},), got {np.shape(groups)}")
         return X, y, None if groups is None else np.asarray(groups)
 
-    def _inner(self, X, y, groups, rows) -> _InnerFolds:
-        """The inner folds of one training set, ``rows`` of the whole."""
-        classes, codes = np.unique(y, return_inverse=True)
-        keys = _row_keys(X, codes, self.random_state)
+    def _inner(self, X, y, groups, rows, keys=None) -> _InnerFolds:
+        """The inner folds of the training set ``rows`` of (X, y, groups); ``keys`` the whole set's row keys
+        (:func:`_row_keys`), when the training set holds every class."""
+        part = X[rows]
+        classes, codes = np.unique(y[rows], return_inverse=True)
+        keys = _row_keys(part, codes, self.random_state) if keys is None else keys[rows]
         # A canonical order (label, then content hash): the inner folds, hence k, ignore the input's order.
         canonical = np.lexsort((keys, codes))
         codes, keys = codes[canonical], keys[canonical]
-        groups = None if groups is None else groups[canonical]
+        groups = None if groups is None else groups[rows][canonical]
         folds = _inner_folds(codes, groups, self.cv)
         splits = list(_split(codes, groups, folds, self.random_state)) if folds >= 2 and len(classes) >= 2 else []
         scored = np.sort(np.argsort(keys, kind="stable")[: int(self.cv_rows)])
-        return _InnerFolds(rows[canonical], canonical, classes, codes, keys, splits, scored, on_grid(X))
+        return _InnerFolds(rows[canonical], classes, codes, keys, splits, scored, on_grid(part))
 
     def _adopt(self, X, inner: _InnerFolds, hits: dict, scale: float):
-        """Fitted on ``X`` (the training set of ``inner``) with its inner folds' hits and distance scale."""
+        """Fitted on the training set of ``inner``, rows of ``X``, with its inner folds' hits and distance scale."""
         ks = self._ks()
         self.classes_, self.scale_ = inner.classes, scale
         self.cv_scores_ = {}
@@ -283,8 +289,8 @@ class KNN(ClassifierMixin, BaseEstimator):
             self.k_ = int(tied[np.random.default_rng(self.random_state).integers(len(tied))])
         else:
             self.k_ = ks[0]
-        self.k_ = min(self.k_, len(X))
-        self.X_ = X[inner.canonical]
+        self.X_ = X[inner.rows]
+        self.k_ = min(self.k_, len(self.X_))
         # Every prediction compares with the training rows' integer codes: computed once.
         self.grid_rows_ = Rows.of(self.X_, True) if inner.exact else None
         self.codes_ = inner.codes
@@ -332,12 +338,11 @@ def _split(codes, groups, folds, seed):
 
 @dataclass(frozen=True, eq=False)
 class _InnerFolds:
-    """One training set's inner folds, in its canonical order: ``rows`` its rows of the whole set, ``canonical``
-    the same as positions in the training set; ``splits`` (train, test) positions; ``scored`` the positions the
-    folds score; ``exact`` whether its rows lie on the ADC's grid."""
+    """One training set's inner folds, in its canonical order: ``rows`` its rows of the whole set; ``splits``
+    (train, test) and ``scored`` (the rows the folds score) positions in ``rows``; ``exact`` whether its rows lie
+    on the ADC's grid."""
 
     rows: np.ndarray
-    canonical: np.ndarray
     classes: np.ndarray
     codes: np.ndarray
     keys: np.ndarray

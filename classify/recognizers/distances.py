@@ -140,13 +140,10 @@ def ranked(d2, tiebreak, k: int) -> np.ndarray:
             continue
         # Run j holds columns j, j + runs, j + 2 runs...: their minima are elementwise ones over rows of runs.
         lows = d[:, : runs * run].reshape(len(d), run, runs).min(axis=1)
-        near = np.argpartition(lows, k - 1, axis=1)
-        bound = np.take_along_axis(lows, near[:, k - 1 : k], axis=1)
+        chosen, bound = _within_kth(lows, k)
         if not np.isfinite(bound).all():  # fewer than k runs within reach: nothing to screen by
             out[start : start + step] = _first_k(d, tb, k)
             continue
-        wide = int((lows <= bound).sum(axis=1).max())
-        chosen = near[:, :k] if wide == k else np.argpartition(lows, wide - 1, axis=1)[:, :wide]
         cols = (np.sort(chosen, axis=1)[:, :, None] + runs * np.arange(run)).reshape(len(d), -1)
         cols = np.concatenate([cols, np.broadcast_to(np.arange(runs * run, m), (len(d), m - runs * run))], axis=1)
         picked = _first_k(np.take_along_axis(d, cols, axis=1), np.take_along_axis(tb, cols, axis=1), k)
@@ -154,18 +151,23 @@ def ranked(d2, tiebreak, k: int) -> np.ndarray:
     return out
 
 
-def _first_k(d: np.ndarray, tb: np.ndarray, k: int) -> np.ndarray:
-    """(b, k) columns of the first ``k`` of each row of ``d`` (b, m) sorted by distance, then ``tb`` (b, m)."""
+def _within_kth(d: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:
+    """Columns of each row of ``d`` (b, m) holding its ``k`` least values and every value tied with its k-th, as
+    many per row as the row with most ties needs (b, w); and the k-th least values (b, 1)."""
     m = d.shape[1]
     near = np.argpartition(d, k - 1, axis=1)
     kth = np.take_along_axis(d, near[:, k - 1 : k], axis=1)
     wide = int((d <= kth).sum(axis=1).max())
     if wide >= m:
-        near = np.broadcast_to(np.arange(m), d.shape)
-    elif wide > k:  # ties at the k-th distance: take them all
-        near = np.argpartition(d, wide - 1, axis=1)[:, :wide]
-    else:
-        near = near[:, :k]
+        return np.broadcast_to(np.arange(m), d.shape), kth
+    if wide > k:  # ties at the k-th value: take them all
+        return np.argpartition(d, wide - 1, axis=1)[:, :wide], kth
+    return near[:, :k], kth
+
+
+def _first_k(d: np.ndarray, tb: np.ndarray, k: int) -> np.ndarray:
+    """(b, k) columns of the first ``k`` of each row of ``d`` (b, m) sorted by distance, then ``tb`` (b, m)."""
+    near, _ = _within_kth(d, k)
     rows = np.arange(len(d))[:, None]
     order = np.lexsort((tb[rows, near], d[rows, near]), axis=1)[:, :k]
     return near[rows, order]
