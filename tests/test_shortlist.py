@@ -71,6 +71,22 @@ def test_free_stack_finds_each_objects_nearest_sample_and_leaves_out_an_instance
             assert count[r, c] == keep.sum()
             np.testing.assert_allclose(d2[r, c], want, rtol=1e-4, atol=1e-4)
     assert np.isinf(d2[1, 2]) and count[1, 2] == 0  # object 2 has instance 1 only
+    # An instance no object holds leaves nothing out.
+    np.testing.assert_array_equal(stack.nearest(Z, np.full(6, 7))[0], stack.nearest(Z, np.full(6, -1))[0])
+    assert stack.nearest(Z, np.full(6, 7))[1].tolist() == [[4, 7, 2]] * 6
+
+
+def test_tempered_losses_are_the_logsumexp_of_the_tempered_totals_bit_for_bit():
+    from classify.recognizers.banks import lse
+    from classify.recognizers.place import _tempered_nll
+
+    rng = np.random.default_rng(4)
+    total = rng.normal(size=(40, 9)) * 20 - 50
+    total[:, 3] = -np.inf  # an object no touch reaches
+    truth = rng.integers(0, 3, 40)
+    temps = np.geomspace(0.25, 64.0, 17)
+    want = [np.mean(lse(total / T, axis=1) - total[np.arange(40), truth] / T) for T in temps]
+    assert _tempered_nll(total, truth, temps).tolist() == want
 
 
 def test_nearest_classes_are_the_least_distances_in_order():

@@ -70,6 +70,30 @@ def describe_touches(X) -> np.ndarray:
     return X.astype(np.float64)
 
 
+def _tempered_nll(total: np.ndarray, truth: np.ndarray, temps: np.ndarray) -> np.ndarray:
+    """(temps,) mean negative log posterior of the true objects, summed log-likelihoods ``total`` (m, C) tempered by
+    each of ``temps``: ``lse(total / T) - total[truth] / T``, averaged over rows.
+
+    A few temperatures at a time in one reused buffer (a fresh one per step costs its page faults, more than the
+    arithmetic); the operations are ``lse``'s, so the values are its, bit for bit.
+    """
+    step = min(temps.size, max(1, _TEMPERED // total.size))
+    buffer = np.empty((step, *total.shape))
+    rows = np.arange(len(truth))
+    out = np.empty(temps.size)
+    for i in range(0, temps.size, step):
+        scaled = buffer[: min(step, temps.size - i)]
+        np.divide(total[None], temps[i : i + step, None, None], out=scaled)
+        picked = scaled[:, rows, truth]
+        top = np.max(scaled, axis=2, keepdims=True)
+        top = np.where(np.isfinite(top), top, 0.0)
+        np.exp(np.subtract(scaled, top, out=scaled), out=scaled)
+        with np.errstate(divide="ignore"):
+            log_sum = np.log(scaled.sum(axis=2, keepdims=True)) + top
+        out[i : i + step] = (log_sum[..., 0] - picked).mean(axis=1)
+    return out
+
+
 class PlaceAware(ClassifierMixin, BaseEstimator):
     """Place-aware likelihood of touches: a kernel density per object and place, matched by signature.
 
@@ -261,6 +285,8 @@ class PlaceAware(ClassifierMixin, BaseEstimator):
         # (widths, N, C) place and place-free log-likelihoods of every held-out touch; one width at a time past
         # the shortlist, where N x C is large.
         every = self._log_terms(Zs, sigs, insts, widths) if C <= self.shortlist else None
+        # Past the shortlist each width reads the same screening, done once.
+        screen = self.free_.nearest(Zs, insts) if every is None else None
         rng = np.random.default_rng(self.random_state)
         groups = [np.flatnonzero((ys == c) & (insts == t)) for c, t in sorted(set(zip(ys.tolist(), insts.tolist())))]
         sets = [
@@ -272,7 +298,10 @@ class PlaceAware(ClassifierMixin, BaseEstimator):
         temps = np.asarray(self.temperatures, np.float64)
         best = (np.inf, None)
         for a, h in enumerate(widths):
-            place, free = (every[0][a], every[1][a]) if every is not None else self._log_terms(Zs, sigs, insts, [h])[:2]
+            if every is not None:
+                place, free = every[0][a], every[1][a]
+            else:
+                place, free, _ = self._log_terms(Zs, sigs, insts, [h], screen=screen)
             place, free = place.reshape(len(Zs), C), free.reshape(len(Zs), C)
             for w in self.mixtures:
                 ll = np.logaddexp(np.log1p(-w) + place, np.log(w) + free)
@@ -283,11 +312,7 @@ class PlaceAware(ClassifierMixin, BaseEstimator):
                         continue
                     total = np.concatenate([ll[rows].sum(axis=1) for rows, _ in chosen])  # (m, C)
                     truth = np.concatenate([np.full(len(rows), t) for rows, t in chosen])
-                    step = max(1, _TEMPERED // total.size)
-                    for i in range(0, temps.size, step):
-                        scaled = total[None] / temps[i : i + step, None, None]
-                        nll = lse(scaled, axis=2) - scaled[:, np.arange(len(truth)), truth]
-                        loss[i : i + step] += nll.mean(axis=1) / len(self.fit_touches)
+                    loss += _tempered_nll(total, truth, temps) / len(self.fit_touches)
                 t = int(np.argmin(loss))
                 if loss[t] < best[0] - 1e-12:
                     best = (float(loss[t]), (float(h), float(w), float(temps[t])))
@@ -304,7 +329,7 @@ class PlaceAware(ClassifierMixin, BaseEstimator):
         logw = -0.5 * (dist**2 - dist[:, :1] ** 2) / bank.match_width**2
         return idx, logw - lse(logw, axis=1, keepdims=True)
 
-    def _log_terms(self, Z, G, exclude, widths, chunk: int = 1024):
+    def _log_terms(self, Z, G, exclude, widths, chunk: int = 1024, screen=None):
         """Place and place-free log-likelihood terms, each (len(widths), n, C), of touches Z at places G.
 
         ``G`` is (n, L), the same place under every object, (n, C, L), or a
@@ -312,6 +337,7 @@ class PlaceAware(ClassifierMixin, BaseEstimator):
         Past the shortlist an object off a touch's shortlist has no place term
         (-inf) and the place-free term's nearest kernel alone: lower bounds.
         The third value is the (n, C) bool shortlist then, else None.
+        ``screen`` is ``self.free_.nearest(Z, exclude)`` when already at hand.
         """
         n, C = len(Z), len(self.banks_)
         place = np.full((len(widths), n, C), _NEG)
@@ -319,7 +345,7 @@ class PlaceAware(ClassifierMixin, BaseEstimator):
         inv = 0.5 / np.asarray(widths, np.float64) ** 2
         member = None
         if C > self.shortlist:
-            d2, count = self.free_.nearest(Z, exclude)
+            d2, count = self.free_.nearest(Z, exclude) if screen is None else screen
             member = np.zeros((n, C), bool)
             np.put_along_axis(member, nearest_classes(d2, self.shortlist), True, axis=1)
             with np.errstate(invalid="ignore"):

@@ -33,29 +33,40 @@ _BLOCK = 1 << 22
 
 @dataclass(frozen=True, eq=False)
 class FreeStack:
-    """Every object's place-free samples in one array, for screening all objects with one matrix product.
+    """Every object's place-free samples, one array per training instance, for screening all objects with a few
+    matrix products.
 
-    ``samples`` (C, F, d) float32, padded; ``sq`` (C, F) float32 their squared
-    norms (inf for padding); ``instances`` (C, F) int64 each sample's
-    training instance (-2 for padding).
+    ``ids`` (V,) int64 the training instances; ``samples`` tuple of V (F_v, C, d)
+    float32, the f-th sample of every object in row f, padded; ``sq`` tuple of
+    V (F_v, C) float32 their squared norms (inf for padding); ``counts`` (V, C)
+    int64 each object's samples of each instance.  A touch that leaves out an
+    instance skips its array: no mask over the samples, and the counts are
+    known beforehand.  Each object's nearest sample is then the least of F_v
+    rows of C, taken a whole row at a time.
     """
 
-    samples: np.ndarray
-    sq: np.ndarray
-    instances: np.ndarray
+    ids: np.ndarray
+    samples: tuple
+    sq: tuple
+    counts: np.ndarray
 
     @staticmethod
     def of(frees: list, instances: list) -> FreeStack:
         """From per-object (F_c, d) samples and (F_c,) instances."""
-        C, F, d = len(frees), max(len(f) for f in frees), frees[0].shape[1]
-        samples = np.zeros((C, F, d), np.float32)
-        sq = np.full((C, F), np.inf, np.float32)
-        inst = np.full((C, F), -2, np.int64)
-        for c, (f, i) in enumerate(zip(frees, instances)):
-            samples[c, : len(f)] = f
-            sq[c, : len(f)] = np.einsum("fd,fd->f", f, f)
-            inst[c, : len(f)] = i
-        return FreeStack(samples, sq, inst)
+        ids = np.unique(np.concatenate([np.asarray(i, np.int64) for i in instances]))
+        C, d = len(frees), frees[0].shape[1]
+        counts = np.array([[int(np.sum(np.asarray(i) == v)) for i in instances] for v in ids], np.int64).reshape(-1, C)
+        samples, sq = [], []
+        for v, width in zip(ids, counts.max(axis=1, initial=0)):
+            stack = np.zeros((width, C, d), np.float32)
+            norms = np.full((width, C), np.inf, np.float32)
+            for c, (f, i) in enumerate(zip(frees, instances)):
+                mine = np.asarray(f)[np.asarray(i) == v]
+                stack[: len(mine), c] = mine
+                norms[: len(mine), c] = np.einsum("fd,fd->f", mine, mine)
+            samples.append(stack)
+            sq.append(norms)
+        return FreeStack(ids, tuple(samples), tuple(sq), counts)
 
     def nearest(self, Z: np.ndarray, exclude: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Squared distance from each touch to each object's nearest sample, and how many samples count.
@@ -70,20 +81,32 @@ class FreeStack:
         d2 : (n, C) float64 (inf where every sample is left out)
         count : (n, C) int64
         """
-        C, F, d = self.samples.shape
-        flat = self.samples.reshape(C * F, d)
-        n = len(Z)
+        C, n = self.counts.shape[1], len(Z)
+        exclude = np.asarray(exclude, np.int64)
+        count = np.tile(self.counts.sum(axis=0), (n, 1))
+        for v, per in zip(self.ids, self.counts):
+            count[exclude == v] -= per
         d2 = np.empty((n, C))
-        count = np.empty((n, C), np.int64)
-        step = max(1, _BLOCK // (C * F))
+        widest = max((s.shape[0] for s in self.samples), default=0)
+        step = max(1, _BLOCK // max(C * widest * len(self.samples), 1))
+        products = np.empty((min(step, n), C * widest), np.float32)
+        sums = np.empty_like(products)
         for a in range(0, n, step):
             z = Z[a : a + step].astype(np.float32)
-            ex = exclude[a : a + step]
-            D = (np.einsum("nd,nd->n", z, z)[:, None] + self.sq.reshape(1, -1) - 2.0 * (z @ flat.T)).reshape(-1, C, F)
-            out = self.instances[None] == ex[:, None, None]
-            D[out] = np.inf
-            d2[a : a + step] = np.maximum(D.min(axis=2), 0.0)
-            count[a : a + step] = np.isfinite(D).sum(axis=2)
+            m, zz = len(z), np.einsum("nd,nd->n", z, z)
+            low = np.full((m, C), np.inf, np.float32)
+            for v, samples, sq in zip(self.ids, self.samples, self.sq):
+                F = samples.shape[0]
+                if F == 0:
+                    continue
+                g = np.matmul(z, samples.reshape(C * F, -1).T, out=products[:m, : C * F])
+                g *= 2.0
+                # (|z|^2 + |f|^2) - 2 z.f
+                D = np.subtract(np.add(zz[:, None], sq.reshape(1, -1), out=sums[:m, : C * F]), g, out=g)
+                near = D.reshape(m, F, C).min(axis=1)
+                near[exclude[a : a + m] == v] = np.inf
+                np.minimum(low, near, out=low)
+            d2[a : a + m] = np.maximum(low, 0.0)
         return d2, count
 
 
