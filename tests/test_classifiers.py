@@ -277,6 +277,7 @@ def test_knn_fitted_on_subsets_together_are_the_models_fitted_one_by_one():
         groups = np.arange(300) // 3
         inst = np.tile([1, 2, 3], 100)
         subsets = [inst != 1, np.flatnonzero(inst != 2), np.flatnonzero(inst != 3), np.arange(300), np.arange(40, 130)]
+        subsets += [inst == 1, np.flatnonzero(inst == 2)]  # sets that share no row read none of each other's
         template = classify.make("knn", cv_rows=70)  # fewer rows scored than a subset holds
         together = list(template.fit_subsets(X, y, groups, subsets))
         queries = rng.normal(size=(25, 6)) if not grid else np.round(rng.random((25, 6)) * 6) / 255
