@@ -326,3 +326,16 @@ def test_places_pair_by_signatures_a_few_rows_at_a_time_as_all_at_once():
         )
     for gm, gf, keep in cases:
         np.testing.assert_array_equal(_pairs(gm, gf, keep), at_once(gm, gf, keep))
+
+
+def test_tempered_losses_are_the_logsumexp_of_the_tempered_totals_bit_for_bit():
+    from classify.recognizers.banks import lse
+    from classify.recognizers.place import _tempered_nll
+
+    rng = np.random.default_rng(4)
+    total = rng.normal(size=(40, 9)) * 20 - 50
+    total[:, 3] = -np.inf  # an object no touch reaches
+    truth = rng.integers(0, 3, 40)
+    temps = np.geomspace(0.25, 64.0, 17)
+    want = [np.mean(lse(total / T, axis=1) - total[np.arange(40), truth] / T) for T in temps]
+    assert _tempered_nll(total, truth, temps).tolist() == want

@@ -76,19 +76,6 @@ def test_free_stack_finds_each_objects_nearest_sample_and_leaves_out_an_instance
     assert stack.nearest(Z, np.full(6, 7))[1].tolist() == [[4, 7, 2]] * 6
 
 
-def test_tempered_losses_are_the_logsumexp_of_the_tempered_totals_bit_for_bit():
-    from classify.recognizers.banks import lse
-    from classify.recognizers.place import _tempered_nll
-
-    rng = np.random.default_rng(4)
-    total = rng.normal(size=(40, 9)) * 20 - 50
-    total[:, 3] = -np.inf  # an object no touch reaches
-    truth = rng.integers(0, 3, 40)
-    temps = np.geomspace(0.25, 64.0, 17)
-    want = [np.mean(lse(total / T, axis=1) - total[np.arange(40), truth] / T) for T in temps]
-    assert _tempered_nll(total, truth, temps).tolist() == want
-
-
 def test_nearest_classes_are_the_least_distances_in_order():
     d2 = np.array([[5.0, 1.0, 3.0, 0.5, 9.0], [0.0, 0.1, 0.2, 0.3, 0.4]])
     assert nearest_classes(d2, 2).tolist() == [[1, 3], [0, 1]]

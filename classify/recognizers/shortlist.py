@@ -55,13 +55,14 @@ class FreeStack:
         """From per-object (F_c, d) samples and (F_c,) instances."""
         ids = np.unique(np.concatenate([np.asarray(i, np.int64) for i in instances]))
         C, d = len(frees), frees[0].shape[1]
-        counts = np.array([[int(np.sum(np.asarray(i) == v)) for i in instances] for v in ids], np.int64).reshape(-1, C)
+        # Each instance's samples of each object.
+        parts = [[np.asarray(f)[np.asarray(i) == v] for f, i in zip(frees, instances)] for v in ids]
+        counts = np.array([[len(p) for p in row] for row in parts], np.int64).reshape(-1, C)
         samples, sq = [], []
-        for v, width in zip(ids, counts.max(axis=1, initial=0)):
+        for row, width in zip(parts, counts.max(axis=1)):
             stack = np.zeros((width, C, d), np.float32)
             norms = np.full((width, C), np.inf, np.float32)
-            for c, (f, i) in enumerate(zip(frees, instances)):
-                mine = np.asarray(f)[np.asarray(i) == v]
+            for c, mine in enumerate(row):
                 stack[: len(mine), c] = mine
                 norms[: len(mine), c] = np.einsum("fd,fd->f", mine, mine)
             samples.append(stack)
@@ -87,8 +88,9 @@ class FreeStack:
         for v, per in zip(self.ids, self.counts):
             count[exclude == v] -= per
         d2 = np.empty((n, C))
-        widest = max((s.shape[0] for s in self.samples), default=0)
-        step = max(1, _BLOCK // max(C * widest * len(self.samples), 1))
+        # Every instance has a sample, so no array is empty.
+        widest = max(s.shape[0] for s in self.samples)
+        step = max(1, _BLOCK // (C * widest * len(self.samples)))
         products = np.empty((min(step, n), C * widest), np.float32)
         sums = np.empty_like(products)
         for a in range(0, n, step):
@@ -97,8 +99,6 @@ class FreeStack:
             low = np.full((m, C), np.inf, np.float32)
             for v, samples, sq in zip(self.ids, self.samples, self.sq):
                 F = samples.shape[0]
-                if F == 0:
-                    continue
                 g = np.matmul(z, samples.reshape(C * F, -1).T, out=products[:m, : C * F])
                 g *= 2.0
                 # (|z|^2 + |f|^2) - 2 z.f
