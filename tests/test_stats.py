@@ -87,6 +87,39 @@ def test_calibration_fitted_a_block_of_rows_at_a_time_matches_the_whole_grid_sco
     assert fusion.fit_calibration(P, y) == whole
 
 
+def test_calibration_grid_scores_are_calibrate_bit_for_bit():
+    rng = np.random.default_rng(6)
+    P = rng.dirichlet(np.ones(30) * 0.1, 200) ** 2
+    P /= P.sum(axis=1, keepdims=True)
+    P[:40] = np.round(P[:40], 1)  # exact zeros and ties as well
+    y = rng.integers(0, 30, 200)
+    grid = [fusion.Calibration(e, t) for e in fusion._EPS_GRID for t in fusion._T_GRID]
+    reference = np.stack([fusion.calibrate(P, c)[np.arange(len(y)), y] for c in grid])
+    scored = np.empty_like(reference)
+    fusion._score_block(P, y, scored)
+    assert np.array_equal(scored, reference)
+
+
+def test_calibration_scores_fewer_rows_as_objects_grow_so_its_cost_stays_linear(monkeypatch):
+    assert fusion.calibration_rows(16) == fusion.CALIBRATION_ROWS
+    assert fusion.calibration_rows(2 * fusion.CALIBRATION_CELLS // fusion.CALIBRATION_ROWS) < fusion.CALIBRATION_ROWS
+    assert all(fusion.calibration_rows(c) * c <= fusion.CALIBRATION_CELLS for c in (1000, 2000, 4000))
+    assert fusion.calibration_rows(10**9) == fusion._MIN_ROWS
+    monkeypatch.setattr(fusion, "CALIBRATION_CELLS", 50 * 20)  # 50 rows of 20 objects
+    monkeypatch.setattr(fusion, "_MIN_ROWS", 10)
+    rng = np.random.default_rng(7)
+    truth = rng.dirichlet(np.ones(20) * 0.3, 400)
+    y = np.array([rng.choice(20, p=row) for row in truth])
+    P = truth**2 / (truth**2).sum(axis=1, keepdims=True)
+    from classify.recognizers.shortlist import spread
+
+    pick = spread(len(y), 50)
+    scored, score = [], fusion._score_block
+    monkeypatch.setattr(fusion, "_score_block", lambda P, y, out: scored.append(len(y)) or score(P, y, out))
+    assert fusion.fit_calibration(P, y) == fusion.fit_calibration(P[pick], y[pick], rows=len(y))
+    assert scored == [50, 50]
+
+
 def test_touch_sets_are_distinct_exhaustive_when_few_and_seeded():
     rng = np.random.default_rng(0)
     assert len(fusion.touch_sets(15, 14, 50, rng)) == 15  # C(15, 14) = 15 < 50: all of them

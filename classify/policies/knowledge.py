@@ -398,14 +398,14 @@ def _held_out(models, F, y, inst, C: int, H: int, block: int = 4096):
     :class:`~classify.recognizers.shortlist.SparseRows` (N,): every object up to ``H``, past it each row's
     ``H`` most probable and one value for the others; and the calibration, fitted on those posteriors."""
     from classify.recognizers.classifiers import KNN
-    from classify.recognizers.fusion import CALIBRATION_ROWS, calibrate, calibrate_rows, fit_calibration
+    from classify.recognizers.fusion import calibrate, calibrate_rows, calibration_rows, fit_calibration
     from classify.recognizers.shortlist import SparseRows, knn_shortlist, nearest_classes, spread
     from classify.recognizers.touches import posteriors
 
     dense = C <= H
     T = C if dense else H
     # The rows the calibration is fitted on are kept whole: every row up to H objects.
-    pick = np.arange(len(y)) if dense else spread(len(y), CALIBRATION_ROWS)
+    pick = np.arange(len(y)) if dense else spread(len(y), calibration_rows(C))
     kept = np.zeros((pick.size, C))
     values, classes, rest = np.zeros((len(y), T)), np.tile(np.arange(T), (len(y), 1)), np.zeros(len(y))
     for i in np.unique(inst):

@@ -27,7 +27,7 @@ from itertools import combinations
 
 import numpy as np
 
-__all__ = ["Calibration", "fit_calibration", "calibrate", "calibrate_rows", "touch_sets", "fuse"]
+__all__ = ["Calibration", "calibration_rows", "fit_calibration", "calibrate", "calibrate_rows", "touch_sets", "fuse"]
 
 _EPS_GRID = (1e-4, 1e-3, 1e-2, 0.03, 0.1, 0.3)
 _T_GRID = tuple(float(t) for t in np.round(np.geomspace(0.1, 20.0, 24), 6))
@@ -84,18 +84,34 @@ def calibrate_rows(values, rest, n_classes: int, calibration: Calibration) -> tu
 
 #: Rows a calibration is fitted on at most.
 CALIBRATION_ROWS = 20000
+#: Posteriors a calibration is fitted on at most (rows x objects), so that its cost grows no faster than the
+#: number of objects; never fewer than ``_MIN_ROWS`` rows.
+CALIBRATION_CELLS = 1 << 23
+_MIN_ROWS = 2000
 
 
-def fit_calibration(proba, y, rows: int = CALIBRATION_ROWS) -> Calibration:
+def calibration_rows(n_classes: int) -> int:
+    """Held-out rows :func:`fit_calibration` scores at most with ``n_classes`` objects.
+
+    Examples
+    --------
+    >>> calibration_rows(16), calibration_rows(999), calibration_rows(10**6)
+    (20000, 8397, 2000)
+    """
+    return int(min(CALIBRATION_ROWS, max(_MIN_ROWS, CALIBRATION_CELLS // max(int(n_classes), 1))))
+
+
+def fit_calibration(proba, y, rows: int | None = None) -> Calibration:
     """The ``(eps, T)`` of the grid minimizing the negative log-likelihood of held-out ``proba``.
 
     Parameters
     ----------
     proba : (n, C) posteriors of held-out samples
     y : (n,) int, true column of each row
-    rows : int
-        Rows the grid is scored on at most, evenly spread over the n: two
-        numbers are fitted, and the cost stays that of ``rows`` x C.
+    rows : int, optional
+        Rows the grid is scored on at most, evenly spread over the n
+        (default :func:`calibration_rows` of C): two numbers are fitted, and
+        the cost stays that of ``rows`` x C.
 
     Examples
     --------
@@ -110,26 +126,44 @@ def fit_calibration(proba, y, rows: int = CALIBRATION_ROWS) -> Calibration:
         raise ValueError(f"proba must be (n, C) and y (n,), got {P.shape} and {y.shape}")
     if len(y) == 0:
         return Calibration()
+    rows = calibration_rows(P.shape[1]) if rows is None else rows
     if len(y) > rows:
         from classify.recognizers.shortlist import spread
 
         pick = spread(len(y), rows)
         P, y = P[pick], y[pick]
     grid = [Calibration(eps, t) for eps in _EPS_GRID for t in _T_GRID]
-    # Each grid point's calibrated posterior of the true object, a block of rows at a time: calibration is row by
-    # row, and a block holds at most _CELLS values whatever the number of objects.
     truth = np.empty((len(grid), len(y)))
+    # A block of rows at a time: calibration is row by row, and a block holds at most _CELLS values whatever
+    # the number of objects.
     step = max(1, _CELLS // P.shape[1])
     for a in range(0, len(y), step):
-        block, rows = P[a : a + step], np.arange(min(step, len(y) - a))
-        for g, cal in enumerate(grid):
-            truth[g, a : a + step] = calibrate(block, cal)[rows, y[a : a + step]]
+        _score_block(P[a : a + step], y[a : a + step], truth[:, a : a + step])
     best, best_nll = Calibration(), math.inf
     for cal, p in zip(grid, truth):
         nll = -float(np.mean(np.log(np.maximum(p, _TINY))))
         if nll < best_nll - 1e-12:
             best, best_nll = cal, nll
     return best
+
+
+def _score_block(P: np.ndarray, y: np.ndarray, out: np.ndarray) -> None:
+    """:func:`calibrate`'s posterior of the true column of each row of ``P`` (b, C) at every grid point, bit for
+    bit, into ``out`` (grid, b): each mixing's logarithms and row maxima serve all its temperatures (a
+    positive divisor keeps the maximum where it is, so max(L) / T is max(L / T))."""
+    C = P.shape[1]
+    rows = np.arange(len(y))
+    scaled = np.empty_like(P)
+    g = 0
+    for eps in _EPS_GRID:
+        logs = np.log(np.maximum((1.0 - eps) * P + eps / C, _TINY))
+        top = logs.max(axis=1)
+        for t in _T_GRID:
+            np.divide(logs, t, out=scaled)
+            scaled -= (top / t)[:, None]
+            np.exp(scaled, out=scaled)
+            out[g] = scaled[rows, y] / scaled.sum(axis=1)
+            g += 1
 
 
 def touch_sets(n_points: int, k: int, count: int, rng: np.random.Generator) -> np.ndarray:
