@@ -87,6 +87,31 @@ def test_knn_scores_at_most_cv_rows_and_still_finds_the_larger_k():
     assert again.k_ == some.k_ and again.scale_ == some.scale_ and again.cv_scores_ == some.cv_scores_
 
 
+def test_knn_scores_fewer_rows_of_a_larger_set_so_the_search_grows_linearly(monkeypatch):
+    from classify.recognizers import classifiers as module
+
+    monkeypatch.setattr(module, "_SCAN_PAIRS", 400 * 400)  # scored whole up to 400 rows
+    monkeypatch.setattr(module, "_MIN_CV_ROWS", 50)
+    rng = np.random.default_rng(3)
+
+    def fitted(n, cv_rows="auto"):
+        X = np.r_[rng.normal(0, 1, (n // 2, 2)), rng.normal(2.5, 1, (n // 2, 2))]
+        y = np.repeat([0, 1], n // 2)
+        return classify.make("knn", cv_rows=cv_rows).fit(X, y)
+
+    for n, scored in ((300, 300), (400, 400), (800, 200), (4000, 50)):
+        state = rng.bit_generator.state
+        auto = fitted(n)
+        rng.bit_generator.state = state
+        fixed = fitted(n, scored)
+        assert (auto.k_, auto.scale_, auto.cv_scores_) == (fixed.k_, fixed.scale_, fixed.cv_scores_)
+        assert min(n, auto._scored_rows(n)) * n <= max(400 * 400, 50 * n)  # pairs the search compares
+    with pytest.raises(ValueError, match="cv_rows"):
+        classify.make("knn", cv_rows=0).fit(np.zeros((4, 2)), [0, 0, 1, 1])
+    with pytest.raises(ValueError, match="cv_rows"):
+        classify.make("knn", cv_rows="all").fit(np.zeros((4, 2)), [0, 0, 1, 1])
+
+
 def test_knn_predicts_a_block_at_a_time_as_it_would_row_by_row():
     rng = np.random.default_rng(1)
     X, y = rng.normal(size=(300, 4)), rng.integers(0, 3, 300)

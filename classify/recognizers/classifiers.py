@@ -150,11 +150,15 @@ class KNN(ClassifierMixin, BaseEstimator):
         k is used).
     random_state : int
         Seeds the inner fold shuffle and every tie break.
-    cv_rows : int
+    cv_rows : int or "auto"
         Training rows the inner folds score at most, and whose nearest
         other row sets ``scale_``: those of least content hash, a sample
         that ignores the rows' order.  The search then costs ``cv_rows``
         times the training set, not its square; smaller sets are scored whole.
+        "auto" (the default) scores 20,000 rows, fewer when they would
+        compare more than 2^28 pairs (never fewer than 2,000): sets of up
+        to 16,384 rows are scored whole, and past that the search compares
+        2^28 pairs whatever the set's size.
 
     Attributes
     ----------
@@ -203,7 +207,7 @@ class KNN(ClassifierMixin, BaseEstimator):
     array([1])
     """
 
-    def __init__(self, ks=(1, 3, 5, 7, 9), cv=3, random_state=0, cv_rows=20000):
+    def __init__(self, ks=(1, 3, 5, 7, 9), cv=3, random_state=0, cv_rows="auto"):
         self.ks = ks
         self.cv = cv
         self.random_state = random_state
@@ -254,6 +258,8 @@ class KNN(ClassifierMixin, BaseEstimator):
             raise ValueError(f"KNN: ks must hold positive integers, got {self.ks!r}")
         if not (isinstance(self.cv, numbers.Integral) and self.cv >= 2):
             raise ValueError(f"KNN: cv must be an integer >= 2, got {self.cv!r}")
+        if not (self.cv_rows == "auto" or (isinstance(self.cv_rows, numbers.Integral) and self.cv_rows >= 1)):
+            raise ValueError(f"KNN: cv_rows must be a positive integer or 'auto', got {self.cv_rows!r}")
         X = as_matrix(X)
         y = np.asarray(y)
         if y.shape != (len(X),):
@@ -274,8 +280,14 @@ class KNN(ClassifierMixin, BaseEstimator):
         groups = None if groups is None else groups[rows][canonical]
         folds = _inner_folds(codes, groups, self.cv)
         splits = list(_split(codes, groups, folds, self.random_state)) if folds >= 2 and len(classes) >= 2 else []
-        scored = np.sort(np.argsort(keys, kind="stable")[: int(self.cv_rows)])
+        scored = np.sort(np.argsort(keys, kind="stable")[: self._scored_rows(len(part))])
         return _InnerFolds(rows[canonical], classes, codes, keys, splits, scored, on_grid(part))
+
+    def _scored_rows(self, n: int) -> int:
+        """Rows the inner folds of a training set of ``n`` rows score at most (see ``cv_rows``)."""
+        if self.cv_rows != "auto":
+            return int(self.cv_rows)
+        return int(min(_CV_ROWS, max(_MIN_CV_ROWS, _SCAN_PAIRS // max(n, 1))))
 
     def _adopt(self, X, inner: _InnerFolds, hits: dict, scale: float):
         """Fitted on the training set of ``inner``, rows of ``X``, with its inner folds' hits and distance scale."""
@@ -320,6 +332,8 @@ class KNN(ClassifierMixin, BaseEstimator):
 
 
 _SOFT = 0.5  # weight of the distance term: under one vote, so it never overturns a majority
+# cv_rows="auto": rows scored at most, pairs compared at most, and rows scored at least.
+_CV_ROWS, _SCAN_PAIRS, _MIN_CV_ROWS = 20000, 1 << 28, 2000
 
 
 def _inner_folds(codes, groups, cv) -> int:
