@@ -1,5 +1,7 @@
 """Symmetry: the channel (local mirror correlation) on pop-out stimuli, its contract, bad inputs."""
 
+import importlib
+
 import cv2
 import numpy as np
 import pytest
@@ -368,3 +370,40 @@ def test_map_is_independent_of_the_thread_count():
     finally:
         cv2.setNumThreads(threads)
     assert np.array_equal(single, symmetry(img))
+
+
+def _correlation_by_definition(b: np.ndarray):
+    """The windowed mirror correlation about vertical lines, pair by pair in float64 (the module notes)."""
+    from scipy.ndimage import convolve1d
+
+    module = importlib.import_module("meshsal.attention.symmetry")
+    h, w = b.shape
+    r = module._R
+    pad = np.pad(b.astype(np.float64), ((0, 0), (r, r)))
+    c = np.arange(w) + r
+    along = module._ALONG_KERNEL.ravel().astype(np.float64)
+    out = []
+    for k, first in ((module._K_ON, lambda m: c - m), (module._K_BETWEEN, lambda m: c + 1 - m)):
+        num = sum(k[m - 1] * pad[:, first(m)] * pad[:, c + m] for m in range(1, r + 1))
+        den = sum(k[m - 1] * 0.5 * (pad[:, first(m)] ** 2 + pad[:, c + m] ** 2) for m in range(1, r + 1))
+        present = sum(k[m - 1] * ((first(m) >= r) & (first(m) < w + r) & (c + m < w + r)) for m in range(1, r + 1))
+        rows = convolve1d(np.ones(h), along, mode="constant")
+        num, den = (convolve1d(a, along, axis=0, mode="constant") for a in (num, den))
+        out.append(num / (den + module._FLOOR) * (present[None, :] * rows[:, None]) ** 2)
+    return out
+
+
+@pytest.mark.parametrize("where", ["middle", "corner", "whole"])
+def test_mirror_correlation_is_its_definition_on_a_patch_on_black(where):
+    _mirror_correlation = importlib.import_module("meshsal.attention.symmetry")._mirror_correlation
+    rng = np.random.default_rng(3)
+    b = np.zeros((60, 70), np.float32)
+    patch = {"middle": (slice(20, 35), slice(25, 50)), "corner": (slice(0, 12), slice(58, 70))}.get(where)
+    if patch is None:
+        b[:] = rng.normal(size=b.shape)
+    else:
+        b[patch] = rng.normal(size=b[patch].shape)
+    for got, want in zip(_mirror_correlation(b), _correlation_by_definition(b)):
+        np.testing.assert_allclose(got, want, atol=2e-5)
+        # Off the columns between the patch's first and last, no pair has two non-zero partners.
+        assert not got[:, ~b.any(axis=0)].any() or where == "whole"

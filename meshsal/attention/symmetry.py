@@ -134,37 +134,57 @@ def _mirror_correlation(b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     and the correlation is scaled down by the square of the fraction of the
     window's weight that is present: a window cut by the border has fewer
     pairs and a noisier correlation.
+
+    A line has a non-zero product of partners only between the first and the
+    last non-zero column of ``b`` (a view's background is black): the
+    products and the sums along the lines are taken on those columns, the
+    pairs' energy on the non-zero rows.  Elsewhere the correlation is 0 with
+    every window sum computed (a zero product over a positive energy), and
+    what :func:`_axis_evidence` makes of it is the same.
     """
     h, w = b.shape
     r = _R
-    # Column c + j of the padded image holds b[:, c + j - r], zero off the image.
-    padded = np.pad(b, ((0, 0), (r, r)))
+    on, between = np.zeros((h, w), np.float32), np.zeros((h, w), np.float32)
+    rows, cols = np.flatnonzero(b.any(axis=1)), np.flatnonzero(b.any(axis=0))
+    if not rows.size:
+        return on, between
+    (r0, r1), (c0, c1) = (rows[0], rows[-1] + 1), (cols[0], cols[-1] + 1)
+    part = b[r0:r1]
+    # Column c + j of the padded rows holds b[:, c + j - r], zero off the image.
+    padded = np.pad(part, ((0, 0), (r, r)))
     # Plane m - 1 holds the partners at distance m: c - m and c + m (on), c + 1 - m and c + m (between).
-    right = _columns(padded, r + 1, 1, w)
-    num_on = _sum_in_numpy_order(_columns(padded, r - 1, -1, w) * right * _K_ON32)
-    num_between = _sum_in_numpy_order(_columns(padded, r, -1, w) * right * _K_BETWEEN32)
-    # The energy of the same pairs, (b(p)**2 + b(p')**2) / 2, is a plain filter of b**2.
-    energy = b * b
-    den_on = cv2.filter2D(energy, -1, _KER_ON, borderType=cv2.BORDER_CONSTANT)
-    den_between = cv2.filter2D(energy, -1, _KER_BETWEEN, anchor=(r - 1, 0), borderType=cv2.BORDER_CONSTANT)
-
-    c = np.arange(w)
+    right = _columns(padded, r + 1 + c0, 1, c1 - c0)
+    products = (
+        _sum_in_numpy_order(_columns(padded, r - 1 + c0, -1, c1 - c0) * right * _K_ON32),
+        _sum_in_numpy_order(_columns(padded, r + c0, -1, c1 - c0) * right * _K_BETWEEN32),
+    )
+    # The energy of the same pairs, (b(p)**2 + b(p')**2) / 2, is a plain filter of b**2, row by row.
+    energy = part * part
+    energies = (
+        cv2.filter2D(energy, -1, _KER_ON, borderType=cv2.BORDER_CONSTANT),
+        cv2.filter2D(energy, -1, _KER_BETWEEN, anchor=(r - 1, 0), borderType=cv2.BORDER_CONSTANT),
+    )
+    c = np.arange(c0, c1)
     present_on = _PRESENT_ON[np.clip(np.minimum(c, w - 1 - c), 0, r)]
     present_between = _PRESENT_BETWEEN[np.clip(np.minimum(c + 1, w - 1 - c), 0, r)]
     present_along = cv2.sepFilter2D(
         np.ones((h, 1), np.float32), -1, _ONE, _ALONG_KERNEL, borderType=cv2.BORDER_CONSTANT
     )
-    out = []
-    for num, den, present in ((num_on, den_on, present_on), (num_between, den_between, present_between)):
+    column = np.zeros((h, c1 - c0), np.float32)
+    for out, num, den, present in (
+        (on, products[0], energies[0], present_on),
+        (between, products[1], energies[1], present_between),
+    ):
         # A ratio of window sums, not a mean of per-row ratios: rows with
-        # little texture must not weigh as much as the rest.
-        num = cv2.sepFilter2D(
-            np.ascontiguousarray(num, np.float32), -1, _ONE, _ALONG_KERNEL, borderType=cv2.BORDER_CONSTANT
-        )
-        den = cv2.sepFilter2D(den, -1, _ONE, _ALONG_KERNEL, borderType=cv2.BORDER_CONSTANT)
+        # little texture must not weigh as much as the rest.  The sums run
+        # down each column, over the zero rows too.
+        column[r0:r1] = num
+        num = cv2.sepFilter2D(column, -1, _ONE, _ALONG_KERNEL, borderType=cv2.BORDER_CONSTANT)
+        column[r0:r1] = den[:, c0:c1]
+        den = cv2.sepFilter2D(column, -1, _ONE, _ALONG_KERNEL, borderType=cv2.BORDER_CONSTANT)
         coverage = present.astype(np.float32)[None, :] * present_along
-        out.append(num / (den + np.float32(_FLOOR)) * coverage * coverage)
-    return out[0], out[1]
+        out[:, c0:c1] = num / (den + np.float32(_FLOOR)) * coverage * coverage
+    return on, between
 
 
 def _beside(a: np.ndarray) -> np.ndarray:
