@@ -126,7 +126,7 @@ def bench_channels(mesh, label: str, size: int, repeats: int, threads: int) -> N
     print("|---|---:|---:|---:|")
     for name, wall, cpu in rows:
         print(f"| {name} | {wall:.3f} | {cpu:.3f} | {1000 * cpu / n:.2f} |")
-    wall, cpu = rows[-4][1:]
+    wall, cpu = stacked
     print(
         f"\nTarget: saliency_views of all views <= 0.5 s on 2 cores (AVX-512), pinned; measured {wall:.2f} s wall, "
         f"{cpu:.2f} s CPU (load average at the end: {os.getloadavg()[0]:.1f}). "
