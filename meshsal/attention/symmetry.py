@@ -138,9 +138,9 @@ def _mirror_correlation(b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     A line has a non-zero product of partners only between the first and the
     last non-zero column of ``b`` (a view's background is black): the
     products and the sums along the lines are taken on those columns, the
-    pairs' energy on the non-zero rows.  Elsewhere the correlation is 0 with
-    every window sum computed (a zero product over a positive energy), and
-    what :func:`_axis_evidence` makes of it is the same.
+    pairs' energy on the non-zero rows.  Elsewhere the correlation is zero,
+    as over the whole image, up to the sign of a zero, which the channel's
+    evidence (a 4th power) drops: the channel keeps its bits.
     """
     h, w = b.shape
     r = _R
