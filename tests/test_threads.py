@@ -24,3 +24,26 @@ def test_attention_points_are_the_same_with_one_thread_and_with_two():
     for name in ("vertex_ids", "positions", "normals", "scores", "votes"):
         np.testing.assert_array_equal(getattr(one, name), getattr(two, name), err_msg=name)
     assert one.views == two.views and one.best_set == two.best_set
+
+
+def test_saliency_views_leaves_the_process_thread_settings_as_it_found_them():
+    import sys
+
+    import cv2
+    import pytest
+
+    from meshsal import attention
+
+    cup = meshsal.scale_to(meshsal.objects.toys.make("cup"), 150.0)
+    views = render_views(cup, [c for s in view_rig()[:2] for c in s], size=32, threads=1)
+    before = (sys.getswitchinterval(), cv2.getNumThreads())
+    one = attention.saliency_views(views, cup, threads=1)
+    two = attention.saliency_views(views, cup, threads=2)
+    assert (sys.getswitchinterval(), cv2.getNumThreads()) == before
+    for a, b in zip(one, two):
+        np.testing.assert_array_equal(a.map, b.map)
+    broken = list(views)
+    broken[-1] = type(views[0])(**{**vars(views[0]), "rgb": np.full((32, 32, 3), np.nan, np.float32)})
+    with pytest.raises(ValueError):
+        attention.saliency_views(broken, cup, threads=2)
+    assert (sys.getswitchinterval(), cv2.getNumThreads()) == before
