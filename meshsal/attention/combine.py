@@ -438,7 +438,8 @@ def saliency_views(
     mesh : Mesh
     weights, vertex_saliency, normalize : as in :func:`saliency`
     threads : int, optional, worker threads (default: the CPU count); with more than one, OpenCV's own
-        threads are capped at one for the call (process-wide), then restored
+        threads are capped at one and Python's switch interval set to 0.5 ms for the call (both
+        process-wide), then restored
     quiet : bool, no progress bar on stderr
 
     Returns
