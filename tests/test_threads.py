@@ -26,19 +26,27 @@ def test_attention_points_are_the_same_with_one_thread_and_with_two():
     assert one.views == two.views and one.best_set == two.best_set
 
 
-def test_saliency_views_leaves_the_process_thread_settings_as_it_found_them():
+def test_saliency_views_leaves_the_process_thread_settings_as_it_found_them(monkeypatch):
     import sys
 
     import cv2
     import pytest
 
     from meshsal import attention
+    from meshsal.attention import combine
 
     cup = meshsal.scale_to(meshsal.objects.toys.make("cup"), 150.0)
-    views = render_views(cup, [c for s in view_rig()[:2] for c in s], size=32, threads=1)
+    # More views than a stack holds, so that two threads share them.
+    views = render_views(cup, [c for s in view_rig()[:5] for c in s], size=32, threads=1)
+    assert len(views) > combine._VIEWS_PER_STACK
     before = (sys.getswitchinterval(), cv2.getNumThreads())
     one = attention.saliency_views(views, cup, threads=1)
+    seen, channels = [], combine.image_channels_stack
+    monkeypatch.setattr(
+        combine, "image_channels_stack", lambda imgs: seen.append(sys.getswitchinterval()) or channels(imgs)
+    )
     two = attention.saliency_views(views, cup, threads=2)
+    assert seen == [combine._SWITCH_S] * 2 and combine._SWITCH_S != before[0]
     assert (sys.getswitchinterval(), cv2.getNumThreads()) == before
     for a, b in zip(one, two):
         np.testing.assert_array_equal(a.map, b.map)

@@ -25,12 +25,8 @@ def opencv_threads(n: int):
     """
     import cv2
 
-    before = cv2.getNumThreads()
-    cv2.setNumThreads(int(n))
-    try:
+    with _held(cv2.getNumThreads, cv2.setNumThreads, int(n)):
         yield
-    finally:
-        cv2.setNumThreads(before)
 
 
 @contextmanager
@@ -54,9 +50,16 @@ def switch_interval(seconds: float):
     """
     import sys
 
-    before = sys.getswitchinterval()
-    sys.setswitchinterval(float(seconds))
+    with _held(sys.getswitchinterval, sys.setswitchinterval, float(seconds)):
+        yield
+
+
+@contextmanager
+def _held(get, put, value):
+    """``put(value)`` for the block, then ``put`` of what ``get()`` gave before it, whatever the block raised."""
+    before = get()
+    put(value)
     try:
         yield
     finally:
-        sys.setswitchinterval(before)
+        put(before)
