@@ -123,6 +123,10 @@ def test_the_estimator_clones_validates_and_extends_its_banks():
         PlaceAware(shortlist=0).fit(X, y, signatures=sig, instances=inst, places=key)
     with pytest.raises(ValueError, match="one row per touch"):
         PlaceAware().fit(X[:-1], y, signatures=sig, instances=inst, places=key)
+    with pytest.raises(ValueError, match="temperatures must be positive"):
+        PlaceAware(temperatures=(1.0, -2.0)).fit(X, y, signatures=sig, instances=inst, places=key)
+    with pytest.raises(ValueError, match=r"mixtures must lie in \(0, 1\)"):
+        PlaceAware(mixtures=(0.0, 0.1)).fit(X, y, signatures=sig, instances=inst, places=key)
     model.fit(X, y, signatures=sig, instances=inst, places=key)
     # A new place far from the others, where object 1 feels 5s: the extended model knows it, the old one not.
     new = np.full((20, 4), 5.0) + rng.normal(0, 0.3, (20, 4))
@@ -292,6 +296,53 @@ def test_a_registration_seeded_by_a_number_draws_as_a_new_generator_of_that_seed
             assert all(np.array_equal(a, b) for a, b in zip(got, expected))
     assert not _seeded_samples(3, 30, 40).flags.writeable
     assert not np.array_equal(_seeded_samples(0, 30, 40), _seeded_samples(3, 30, 40))
+
+
+def test_refinement_that_stops_when_the_pairs_repeat_is_every_round_bit_for_bit():
+    """A round that pairs the places as the last one did would repeat its fit: stopping there changes no bit of
+    the ten rounds' result, on a true match (which settles) and on another shape (which may not)."""
+    from scipy.spatial import cKDTree
+
+    from meshsal.points.places import _unless_collapsed, register, registration_places, similarity_fit
+    from meshsal.util.quantiles import percentiles
+
+    rng = np.random.default_rng(11)
+    moving = rng.normal(size=(70, 3)) * [40, 20, 10]
+    turn = np.linalg.qr(rng.normal(size=(3, 3)))[0]
+    turn *= np.sign(np.linalg.det(turn))
+    same = (1.3 * moving @ turn.T + 2.0)[rng.permutation(70)]
+    other = rng.normal(size=(55, 3)) * [10, 30, 25]
+    settled = []
+    for fixed in (same, other):
+        s, R, t = register(moving, fixed, rng=3, refine=0)
+        size = registration_places(fixed).spread / registration_places(moving).spread
+        tree = cKDTree(fixed)
+        rounds = []
+        for _ in range(10):
+            dist, nearest = tree.query(s * moving @ R.T + t)
+            close = dist <= percentiles(dist[None], 80.0)[0]
+            rounds.append(nearest[close].tobytes() + close.tobytes())
+            s, R, t = _unless_collapsed(similarity_fit(moving[close], fixed[nearest[close]]), (s, R, t), size)
+        got = register(moving, fixed, rng=3)
+        assert got[0] == s and np.array_equal(got[1], R) and np.array_equal(got[2], t)
+        settled.append(rounds[-1] == rounds[-2])
+    assert settled[0]  # the exact copy settles within ten rounds: the early stop is exercised
+
+
+def test_places_prepared_once_register_as_the_arrays_do():
+    from meshsal.points.places import landmarks_in, register, registration_places
+
+    rng = np.random.default_rng(12)
+    moving = rng.normal(size=(50, 3)) * [40, 20, 10]
+    fixed = [rng.normal(size=(n, 3)) * 30 for n in (50, 64, 5)]  # 5 places: fewer than the landmarks
+    once = registration_places(moving)
+    assert registration_places(once) is once
+    for F in fixed:
+        for seed in (0, 4, np.random.default_rng(4)):
+            a = register(moving, F, rng=seed)
+            b = register(once, registration_places(F), rng=seed if isinstance(seed, int) else np.random.default_rng(4))
+            assert a[0] == b[0] and np.array_equal(a[1], b[1]) and np.array_equal(a[2], b[2])
+        np.testing.assert_array_equal(landmarks_in(once, registration_places(F)), landmarks_in(moving, F))
 
 
 def test_registration_misfits_are_the_einsum_and_norm_bit_for_bit():

@@ -120,6 +120,7 @@ class PlaceKnowledge:
     #: Matched entries a forecast draws on per object and place.
     forecast_neighbours: int = 2
     _landmarks: dict = field(default_factory=dict, repr=False)
+    _references: dict = field(default_factory=dict, repr=False)
 
     @property
     def n_classes(self) -> int:
@@ -133,18 +134,26 @@ class PlaceKnowledge:
     def landmarks(self, places: Places, c: int) -> np.ndarray:
         """(LANDMARKS, 3) object ``c``'s landmarks laid onto the instance of ``places`` (computed once per
         instance and object, when first asked for)."""
-        from meshsal.points.places import landmarks_in
+        from meshsal.points.places import landmarks_in, registration_places
 
         key = id(places)
         found = self._landmarks.get(key)
         if found is None or found[0] is not places:
             if len(self._landmarks) > 4096:
                 self._landmarks.clear()
-            found = (places, {})
+            found = (places, {}, registration_places(places.positions))
             self._landmarks[key] = found
         if c not in found[1]:
-            found[1][c] = landmarks_in(places.positions, self.references[c])
+            found[1][c] = landmarks_in(found[2], self._reference(c))
         return found[1][c]
+
+    def _reference(self, c: int):
+        """Object ``c``'s training places prepared for registration (once per object)."""
+        from meshsal.points.places import registration_places
+
+        if c not in self._references:
+            self._references[c] = registration_places(self.references[c])
+        return self._references[c]
 
     def signatures_at(self, positions, places: Places, classes=None) -> np.ndarray:
         """(k, J, LANDMARKS) where points of the instance of ``places`` lie on each object of ``classes``

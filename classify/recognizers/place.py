@@ -75,17 +75,20 @@ def _tempered_nll(total: np.ndarray, truth: np.ndarray, temps: np.ndarray) -> np
     each of ``temps``: ``lse(total / T) - total[truth] / T``, averaged over rows.
 
     A few temperatures at a time in one reused buffer (a fresh one per step costs its page faults, more than the
-    arithmetic); the operations are ``lse``'s, so the values are its, bit for bit.
+    arithmetic); the operations are ``lse``'s, so the values are its, bit for bit.  Each row's maximum is taken
+    once: dividing by a positive temperature keeps the order, and rounding never reverses it, so the maximum of
+    the tempered row is the tempered maximum, exactly.
     """
     step = min(temps.size, max(1, _TEMPERED // total.size))
     buffer = np.empty((step, *total.shape))
     rows = np.arange(len(truth))
+    peak = total.max(axis=1)[None, :, None]
     out = np.empty(temps.size)
     for i in range(0, temps.size, step):
         scaled = buffer[: min(step, temps.size - i)]
         np.divide(total[None], temps[i : i + step, None, None], out=scaled)
         picked = scaled[:, rows, truth]
-        top = np.max(scaled, axis=2, keepdims=True)
+        top = peak / temps[i : i + step, None, None]
         top = np.where(np.isfinite(top), top, 0.0)
         np.exp(np.subtract(scaled, top, out=scaled), out=scaled)
         with np.errstate(divide="ignore"):
@@ -225,6 +228,8 @@ class PlaceAware(ClassifierMixin, BaseEstimator):
             raise ValueError("the place-aware recognizer needs at least two training instances (it leaves one out)")
         if not (0 < min(self.mixtures) and max(self.mixtures) < 1):
             raise ValueError(f"mixtures must lie in (0, 1), got {self.mixtures}")
+        if not min(self.temperatures) > 0:
+            raise ValueError(f"temperatures must be positive, got {self.temperatures}")
         if min(self.shortlist, self.fit_objects) < 1 or int(self.shortlist) != self.shortlist:
             raise ValueError(
                 f"shortlist and fit_objects must be positive integers, got {self.shortlist}, {self.fit_objects}"

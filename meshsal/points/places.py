@@ -19,6 +19,7 @@ with the nearest signature.
 from __future__ import annotations
 
 import functools
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -34,6 +35,8 @@ __all__ = [
     "candidate_places",
     "signatures",
     "similarity_fit",
+    "RegistrationPlaces",
+    "registration_places",
     "register",
     "landmarks_in",
 ]
@@ -155,17 +158,31 @@ def similarity_fit(source, target) -> tuple[float, np.ndarray, np.ndarray]:
     A, B = np.asarray(source, np.float64), np.asarray(target, np.float64)
     batch = A.ndim == 3
     A, B = (A, B) if batch else (A[None], B[None])
-    ma, mb = A.mean(axis=1, keepdims=True), B.mean(axis=1, keepdims=True)
-    A0, B0 = A - ma, B - mb
-    U, S, Vt = np.linalg.svd(np.einsum("bki,bkj->bij", B0, A0) / A.shape[1])
+    s, R, t = _fit_onto(_centered(A), B)
+    return (s, R, t) if batch else (float(s[0]), R[0], t[0])
+
+
+def _centered(A: np.ndarray) -> tuple:
+    """The source side of :func:`similarity_fit` for (b, k, 3) points: their means, the centred points, their
+    variances (shared by every target they are fitted onto)."""
+    ma = A.mean(axis=1, keepdims=True)
+    A0 = A - ma
+    return ma, A0, (A0**2).sum(axis=(1, 2)) / A.shape[1]
+
+
+def _fit_onto(source: tuple, B: np.ndarray) -> tuple:
+    """:func:`similarity_fit` of :func:`_centered` sources onto (b, k, 3) targets: (b,) s, (b, 3, 3) R, (b, 3) t."""
+    ma, A0, var = source
+    mb = B.mean(axis=1, keepdims=True)
+    B0 = B - mb
+    U, S, Vt = np.linalg.svd(np.einsum("bki,bkj->bij", B0, A0) / A0.shape[1])
     sign = np.where(np.linalg.det(U @ Vt) < 0, -1.0, 1.0)
-    D = np.ones((len(A), 3))
+    D = np.ones((len(A0), 3))
     D[:, 2] = sign
     R = (U * D[:, None, :]) @ Vt
-    var = (A0**2).sum(axis=(1, 2)) / A.shape[1]
     s = np.where(var > 0, (S * D).sum(axis=1) / np.where(var > 0, var, 1.0), 1.0)
     t = mb[:, 0] - s[:, None] * np.einsum("bij,bj->bi", R, ma[:, 0])
-    return (s, R, t) if batch else (float(s[0]), R[0], t[0])
+    return s, R, t
 
 
 # Moving places paired at a time (:func:`_pairs`).
@@ -187,7 +204,61 @@ def _pairs(gm: np.ndarray, gf: np.ndarray, keep: int) -> np.ndarray:
     return pair
 
 
-def register(moving, fixed, rng=0, rounds: int = 200, keep: int = 5) -> tuple[float, np.ndarray, np.ndarray]:
+@dataclass(frozen=True, eq=False)
+class RegistrationPlaces:
+    """Places with what :func:`register` reads of them, computed once: pass one in place of the (m, 3) array
+    when the same places are registered many times (a test instance onto every object it might be).
+
+    ``positions`` (m, 3) float64, starting with their landmarks; ``signatures``
+    (m, min(LANDMARKS, m)) float64 against those landmarks; ``spread`` float,
+    the root-mean-square distance of the places from their mean.  The k-d tree
+    of the places and the RANSAC's centred triples of a seed are built when
+    first needed.
+
+    Examples
+    --------
+    >>> pts = np.random.default_rng(0).normal(size=(60, 3)) * [40, 20, 10]
+    >>> once = registration_places(pts)
+    >>> all(np.array_equal(a, b) for a, b in zip(register(once, 2 * pts), register(pts, 2 * pts)))
+    True
+    """
+
+    positions: np.ndarray
+    signatures: np.ndarray
+    spread: float
+    _sources: dict = field(default_factory=dict, repr=False)
+
+    def __len__(self) -> int:
+        return len(self.positions)
+
+    @functools.cached_property
+    def tree(self):
+        """scipy.spatial.cKDTree of the places."""
+        from scipy.spatial import cKDTree
+
+        return cKDTree(self.positions)
+
+    def sources(self, seed: int, rounds: int) -> tuple:
+        """The RANSAC's (rounds, 3) triples of a numeric seed and their centred points (:func:`_centered`)."""
+        key = (seed, rounds)
+        if key not in self._sources:
+            picks = _seeded_samples(seed, rounds, len(self))
+            self._sources[key] = (picks, _centered(self.positions[picks]))
+        return self._sources[key]
+
+
+def registration_places(points) -> RegistrationPlaces:
+    """:class:`RegistrationPlaces` of (m, 3) places (returned as they are when they already are)."""
+    if isinstance(points, RegistrationPlaces):
+        return points
+    X = np.asarray(points, np.float64)
+    spread = float(np.sqrt(((X - X.mean(axis=0)) ** 2).sum(axis=1).mean()))
+    return RegistrationPlaces(X, signatures(X, X[:LANDMARKS]), spread)
+
+
+def register(
+    moving, fixed, rng=0, rounds: int = 200, keep: int = 5, refine: int = 10
+) -> tuple[float, np.ndarray, np.ndarray]:
     """The similarity that lays the candidate places of one instance onto those of another of the same shape.
 
     Both sets are places of :func:`candidate_places` (or any samples of the
@@ -197,16 +268,18 @@ def register(moving, fixed, rng=0, rounds: int = 200, keep: int = 5) -> tuple[fl
     ``keep`` of their :data:`LANDMARKS` coordinates that agree best (a
     landmark that another tessellation moved spoils only its own
     coordinate); a seeded RANSAC over those pairs finds the similarity most
-    of them agree with, and a few rounds of trimmed closest-point fitting
-    refine it.  Where a shape is symmetric, one of its symmetric poses is
-    found: its symmetric places feel alike anyway.
+    of them agree with, and up to ``refine`` rounds of trimmed closest-point
+    fitting refine it (stopping early once a round pairs the places as the
+    last one did: its fit would repeat the last one).  Where a shape is symmetric, one of
+    its symmetric poses is found: its symmetric places feel alike anyway.
 
     Parameters
     ----------
-    moving, fixed : (m, 3), (n, 3) float64, each starting with its landmarks
+    moving, fixed : (m, 3), (n, 3) float64, each starting with its landmarks, or :class:`RegistrationPlaces`
     rng : numpy Generator or int, the RANSAC's draws
     rounds : int, RANSAC samples
     keep : int, signature coordinates compared per pair
+    refine : int, closest-point rounds at most
 
     Returns
     -------
@@ -220,20 +293,23 @@ def register(moving, fixed, rng=0, rounds: int = 200, keep: int = 5) -> tuple[fl
     >>> round(s, 6), bool(np.allclose(R, turn))
     (1.5, True)
     """
-    from scipy.spatial import cKDTree
-
-    M, F = np.asarray(moving, np.float64), np.asarray(fixed, np.float64)
+    moving, fixed = registration_places(moving), registration_places(fixed)
+    M, F = moving.positions, fixed.positions
     L = min(LANDMARKS, len(M), len(F))
-    gm, gf = signatures(M, M[:L]), signatures(F, F[:L])
+    if L > 1:  # signatures against the first L landmarks are the first L columns of those against more
+        gm, gf = moving.signatures[:, :L], fixed.signatures[:, :L]
+    else:
+        gm, gf = signatures(M, M[:L]), signatures(F, F[:L])
     pair = _pairs(gm, gf, min(keep, L))
-    scale = np.sqrt(((F - F.mean(axis=0)) ** 2).sum(axis=1).mean())
-    size = scale / max(np.sqrt(((M - M.mean(axis=0)) ** 2).sum(axis=1).mean()), 1e-300)
+    scale = fixed.spread
+    size = scale / max(moving.spread, 1e-300)
     tol = 0.05 * scale
     if isinstance(rng, (int, np.integer)):
-        picks = _seeded_samples(int(rng), rounds, len(M))
+        picks, source = moving.sources(int(rng), rounds)
     else:
         picks = _samples(rng if isinstance(rng, np.random.Generator) else np.random.default_rng(rng), rounds, len(M))
-    S, R, T = similarity_fit(M[picks], F[pair[picks]])
+        source = _centered(M[picks])
+    S, R, T = _fit_onto(source, F[pair[picks]])
     counts = (_misfits(S, R, T, M, F[pair]) < tol).sum(axis=1)
     counts[~_plausible(S, size)] = -1
     b = int(np.argmax(counts))
@@ -243,10 +319,13 @@ def register(moving, fixed, rng=0, rounds: int = 200, keep: int = 5) -> tuple[fl
     inliers = np.linalg.norm(s * M @ R.T + t - F[pair], axis=1) < tol
     if inliers.sum() >= 3:
         s, R, t = _unless_collapsed(similarity_fit(M[inliers], F[pair[inliers]]), (s, R, t), size)
-    tree = cKDTree(F)
-    for _ in range(10):
-        dist, nearest = tree.query(s * M @ R.T + t)
+    last = None
+    for _ in range(refine):
+        dist, nearest = fixed.tree.query(s * M @ R.T + t)
         close = dist <= percentiles(dist[None], 80.0)[0]  # np.quantile(dist, 0.8), bit for bit
+        if last is not None and np.array_equal(nearest, last[0]) and np.array_equal(close, last[1]):
+            break  # the same pairs as the last round: its fit, which gave (s, R, t), again
+        last = (nearest, close)
         s, R, t = _unless_collapsed(similarity_fit(M[close], F[nearest[close]]), (s, R, t), size)
     return float(s), R, t
 
@@ -268,16 +347,28 @@ def _seeded_samples(seed: int, rounds: int, m: int) -> np.ndarray:
 def _misfits(S, R, T, M, target) -> np.ndarray:
     """(b, k) distances from ``S[b] R[b] M[k] + T[b]`` to ``target[k]``, for b similarities at once.
 
-    Coordinate by coordinate on (b, k) arrays; each sum is taken in the
-    order ``np.einsum("bij,kj->bki")`` takes it, so the distances are those
-    of the einsum and ``np.linalg.norm``, bit for bit, at a fraction of the cost.
+    Coordinate by coordinate on (b, k) arrays, in place (a new array of
+    that size per operation costs more than the arithmetic); each sum is
+    taken in the order ``np.einsum("bij,kj->bki")`` takes it, so the
+    distances are those of the einsum and ``np.linalg.norm``, bit for bit,
+    at a fraction of the cost.
     """
     x, y, z = M[:, 0], M[:, 1], M[:, 2]
-    d = []
+    out = np.empty((len(S), len(M)))
+    d = np.empty_like(out)
+    term = np.empty_like(out)
     for i in range(3):
-        turned = (R[:, i, 0, None] * x + R[:, i, 2, None] * z) + R[:, i, 1, None] * y
-        d.append(S[:, None] * turned + T[:, i, None] - target[:, i])
-    return np.sqrt((d[0] * d[0] + d[1] * d[1]) + d[2] * d[2])
+        np.multiply(R[:, i, 0, None], x, out=d)
+        d += np.multiply(R[:, i, 2, None], z, out=term)
+        d += np.multiply(R[:, i, 1, None], y, out=term)
+        d *= S[:, None]
+        d += T[:, i, None]
+        d -= target[:, i]
+        if i == 0:
+            np.multiply(d, d, out=out)
+        else:
+            out += np.multiply(d, d, out=d)
+    return np.sqrt(out, out=out)
 
 
 def _plausible(s, size: float):
@@ -301,8 +392,10 @@ def landmarks_in(moving, fixed, rng=0) -> np.ndarray:
 
     Points of ``moving`` located against them (:func:`signatures`) are
     located as the places of ``fixed`` are, even where another tessellation
-    gave ``moving`` landmarks of its own elsewhere.
+    gave ``moving`` landmarks of its own elsewhere.  Either may be
+    :class:`RegistrationPlaces`.
     """
+    fixed = registration_places(fixed)
     s, R, t = register(moving, fixed, rng)
-    L = np.asarray(fixed, np.float64)[:LANDMARKS]
+    L = fixed.positions[:LANDMARKS]
     return ((L - t) @ R) / s
