@@ -369,7 +369,8 @@ def test_places_pair_by_signatures_a_few_rows_at_a_time_as_all_at_once():
     cow, cup = (nominal_mesh(toys.make(name), SETTINGS) for name in ("cow", "cup"))
     P, Q = (m.vertices[candidate_places(m, mesh_saliency(m), 15)] for m in (cow, cup))
     rng = np.random.default_rng(2)
-    cases = [(signatures(P, P[:8]), signatures(Q, Q[:8]), 5), (signatures(P, P[:8]), signatures(P, P[:8]), 5)]
+    cases = [(signatures(P, P[:8]), signatures(Q, Q[:8]), keep) for keep in (5, 8)]
+    cases.append((signatures(P, P[:8]), signatures(P, P[:8]), 5))
     for _ in range(20):  # sizes around the block, few and many coordinates, ties
         m, n, L = int(rng.integers(1, 40)), int(rng.integers(1, 60)), int(rng.integers(1, 9))
         cases.append(
@@ -379,14 +380,30 @@ def test_places_pair_by_signatures_a_few_rows_at_a_time_as_all_at_once():
         np.testing.assert_array_equal(_pairs(gm, gf, keep), at_once(gm, gf, keep))
 
 
-def test_tempered_losses_are_the_logsumexp_of_the_tempered_totals_bit_for_bit():
-    from classify.recognizers.banks import lse
-    from classify.recognizers.place import _tempered_nll
+@pytest.mark.parametrize("keep", [1, 2, 5, 7])
+def test_numpy_sums_a_short_axis_first_to_last_as_place_pairing_does(keep):
+    """``_pairs`` adds fewer than 8 kept squares one plane at a time, first to last; NumPy's sum over that axis
+    must give the same bits, or the pairs of near-equal signatures could differ."""
+    rng = np.random.default_rng(keep)
+    d = np.partition(np.abs(rng.normal(size=(8, 131, 8)) * 3), keep - 1, axis=2)
+    squares = d[:, :, :keep] ** 2
+    total = squares[:, :, 0].copy()
+    for c in range(1, keep):
+        total += squares[:, :, c]
+    np.testing.assert_array_equal(total, squares.sum(axis=2))
 
+
+@pytest.mark.parametrize("cells", [1 << 16, 50, 9])  # all rows in one block; blocks of 5 rows; one row at a time
+def test_tempered_losses_are_the_logsumexp_of_the_tempered_totals_bit_for_bit(cells, monkeypatch):
+    import classify.recognizers.place as place
+    from classify.recognizers.banks import lse
+
+    monkeypatch.setattr(place, "_TEMPERED", cells)
     rng = np.random.default_rng(4)
-    total = rng.normal(size=(40, 9)) * 20 - 50
+    total = rng.normal(size=(43, 9)) * 20 - 50
     total[:, 3] = -np.inf  # an object no touch reaches
-    truth = rng.integers(0, 3, 40)
+    total[7, 1] = total[7].max()  # two objects share a row's maximum
+    truth = rng.integers(0, 3, 43)
     temps = np.geomspace(0.25, 64.0, 17)
-    want = [np.mean(lse(total / T, axis=1) - total[np.arange(40), truth] / T) for T in temps]
-    assert _tempered_nll(total, truth, temps).tolist() == want
+    want = [np.mean(lse(total / T, axis=1) - total[np.arange(43), truth] / T) for T in temps]
+    assert place._tempered_nll(total, truth, temps).tolist() == want

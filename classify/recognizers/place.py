@@ -54,8 +54,8 @@ __all__ = ["PlaceAware", "describe_touches"]
 _NEG = -np.inf
 #: Temperatures tried by default: 0.25 to 64, evenly on a log scale.
 _TEMPERATURES = tuple(float(t) for t in np.round(np.geomspace(0.25, 64.0, 17), 4))
-#: Tempered log-likelihoods held at once while fitting the temperature.
-_TEMPERED = 1 << 24
+#: Tempered log-likelihoods held at once while fitting the temperature (512 KB: a core's cache).
+_TEMPERED = 1 << 16
 
 
 def describe_touches(X) -> np.ndarray:
@@ -74,27 +74,31 @@ def _tempered_nll(total: np.ndarray, truth: np.ndarray, temps: np.ndarray) -> np
     """(temps,) mean negative log posterior of the true objects, summed log-likelihoods ``total`` (m, C) tempered by
     each of ``temps``: ``lse(total / T) - total[truth] / T``, averaged over rows.
 
-    A few temperatures at a time in one reused buffer (a fresh one per step costs its page faults, more than the
-    arithmetic); the operations are ``lse``'s, so the values are its, bit for bit.  Each row's maximum is taken
-    once: dividing by a positive temperature keeps the order, and rounding never reverses it, so the maximum of
-    the tempered row is the tempered maximum, exactly.
+    One temperature and a few rows at a time, in one buffer that stays in the
+    cache (each pass over a large one waits on memory more than it computes);
+    the operations are ``lse``'s, so the values are its, bit for bit.  Each
+    row's maximum is taken once: dividing by a positive temperature keeps the
+    order, and rounding never reverses it, so the maximum of the tempered row
+    is the tempered maximum, exactly.
     """
-    step = min(temps.size, max(1, _TEMPERED // total.size))
-    buffer = np.empty((step, *total.shape))
-    rows = np.arange(len(truth))
-    peak = total.max(axis=1)[None, :, None]
-    out = np.empty(temps.size)
-    for i in range(0, temps.size, step):
-        scaled = buffer[: min(step, temps.size - i)]
-        np.divide(total[None], temps[i : i + step, None, None], out=scaled)
-        picked = scaled[:, rows, truth]
-        top = peak / temps[i : i + step, None, None]
-        top = np.where(np.isfinite(top), top, 0.0)
-        np.exp(np.subtract(scaled, top, out=scaled), out=scaled)
-        with np.errstate(divide="ignore"):
-            log_sum = np.log(scaled.sum(axis=2, keepdims=True)) + top
-        out[i : i + step] = (log_sum[..., 0] - picked).mean(axis=1)
-    return out
+    m, C = total.shape
+    step = max(1, min(m, _TEMPERED // max(C, 1)))
+    buffer = np.empty((step, C))
+    rows = np.arange(step)
+    peak = total.max(axis=1)
+    losses = np.empty((temps.size, m))
+    for j, T in enumerate(temps):
+        tops = peak / T
+        tops = np.where(np.isfinite(tops), tops, 0.0)[:, None]
+        for a in range(0, m, step):
+            b = min(a + step, m)
+            scaled, top = buffer[: b - a], tops[a:b]
+            np.divide(total[a:b], T, out=scaled)
+            picked = scaled[rows[: b - a], truth[a:b]]
+            np.exp(np.subtract(scaled, top, out=scaled), out=scaled)
+            with np.errstate(divide="ignore"):
+                losses[j, a:b] = (np.log(scaled.sum(axis=1, keepdims=True)) + top)[:, 0] - picked
+    return losses.mean(axis=1)
 
 
 class PlaceAware(ClassifierMixin, BaseEstimator):

@@ -195,12 +195,21 @@ def _pairs(gm: np.ndarray, gf: np.ndarray, keep: int) -> np.ndarray:
 
     A few moving rows at a time keep their (rows, n, L) differences in
     cache (1.6x faster at 330 places); each row pairs on its own, so the
-    pairs are those of all rows at once, bit for bit.
+    pairs are those of all rows at once, bit for bit.  Fewer than 8 squares
+    are summed first to last, one (rows, n) plane at a time, as NumPy's
+    reduction over so short an axis sums them (it sums 8 or more pairwise).
     """
     pair = np.empty(len(gm), np.int64)
     for a in range(0, len(gm), _PAIR_ROWS):
         d = np.partition(np.abs(gm[a : a + _PAIR_ROWS, None, :] - gf[None, :, :]), keep - 1, axis=2)[:, :, :keep]
-        pair[a : a + _PAIR_ROWS] = np.argmin((d**2).sum(axis=2), axis=1)
+        if keep < 8:
+            d *= d
+            total = d[:, :, 0].copy()
+            for c in range(1, keep):
+                total += d[:, :, c]
+        else:
+            total = (d**2).sum(axis=2)
+        pair[a : a + _PAIR_ROWS] = np.argmin(total, axis=1)
     return pair
 
 
