@@ -332,10 +332,11 @@ def register(
     for _ in range(refine):
         dist, nearest = fixed.tree.query(s * M @ R.T + t)
         close = dist <= percentiles(dist[None], 80.0)[0]  # np.quantile(dist, 0.8), bit for bit
-        if last is not None and np.array_equal(nearest, last[0]) and np.array_equal(close, last[1]):
+        kept = nearest[close]
+        if last is not None and np.array_equal(close, last[0]) and np.array_equal(kept, last[1]):
             break  # the same pairs as the last round: its fit, which gave (s, R, t), again
-        last = (nearest, close)
-        s, R, t = _unless_collapsed(similarity_fit(M[close], F[nearest[close]]), (s, R, t), size)
+        last = (close, kept)
+        s, R, t = _unless_collapsed(similarity_fit(M[close], F[kept]), (s, R, t), size)
     return float(s), R, t
 
 
