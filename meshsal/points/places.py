@@ -279,8 +279,9 @@ def register(
     coordinate); a seeded RANSAC over those pairs finds the similarity most
     of them agree with, and up to ``refine`` rounds of trimmed closest-point
     fitting refine it (stopping early once a round pairs the places as the
-    last one did: its fit would repeat the last one).  Where a shape is symmetric, one of
-    its symmetric poses is found: its symmetric places feel alike anyway.
+    last one did: its fit would repeat the last one).  Where a shape is
+    symmetric, one of its symmetric poses is found: its symmetric places
+    feel alike anyway.
 
     Parameters
     ----------
