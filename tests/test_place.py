@@ -312,7 +312,6 @@ def test_refinement_that_stops_when_the_pairs_repeat_is_every_round_bit_for_bit(
     turn *= np.sign(np.linalg.det(turn))
     same = (1.3 * moving @ turn.T + 2.0)[rng.permutation(70)]
     other = rng.normal(size=(55, 3)) * [10, 30, 25]
-    settled = []
     for fixed in (same, other):
         s, R, t = register(moving, fixed, rng=3, refine=0)
         size = registration_places(fixed).spread / registration_places(moving).spread
@@ -325,8 +324,8 @@ def test_refinement_that_stops_when_the_pairs_repeat_is_every_round_bit_for_bit(
             s, R, t = _unless_collapsed(similarity_fit(moving[close], fixed[nearest[close]]), (s, R, t), size)
         got = register(moving, fixed, rng=3)
         assert got[0] == s and np.array_equal(got[1], R) and np.array_equal(got[2], t)
-        settled.append(rounds[-1] == rounds[-2])
-    assert settled[0]  # the exact copy settles within ten rounds: the early stop is exercised
+        if fixed is same:  # the exact copy settles within ten rounds: the early stop is exercised
+            assert rounds[-1] == rounds[-2]
 
 
 def test_places_prepared_once_register_as_the_arrays_do():
