@@ -357,8 +357,12 @@ def _experiment(args) -> int:
         )
     print(format_tables(result))
     if not args.quiet:
-        t = result.timings
-        print(f"results written to {args.out}/ ({t['total']:.0f} s, {t['cpu_total']:.0f} s of CPU)", file=sys.stderr)
+        t, peak = result.timings, result.usage["total"]["peak_mb"]
+        print(
+            f"results written to {args.out}/ ({t['total']:.0f} s, {t['cpu_total']:.0f} s of CPU, {peak:.0f} MB at most; "
+            "each stage's in results.json)",
+            file=sys.stderr,
+        )
     return 0
 
 

@@ -145,7 +145,11 @@ def test_cli_experiment_writes_every_file_and_a_cached_rerun_equals_a_fresh_run(
     assert document["settings"]["objects"] == ["box", "ball"] and document["settings"]["replicates"] == 2
     assert set(document["settings"]["libraries"]) >= {"numpy", "scikit-learn", "embreex", "libigl", "pymeshlab"}
     assert any(len(entry["replicate_by_object"]) == 2 for entry in document["rates"])
-    assert main(argv(tmp_path / "cached", cache)) == 0  # read back from the cache
+    capsys.readouterr()
+    assert main(argv(tmp_path / "cached", cache)[:-1]) == 0  # read back from the cache, not quiet
+    said = capsys.readouterr().err
+    assert f"results written to {tmp_path / 'cached'}/" in said and " MB at most; each stage's in results.json" in said
+    assert set(json.loads((tmp_path / "cached" / "results.json").read_text())["usage"]) >= {"paper", "total"}
     assert main(argv(tmp_path / "fresh", "none")) == 0  # computed from nothing
     fresh = (tmp_path / "fresh" / "results.csv").read_text()
     assert (tmp_path / "cached" / "results.csv").read_text() == fresh == (out / "results.csv").read_text()
@@ -412,38 +416,28 @@ def test_a_result_read_back_from_its_json_prints_the_same_tables(tmp_path):
     again = ExperimentResult.from_json(json.loads((tmp_path / "results.json").read_text()))
     assert experiment.format_tables(again) == experiment.format_tables(r)
     assert again.cell("uniform", "instance", "knn", 2, False, 3) == r.cell("uniform", "instance", "knn", 2, False, 3)
+    assert again.usage == r.usage
 
 
-def test_the_cpu_time_of_a_run_counts_the_workers_still_running():
-    import subprocess
-    import sys
-
-    from classify.experiment.run import _cpu_seconds
-
-    before = _cpu_seconds()
-    # A child that works for a while and then waits, alive, as a run's local workers do when it ends.
-    child = subprocess.Popen(
-        [
-            sys.executable,
-            "-c",
-            "import sys, time\nt = time.process_time()\nwhile time.process_time() - t < 0.5: pass\n"
-            "print('done', flush=True)\nsys.stdin.read()",
-        ],
-        stdin=subprocess.PIPE,
-        stdout=subprocess.PIPE,
-        text=True,
-    )
-    try:
-        assert child.stdout.readline().strip() == "done"
-        assert _cpu_seconds() - before >= 0.5
-    finally:
-        child.communicate("")
+def test_a_run_reports_each_stages_wall_and_cpu_time_and_peak_memory(tmp_path):
+    config = QUICK.replace(methods=("uniform",), protocols=("paper", "instance"), classifiers=("knn",), replicates=2)
+    r = quick.run(_objects()[:2], config)
+    stages = ("paper", "instance_points_and_imprints", "instance_recognition")
+    assert set(r.usage) == {*stages, "total"}
+    for name in stages:
+        assert r.usage[name]["wall_s"] == r.timings[name]
+        assert r.usage[name]["cpu_s"] > 0
+        # At least this process: the libraries loaded and the objects held.
+        assert 50 < r.usage[name]["peak_mb"] <= r.usage["total"]["peak_mb"]
+    assert r.usage["total"]["wall_s"] == r.timings["total"]
+    assert r.usage["total"]["cpu_s"] == r.timings["cpu_total"]
 
 
 def _comparable(path):
     """A results.json without what changes from run to run (timings, provenance)."""
     document = json.loads(path.read_text())
     document.pop("timings_s")
+    document.pop("usage")
     document["settings"].pop("provenance")
     return document
 

@@ -49,6 +49,7 @@ from classify.reporting.results import (
 )
 from classify.runtime import cache as cache_mod
 from classify.runtime.cluster import Inline, worker_pool
+from classify.runtime.usage import StageUsage, cpu_seconds, measured, resident_mb
 from meshsal.points import METHODS, MODEL_METHODS
 
 __all__ = [
@@ -73,27 +74,6 @@ __all__ = [
 #: What a worker process of the experiment imports as it starts, while the objects load (``worker_pool``'s
 #: ``preload``): the stages, scikit-learn, OpenCV, the mesh libraries (2-3 s).
 WORKER_MODULES = (__name__, "meshsal.points", "meshsal.attention.rig", "meshsal.objects.instances", "tactile")
-
-
-def _cpu_seconds() -> float:
-    """User and system CPU seconds of this process and of every process below it, running or ended.
-
-    Local workers still run when a run ends, so the kernel's count of ended
-    children alone would miss all their work.
-    """
-    import resource
-
-    import psutil
-
-    own, ended = resource.getrusage(resource.RUSAGE_SELF), resource.getrusage(resource.RUSAGE_CHILDREN)
-    total = own.ru_utime + own.ru_stime + ended.ru_utime + ended.ru_stime
-    for child in psutil.Process().children(recursive=True):
-        try:
-            times = child.cpu_times()
-        except psutil.Error:  # ended meanwhile: counted with the ended ones once reaped
-            continue
-        total += times.user + times.system
-    return total
 
 
 def _provenance() -> dict:
@@ -226,15 +206,16 @@ def _report_block(block, replicates: int, elapsed: float) -> None:
     print(f"replicates 1-{done} of {replicates} measured in {duration(elapsed)}{left}", file=sys.stderr)
 
 
-def _timed(timings: dict, name: str, work):
-    """``work()``, its wall time added to ``timings[name]``."""
-    t0 = time.perf_counter()
-    out = work()
-    timings[name] = timings.get(name, 0.0) + time.perf_counter() - t0
+def _timed(timings: dict, usage: dict, name: str, work):
+    """``work()``, its wall time added to ``timings[name]`` and its :class:`~classify.runtime.usage.StageUsage` to
+    ``usage[name]``."""
+    out, cost = measured(work)
+    timings[name] = timings.get(name, 0.0) + cost.wall_s
+    usage[name] = usage[name] + cost if name in usage else cost
     return out
 
 
-def _measure_block(objects: ObjectSet, config: ExperimentConfig, runtime: Runtime, block, timings) -> tuple:
+def _measure_block(objects: ObjectSet, config: ExperimentConfig, runtime: Runtime, block, timings, usage) -> tuple:
     """A block of replicates measured under the instance protocol: (its touch models, its measurements).
 
     Its instances (:func:`instance_stage`) live only in this call, so the next block's take their place.
@@ -243,6 +224,7 @@ def _measure_block(objects: ObjectSet, config: ExperimentConfig, runtime: Runtim
     sets = _object_sets(len(objects))
     stage = _timed(
         timings,
+        usage,
         "instance_points_and_imprints",
         lambda: instance_stage(
             objects,
@@ -256,6 +238,7 @@ def _measure_block(objects: ObjectSet, config: ExperimentConfig, runtime: Runtim
     )
     out = _timed(
         timings,
+        usage,
         "instance_recognition",
         lambda: [
             x for m in config.methods for n in sets for x in instance_recognition(m, n, stage, objects, config, runtime)
@@ -264,12 +247,16 @@ def _measure_block(objects: ObjectSet, config: ExperimentConfig, runtime: Runtim
     if config.policies:
         out += _timed(
             timings,
+            usage,
             "sequential",
             lambda: [x for n in sets for x in policy_recognition(n, stage, objects, config, runtime)],
         )
     if place:
         out += _timed(
-            timings, "place", lambda: [x for n in sets for x in place_recognition(n, stage, objects, config, runtime)]
+            timings,
+            usage,
+            "place",
+            lambda: [x for n in sets for x in place_recognition(n, stage, objects, config, runtime)],
         )
     return stage.models, out
 
@@ -330,7 +317,7 @@ def run_experiment(
     """
     from meshsal.util.reproducible import warn_if_unpinned
 
-    started, cpu_started = time.perf_counter(), _cpu_seconds()
+    started, cpu_started = time.perf_counter(), cpu_seconds()
     config = (config or ExperimentConfig()).replace(**changes).checked()
     if int(replicates_at_once) < 1:
         raise ValueError(f"replicates_at_once must be at least 1, got {replicates_at_once}")
@@ -340,7 +327,7 @@ def run_experiment(
         cache_dir = cache_mod.default_dir()
     # A touch model needs training instances: the paper protocol has none.
     paper_methods = [m for m in config.methods if m not in MODEL_METHODS]
-    timings, measurements, models = {}, [], []
+    timings, usage, measurements, models = {}, {}, [], []
     workers = nullcontext(executor) if executor is not None else worker_pool(n_jobs, preload=WORKER_MODULES)
     with threadpool_limits(1), workers as pool:
         # Local workers start while the objects load, and build the toys; a bad file still stops the run before any work.
@@ -349,9 +336,9 @@ def run_experiment(
         # Workers render with one thread each; alone, the stage renders with every core.
         runtime = Runtime(pool, cache_dir, None if isinstance(pool, Inline) else 1, quiet)
         if "paper" in config.protocols and paper_methods:
-            t0 = time.perf_counter()
-            measurements += _paper_measurements(objects, paper_methods, config, runtime)
-            timings["paper"] = time.perf_counter() - t0
+            measurements += _timed(
+                timings, usage, "paper", lambda: _paper_measurements(objects, paper_methods, config, runtime)
+            )
         if "instance" in config.protocols:
             blocks, instance_started = [], time.perf_counter()
             by_block = _replicate_blocks(config.replicates, int(replicates_at_once))
@@ -360,9 +347,9 @@ def run_experiment(
                 if len(block) < config.replicates:
                     which = f"{block[0] + 1}-{block[-1] + 1}" if len(block) > 1 else f"{block[0] + 1}"
                     here = dataclasses.replace(runtime, label=f"replicates {which} of {config.replicates}: ")
-                fitted, measured = _measure_block(objects, config, here, block, timings)
+                fitted, taken = _measure_block(objects, config, here, block, timings, usage)
                 models += fitted
-                blocks.append(measured)
+                blocks.append(taken)
                 if not quiet and len(by_block) > 1:
                     _report_block(block, config.replicates, time.perf_counter() - instance_started)
             measurements += join_replicates(blocks)
@@ -370,7 +357,9 @@ def run_experiment(
     summary = _summarize(measurements, config, objects.names)
     timings["total"] = time.perf_counter() - started
     # CPU time of this process and of its finished local workers: what a busy machine does not inflate.
-    timings["cpu_total"] = _cpu_seconds() - cpu_started
+    timings["cpu_total"] = cpu_seconds() - cpu_started
+    peak = max([u.peak_mb for u in usage.values()] + [resident_mb()])
+    usage["total"] = StageUsage(timings["total"], timings["cpu_total"], peak)
     run_settings = {
         "objects": list(objects.names),
         **config.to_json(),
@@ -385,6 +374,7 @@ def run_experiment(
         classifiers=config.classifiers,
         settings=run_settings,
         timings=timings,
+        usage={name: dataclasses.asdict(u) for name, u in usage.items()},
         **summary,
     )
     if out_dir is not None:

@@ -138,6 +138,10 @@ class ExperimentResult:
     ``stopping_rates`` maps ``(method, protocol, classifier, n_objects)`` to the
     (correct, touches used) matrices behind them, each (replicates, levels,
     objects), so that a subset of the objects can be summarized afterwards.
+    ``timings`` maps each stage, ``"total"`` and ``"cpu_total"`` to seconds;
+    ``usage`` maps each stage and ``"total"`` to its ``wall_s``, ``cpu_s``
+    and ``peak_mb`` (``classify.runtime.usage.StageUsage``: this process and
+    its local workers).
     """
 
     cells: tuple
@@ -149,6 +153,7 @@ class ExperimentResult:
     settings: dict = field(default_factory=dict)
     selection_kept: dict = field(default_factory=dict)
     timings: dict = field(default_factory=dict)
+    usage: dict = field(default_factory=dict)
     rates: dict = field(default_factory=dict)
     stopping: tuple = ()
     stopping_rates: dict = field(default_factory=dict)
@@ -192,6 +197,7 @@ class ExperimentResult:
             settings=document.get("settings", {}),
             selection_kept=document.get("selection_kept", {}),
             timings=document.get("timings_s", {}),
+            usage=document.get("usage", {}),
             rates={key(r): np.asarray(r["replicate_by_object"]) for r in document.get("rates", [])},
             stopping=tuple(StoppingCell(**s) for s in document.get("stopping", [])),
             stopping_rates={
@@ -241,6 +247,7 @@ class ExperimentResult:
                 for k, (c, t) in self.stopping_rates.items()
             ],
             "timings_s": self.timings,
+            "usage": self.usage,
         }
 
 
