@@ -39,25 +39,27 @@ def cpu_seconds() -> float:
 def resident_mb() -> float:
     """Memory this process and every process below it hold together, in MB (2**20 bytes).
 
-    Each process counts its proportional set size: a page that n processes
-    share (the libraries a worker maps, what a forked one inherits) counts
-    1/n in each, so the sum counts it once.  Where the system does not
-    report it, the resident set size is taken, which counts a shared page in
-    every process that maps it.
+    Each process's private resident memory (its resident set less the
+    pages it maps from files: the heap, the arrays), summed, plus the
+    largest process's file-backed resident pages (the libraries, which
+    every worker maps and which count once).  Read from ``/proc/<pid>/statm``
+    on Linux: counters, so sampling never walks a worker's page tables nor
+    holds its memory map's lock.  Elsewhere the shared pages are not
+    reported, and each process's whole resident set is summed.
     """
     import psutil
 
     me = psutil.Process()
-    total = 0
+    private, shared = 0, 0
     for process in [me, *me.children(recursive=True)]:
         try:
-            memory = process.memory_full_info()
-        except psutil.AccessDenied:
             memory = process.memory_info()
         except psutil.Error:  # ended meanwhile: it holds nothing now
             continue
-        total += getattr(memory, "pss", memory.rss)
-    return total / 2**20
+        mapped = getattr(memory, "shared", 0)
+        private += memory.rss - mapped
+        shared = max(shared, mapped)
+    return (private + shared) / 2**20
 
 
 @dataclass(frozen=True)
