@@ -83,3 +83,21 @@ def test_a_failing_stage_stops_its_sampler_and_raises():
     with pytest.raises(RuntimeError, match="boom"):
         measured(lambda: (_ for _ in ()).throw(RuntimeError("boom")))
     assert not any(t.name == "stage-memory" for t in threading.enumerate())
+
+
+def test_the_libraries_that_every_process_maps_count_once():
+    import psutil
+
+    children = [_child("import sys\nimport numpy") for _ in range(2)]
+    try:
+        assert all(c.stdout.readline().strip() == "ready" for c in children)
+        tree = [psutil.Process(), *(psutil.Process(c.pid) for c in children)]
+        memory = [p.memory_info() for p in tree]
+        every_rss = sum(m.rss for m in memory) / 2**20
+        private = sum(m.rss - m.shared for m in memory) / 2**20
+        # Each child maps Python's and NumPy's libraries: counted in every resident set, once here.
+        assert min(m.shared for m in memory[1:]) / 2**20 > 5
+        assert private < resident_mb() < every_rss - 5
+    finally:
+        for c in children:
+            c.communicate("")
