@@ -117,11 +117,11 @@ def main() -> int:
             rows.append(json.loads(kept.read_text()))
             print(f"{count} objects: kept from {rows[-1]['measured']}", file=sys.stderr)
             continue
-        runs = []
-        while len(runs) < (args.repeats if not runs or runs[0]["timings"]["total"] < _REPEAT_UNDER_S else 1):
-            runs.append(_measure(count))
-            if runs[-1] is None:
-                return 1
+        runs = [_measure(count)]
+        if runs[0] is not None and runs[0]["timings"]["total"] < _REPEAT_UNDER_S:
+            runs += [_measure(count) for _ in range(args.repeats - 1)]
+        if None in runs:
+            return 1
         walls = sorted(r["timings"]["total"] for r in runs)
         rows.append(sorted(runs, key=lambda r: r["timings"]["total"])[(len(runs) - 1) // 2])
         rows[-1]["runs_s"] = walls

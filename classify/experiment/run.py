@@ -206,16 +206,14 @@ def _report_block(block, replicates: int, elapsed: float) -> None:
     print(f"replicates 1-{done} of {replicates} measured in {duration(elapsed)}{left}", file=sys.stderr)
 
 
-def _timed(timings: dict, usage: dict, name: str, work):
-    """``work()``, its wall time added to ``timings[name]`` and its :class:`~classify.runtime.usage.StageUsage` to
-    ``usage[name]``."""
+def _timed(usage: dict, name: str, work):
+    """``work()``, its :class:`~classify.runtime.usage.StageUsage` added to ``usage[name]``."""
     out, cost = measured(work)
-    timings[name] = timings.get(name, 0.0) + cost.wall_s
     usage[name] = usage[name] + cost if name in usage else cost
     return out
 
 
-def _measure_block(objects: ObjectSet, config: ExperimentConfig, runtime: Runtime, block, timings, usage) -> tuple:
+def _measure_block(objects: ObjectSet, config: ExperimentConfig, runtime: Runtime, block, usage) -> tuple:
     """A block of replicates measured under the instance protocol: (its touch models, its measurements).
 
     Its instances (:func:`instance_stage`) live only in this call, so the next block's take their place.
@@ -223,7 +221,6 @@ def _measure_block(objects: ObjectSet, config: ExperimentConfig, runtime: Runtim
     place = "place" in config.classifiers
     sets = _object_sets(len(objects))
     stage = _timed(
-        timings,
         usage,
         "instance_points_and_imprints",
         lambda: instance_stage(
@@ -237,7 +234,6 @@ def _measure_block(objects: ObjectSet, config: ExperimentConfig, runtime: Runtim
         ),
     )
     out = _timed(
-        timings,
         usage,
         "instance_recognition",
         lambda: [
@@ -246,14 +242,12 @@ def _measure_block(objects: ObjectSet, config: ExperimentConfig, runtime: Runtim
     )
     if config.policies:
         out += _timed(
-            timings,
             usage,
             "sequential",
             lambda: [x for n in sets for x in policy_recognition(n, stage, objects, config, runtime)],
         )
     if place:
         out += _timed(
-            timings,
             usage,
             "place",
             lambda: [x for n in sets for x in place_recognition(n, stage, objects, config, runtime)],
@@ -327,7 +321,7 @@ def run_experiment(
         cache_dir = cache_mod.default_dir()
     # A touch model needs training instances: the paper protocol has none.
     paper_methods = [m for m in config.methods if m not in MODEL_METHODS]
-    timings, usage, measurements, models = {}, {}, [], []
+    usage, measurements, models = {}, [], []
     workers = nullcontext(executor) if executor is not None else worker_pool(n_jobs, preload=WORKER_MODULES)
     with threadpool_limits(1), workers as pool:
         # Local workers start while the objects load, and build the toys; a bad file still stops the run before any work.
@@ -336,9 +330,7 @@ def run_experiment(
         # Workers render with one thread each; alone, the stage renders with every core.
         runtime = Runtime(pool, cache_dir, None if isinstance(pool, Inline) else 1, quiet)
         if "paper" in config.protocols and paper_methods:
-            measurements += _timed(
-                timings, usage, "paper", lambda: _paper_measurements(objects, paper_methods, config, runtime)
-            )
+            measurements += _timed(usage, "paper", lambda: _paper_measurements(objects, paper_methods, config, runtime))
         if "instance" in config.protocols:
             blocks, instance_started = [], time.perf_counter()
             by_block = _replicate_blocks(config.replicates, int(replicates_at_once))
@@ -347,7 +339,7 @@ def run_experiment(
                 if len(block) < config.replicates:
                     which = f"{block[0] + 1}-{block[-1] + 1}" if len(block) > 1 else f"{block[0] + 1}"
                     here = dataclasses.replace(runtime, label=f"replicates {which} of {config.replicates}: ")
-                fitted, taken = _measure_block(objects, config, here, block, timings, usage)
+                fitted, taken = _measure_block(objects, config, here, block, usage)
                 models += fitted
                 blocks.append(taken)
                 if not quiet and len(by_block) > 1:
@@ -355,6 +347,7 @@ def run_experiment(
             measurements += join_replicates(blocks)
 
     summary = _summarize(measurements, config, objects.names)
+    timings = {name: u.wall_s for name, u in usage.items()}
     timings["total"] = time.perf_counter() - started
     # CPU time of this process and of its finished local workers: what a busy machine does not inflate.
     timings["cpu_total"] = cpu_seconds() - cpu_started

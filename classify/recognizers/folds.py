@@ -151,6 +151,26 @@ def _fold_spreads(column: list, n: float, total: float) -> list:
     return out
 
 
+class _Block:
+    """A run of at most 128 values that NumPy sums with 8 interleaved accumulators (fewer than 8: in turn)."""
+
+    __slots__ = ("lo", "stop", "body", "accumulators", "sum")
+
+    def __init__(self, lo: int, n: int):
+        self.lo, self.stop = lo, lo + n
+        # The values the accumulators take; the rest, the tail, is added after them.
+        self.body = lo + n - n % 8 if n >= 8 else lo
+
+
+class _Halves:
+    """A run NumPy sums as two halves, the first a multiple of 8 long."""
+
+    __slots__ = ("split", "left", "right", "sum")
+
+    def __init__(self, split: int, left, right):
+        self.split, self.left, self.right = split, left, right
+
+
 class _ChangedMean:
     """``np.mean`` of a float64 row with one value changed (:meth:`with_value`), bit for bit, without a copy.
 
@@ -163,76 +183,66 @@ class _ChangedMean:
 
     def __init__(self, row: np.ndarray):
         self.values = np.asarray(row, np.float64).tolist()
-        self.size = len(self.values)
-        self.root = self._build(0, self.size)
+        self.root = self._build(0, len(self.values))
 
-    def _build(self, lo: int, n: int) -> list:
-        """A node: [lo, n, split, left, right, sum] inside, [lo, n, accumulators, sum] for a block."""
+    def _build(self, lo: int, n: int):
         if n > _BLOCK:
             half = n // 2
             half -= half % 8
-            left, right = self._build(lo, half), self._build(lo + half, n - half)
-            return [lo, n, half, left, right, left[-1] + right[-1]]
-        accumulators = self._accumulators(lo, n)
-        return [lo, n, accumulators, self._block_sum(lo, n, accumulators, None, 0.0)]
+            node = _Halves(lo + half, self._build(lo, half), self._build(lo + half, n - half))
+            node.sum = node.left.sum + node.right.sum
+            return node
+        node = _Block(lo, n)
+        node.accumulators = [self._chain(node, q, None, 0.0) for q in range(8)] if node.body > lo else None
+        node.sum = self._block_sum(node, node.accumulators, None, 0.0)
+        return node
 
-    def _accumulators(self, lo: int, n: int) -> list | None:
-        if n < 8:
-            return None
-        return [self._chain(lo + q, lo + n - n % 8, None, 0.0) for q in range(8)]
-
-    def _chain(self, first: int, stop: int, j, v) -> float:
-        """An accumulator: values first, first + 8, ... before ``stop``, summed in turn (value j read as v)."""
+    def _chain(self, block: _Block, q: int, j, v) -> float:
+        """Accumulator ``q`` of a block: its values q, q + 8, ... summed in turn (value j read as v)."""
         a = self.values
+        first = block.lo + q
         r = v if first == j else a[first]
-        for i in range(first + 8, stop, 8):
+        for i in range(first + 8, block.body, 8):
             r += v if i == j else a[i]
         return r
 
-    def _block_sum(self, lo: int, n: int, accumulators, j, v) -> float:
+    def _block_sum(self, block: _Block, accumulators, j, v) -> float:
         a = self.values
         if accumulators is None:
             res = -0.0
-            for i in range(lo, lo + n):
-                res += v if i == j else a[i]
-            return res
-        r = accumulators
-        res = ((r[0] + r[1]) + (r[2] + r[3])) + ((r[4] + r[5]) + (r[6] + r[7]))
-        for i in range(lo + n - n % 8, lo + n):
+        else:
+            r = accumulators
+            res = ((r[0] + r[1]) + (r[2] + r[3])) + ((r[4] + r[5]) + (r[6] + r[7]))
+        for i in range(block.body, block.stop):
             res += v if i == j else a[i]
         return res
 
-    def _sum_with(self, node: list, j: int, v: float) -> float:
-        if len(node) == 6:
-            lo, _, half, left, right, _ = node
-            if j < lo + half:
-                return self._sum_with(left, j, v) + right[-1]
-            return left[-1] + self._sum_with(right, j, v)
-        lo, n, accumulators, _ = node
-        if accumulators is not None and j < lo + n - n % 8:
-            q = (j - lo) % 8
-            accumulators = list(accumulators)
-            accumulators[q] = self._chain(lo + q, lo + n - n % 8, j, v)
-        return self._block_sum(lo, n, accumulators, j, v)
+    def _sum(self, node, j: int, v: float, keep: bool) -> float:
+        """The sum of ``node``'s values with value ``j`` read as ``v``; with ``keep``, kept as its sums."""
+        if isinstance(node, _Halves):
+            if j < node.split:
+                total = self._sum(node.left, j, v, keep) + node.right.sum
+            else:
+                total = node.left.sum + self._sum(node.right, j, v, keep)
+        else:
+            accumulators = node.accumulators
+            if j < node.body:
+                q = (j - node.lo) % 8
+                accumulators = accumulators if keep else list(accumulators)
+                accumulators[q] = self._chain(node, q, j, v)
+            total = self._block_sum(node, accumulators, j, v)
+        if keep:
+            node.sum = total
+        return total
 
     def with_value(self, j: int, v: float) -> float:
         """The row's mean with value ``j`` read as ``v``."""
-        return (0.0 + self._sum_with(self.root, j, v)) / self.size
+        return (0.0 + self._sum(self.root, j, v, False)) / len(self.values)
 
     def set(self, j: int, v: float) -> None:
         """Change value ``j`` to ``v`` for good."""
+        self._sum(self.root, j, v, True)
         self.values[j] = v
-        path, node = [], self.root
-        while len(node) == 6:
-            path.append(node)
-            node = node[3] if j < node[0] + node[2] else node[4]
-        lo, n, accumulators, _ = node
-        if accumulators is not None and j < lo + n - n % 8:
-            q = (j - lo) % 8
-            accumulators[q] = self._chain(lo + q, lo + n - n % 8, None, 0.0)
-        node[3] = self._block_sum(lo, n, accumulators, None, 0.0)
-        for parent in reversed(path):
-            parent[5] = parent[3][-1] + parent[4][-1]
 
 
 def _best_fold(evals: list, samples: list) -> int:
