@@ -3,6 +3,7 @@ given certificates; a tls:// address without certificates and mixed-up options a
 
 import shutil
 
+import numpy as np
 import psutil
 import pytest
 from conftest import missing
@@ -95,6 +96,31 @@ def test_a_task_runs_on_one_thread_wherever_it_runs():
         assert list(pool.map(_threads, range(2))) == [(1, 1)] * 2
 
 
+def _nbytes(a):
+    return a.nbytes
+
+
+def _fail(x):
+    raise ValueError(f"task {x} failed")
+
+
+def test_the_local_pool_hands_tasks_over_in_files_it_deletes_and_keeps_none_of_them():
+    big = np.ones(48 * 2**20 // 8)  # 48 MB
+    me = psutil.Process()
+    with worker_pool(2) as pool:
+        folder = pool.folder
+        assert list(pool.map(pow, [2, 3, 4], [3, 2, 1])) == [8, 9, 4]  # in order, several iterables
+        before = me.memory_info().rss
+        assert list(pool.map(_nbytes, [big, big])) == [big.nbytes] * 2
+        # A piped task stays pickled in this process until the next is sent (the feeder's last object).
+        assert me.memory_info().rss - before < 0.5 * big.nbytes
+        assert pool.submit(_nbytes, big).result() == big.nbytes
+        with pytest.raises(ValueError, match="task 1 failed"):
+            list(pool.map(_fail, [1]))
+        assert not any(folder.iterdir())  # each file deleted once read, a failing task's too
+    assert not folder.exists()
+
+
 def _as_addresses(opened, scheme):
     return {f"{scheme}{ip}:{port}" for _, ip, port in opened}
 
@@ -167,7 +193,7 @@ import os, sys, time
 from classify.runtime.cluster import worker_pool
 if __name__ == "__main__":
     with worker_pool(2) as pool:
-        pids = sorted(p.pid for p in pool._processes.values())
+        pids = sorted(p.pid for p in pool.pool._processes.values())
         print(" ".join(map(str, pids)), flush=True)
         pool.submit(time.sleep, 600)
         time.sleep(600)

@@ -142,6 +142,44 @@ def test_the_estimator_clones_validates_and_extends_its_banks():
     np.testing.assert_allclose(weights[1].sum(axis=1), 1.0)
 
 
+def _many_touches(C=20, instances=2, places=150, draws=8, d=42, seed=0):
+    """Codebook-like touches: C objects, each place of each instance touched ``draws`` times (descriptors)."""
+    rng = np.random.default_rng(seed)
+    y = np.repeat(np.arange(C), instances * places * draws)
+    inst = np.tile(np.repeat(np.arange(instances), places * draws), C)
+    key = np.tile(np.repeat(np.arange(places), draws), C * instances)
+    sig = rng.normal(size=(C * places, 3))[y * places + key]
+    X = rng.normal(size=(len(y), d)) + 0.1 * y[:, None] + 0.01 * key[:, None]
+    return X, y, sig, inst, key
+
+
+def test_the_fit_standardizes_in_place_as_its_predictions_do_with_few_touch_sized_arrays():
+    import tracemalloc
+
+    from classify.recognizers.banks import within_place_whitening
+
+    X, y, sig, inst, key = _many_touches()
+    touches = X.nbytes
+    model = PlaceAware(fit_sets=5, bandwidths=(0.5, 1.0), mixtures=(0.01, 0.1))
+    tracemalloc.start()
+    try:
+        model.fit(X, y, signatures=sig, instances=inst, places=key)
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    # Out of place, the fit held the descriptors, their standardized copy, the places' means, the residuals and
+    # the whitened copy at once (4.2 of them here); in place, about 3.
+    assert peak < 3.5 * touches, peak / touches
+    # The in-place operations are those of the predictions' standardization, bit for bit.
+    expected = within_place_whitening((X - model.mean_) / model.scale_, y, key)
+    assert np.array_equal(model.whitening_, expected)
+    Z = model._standardized(X)
+    for c, bank in enumerate(model.banks_):
+        mine = y == c
+        order = np.lexsort((inst[mine], key[mine]))
+        assert np.array_equal(bank.samples[bank.instances >= 0], Z[mine][order].astype(np.float32))
+
+
 # -- the place-aware knowledge on two shapes that differ in one place --------------------------------------
 
 

@@ -73,7 +73,8 @@ def within_place_whitening(Z, y, keys) -> np.ndarray:
     means = np.zeros((group.max() + 1, Z.shape[1]))
     np.add.at(means, group, Z)
     means /= np.bincount(group)[:, None]
-    R = Z - means[group]
+    R = means[group]
+    np.subtract(Z, R, out=R)  # in place: one touch-sized array, not two
     W = R.T @ R / max(len(R) - group.max() - 1, 1)
     W = 0.9 * W + 0.1 * np.diag(np.diag(W)) + 1e-6 * np.trace(W) / len(W) * np.eye(len(W))
     vals, vecs = np.linalg.eigh(W)

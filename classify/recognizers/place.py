@@ -240,10 +240,16 @@ class PlaceAware(ClassifierMixin, BaseEstimator):
             )
         self.mean_ = Z0.mean(axis=0)
         self.scale_ = np.maximum(Z0.std(axis=0), 1e-9 * max(float(Z0.std()), 1e-300))
-        self.whitening_ = np.eye(Z0.shape[1])
-        if self.whiten:
-            self.whitening_ = within_place_whitening((Z0 - self.mean_) / self.scale_, y, keys)
-        Z = self._standardized(Z0)
+        if session is None:
+            first = np.unique(np.c_[y, inst, keys], axis=0, return_index=True)[1]
+            session = (Z0[first], y[first], sig[first], inst[first])
+        # Standardized in place: the operations of _standardized, with one touch-sized array alive instead of
+        # three (a thousand objects' codebooks are millions of touches).
+        Z = Z0
+        Z -= self.mean_
+        Z /= self.scale_
+        self.whitening_ = within_place_whitening(Z, y, keys) if self.whiten else np.eye(Z.shape[1])
+        Z = Z @ self.whitening_
         self.banks_ = []
         for c in self.classes_:
             mine = y == c
@@ -254,9 +260,7 @@ class PlaceAware(ClassifierMixin, BaseEstimator):
                 Bank(k, s, samples, sample_inst, Z[mine][order], inst[mine][order], self.match_width * spacing(s))
             )
         self.free_ = FreeStack.of([b.free for b in self.banks_], [b.free_instances for b in self.banks_])
-        if session is None:
-            first = np.unique(np.c_[y, inst, keys], axis=0, return_index=True)[1]
-            session = (Z0[first], y[first], sig[first], inst[first])
+        del Z
         self._choose(session)
         return self
 
@@ -306,20 +310,29 @@ class PlaceAware(ClassifierMixin, BaseEstimator):
         ]
         temps = np.asarray(self.temperatures, np.float64)
         best = (np.inf, None)
+        # One (N, C) buffer of mixtures for every width and mixture: a large N x C is a few of these.
+        ll, step = np.empty((len(Zs), C)), 1024
         for a, h in enumerate(widths):
             if every is not None:
                 place, free = every[0][a], every[1][a]
             else:
+                place = free = None  # the last width's terms go before this one's are computed
                 place, free, _ = self._log_terms(Zs, sigs, insts, [h], screen=screen)
             place, free = place.reshape(len(Zs), C), free.reshape(len(Zs), C)
             for w in self.mixtures:
-                ll = np.logaddexp(np.log1p(-w) + place, np.log(w) + free)
+                for r in range(0, len(Zs), step):  # logaddexp(log(1 - w) + place, log(w) + free)
+                    rows = slice(r, r + step)
+                    np.logaddexp(np.add(np.log1p(-w), place[rows], out=ll[rows]), np.log(w) + free[rows], out=ll[rows])
                 loss = np.zeros(temps.size)
                 for k in self.fit_touches:
                     chosen = [(rows, truth) for kk, rows, truth in sets if kk == k]
                     if not chosen:
                         continue
-                    total = np.concatenate([ll[rows].sum(axis=1) for rows, _ in chosen])  # (m, C)
+                    total = np.empty((sum(len(rows) for rows, _ in chosen), C))  # (m, C), each set's summed rows
+                    start = 0
+                    for rows, _ in chosen:
+                        np.sum(ll[rows], axis=1, out=total[start : start + len(rows)])
+                        start += len(rows)
                     truth = np.concatenate([np.full(len(rows), t) for rows, t in chosen])
                     loss += _tempered_nll(total, truth, temps) / len(self.fit_touches)
                 t = int(np.argmin(loss))
@@ -356,10 +369,16 @@ class PlaceAware(ClassifierMixin, BaseEstimator):
         if C > self.shortlist:
             d2, count = self.free_.nearest(Z, exclude) if screen is None else screen
             member = np.zeros((n, C), bool)
-            np.put_along_axis(member, nearest_classes(d2, self.shortlist), True, axis=1)
-            with np.errstate(invalid="ignore"):
-                for b, s in enumerate(inv):
-                    free[b] = np.where(count > 0, -s * d2 - np.log(np.maximum(count, 1)), _NEG)
+            # A chunk of rows at a time, in place: (n, C) arrays are large at a thousand objects.
+            for a in range(0, n, chunk):
+                rows = slice(a, a + chunk)
+                np.put_along_axis(member[rows], nearest_classes(d2[rows], self.shortlist), True, 1)
+                logcount = np.log(np.maximum(count[rows], 1))
+                with np.errstate(invalid="ignore"):
+                    for b, s in enumerate(inv):
+                        # -s * d2 - log(max(count, 1)), -inf where no sample counts
+                        term = np.subtract(np.multiply(-s, d2[rows], out=free[b, rows]), logcount, out=free[b, rows])
+                        term[count[rows] <= 0] = _NEG
         for a in range(0, n, chunk):
             span = np.arange(a, min(a + chunk, n))
             for c in range(C) if member is None else np.flatnonzero(member[span].any(axis=0)):
@@ -388,7 +407,7 @@ class PlaceAware(ClassifierMixin, BaseEstimator):
                         place[b, rows, c] = np.log(np.exp(lm - peak).sum(axis=1)) + peak[:, 0] - norm
                         free[b, rows, c] = np.log(np.exp(-s * frel).sum(axis=1)) - s * fnear[:, 0] - flogcount
         # A touch whose every matched entry is left out leans on the place-free term alone.
-        place = np.where(np.isnan(place), _NEG, place)
+        place[np.isnan(place)] = _NEG
         return place, free, member
 
     def log_likelihood(self, X, signatures, exclude=None) -> np.ndarray:

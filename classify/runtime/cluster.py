@@ -38,14 +38,26 @@ numbers as everywhere else.
 
 from __future__ import annotations
 
+import itertools
 import logging
 import multiprocessing
 import sys
+import tempfile
 from concurrent.futures import ProcessPoolExecutor
 from contextlib import contextmanager
 from pathlib import Path
 
-__all__ = ["Inline", "QUIET", "one_thread", "worker_pool", "open_executor", "tls_security", "worker_env", "LOOPBACK"]
+__all__ = [
+    "FilePool",
+    "Inline",
+    "QUIET",
+    "one_thread",
+    "worker_pool",
+    "open_executor",
+    "tls_security",
+    "worker_env",
+    "LOOPBACK",
+]
 
 LOOPBACK = "127.0.0.1"
 #: Dask's housekeeping in a LocalCluster without a dashboard: the statistical profiler (the dashboard's)
@@ -148,16 +160,69 @@ def worker_pool(n_jobs: int, preload: tuple = ()):
     if int(n_jobs) <= 1:
         yield Inline()
         return
-    with ProcessPoolExecutor(
-        int(n_jobs),
-        mp_context=multiprocessing.get_context("spawn"),
-        initializer=_start_worker,
-        initargs=(tuple(preload),),
-    ) as pool:
+    with (
+        tempfile.TemporaryDirectory(prefix="visuotactile-tasks-") as folder,
+        ProcessPoolExecutor(
+            int(n_jobs),
+            mp_context=multiprocessing.get_context("spawn"),
+            initializer=_start_worker,
+            initargs=(tuple(preload),),
+        ) as pool,
+    ):
         # A process is spawned per submitted task, up to n_jobs: these start them all now.
         for _ in range(int(n_jobs)):
             pool.submit(int)
-        yield pool
+        yield FilePool(pool, Path(folder))
+
+
+class FilePool:
+    """A process pool that hands each task to its worker through a file, not through the pool's pipe.
+
+    A task piped to a worker is pickled whole in this process, and the
+    pipe's feeder thread keeps the last one it sent until the next: a
+    recognition job of a thousand objects is hundreds of megabytes, held for
+    the whole stage, with the heap the pickling fragmented.  Here each task is
+    pickled straight into a file (protocol 5: arrays written from where they
+    lie), and the worker reads it and deletes it.  Results come back through
+    the pipe.
+
+    Parameters
+    ----------
+    pool : concurrent.futures.ProcessPoolExecutor
+    folder : Path, a private folder for the tasks' files (the caller removes it)
+    """
+
+    def __init__(self, pool, folder: Path):
+        self.pool, self.folder = pool, Path(folder)
+        self._written = itertools.count()
+
+    def map(self, fn, *iterables):
+        """``fn(*args)`` for each tuple of ``iterables``' items, results in order (as ``Executor.map``)."""
+        return self.pool.map(_run_task_file, (self._write(fn, args) for args in zip(*iterables)))
+
+    def submit(self, fn, *args):
+        return self.pool.submit(_run_task_file, self._write(fn, args))
+
+    def _write(self, fn, args) -> str:
+        import pickle
+
+        path = self.folder / f"{next(self._written)}.pkl"
+        with open(path, "wb") as f:
+            pickle.dump((fn, args), f, protocol=5)
+        return str(path)
+
+
+def _run_task_file(path: str):
+    """Run the task :class:`FilePool` wrote to ``path``, deleting the file once read."""
+    import os
+    import pickle
+
+    try:
+        with open(path, "rb") as f:
+            fn, args = pickle.load(f)
+    finally:
+        os.unlink(path)
+    return fn(*args)
 
 
 def tls_security(ca_file, cert, key=None):
