@@ -105,6 +105,8 @@ def _fail(x):
 
 
 def test_the_local_pool_hands_tasks_over_in_files_it_deletes_and_keeps_none_of_them():
+    import pickle
+
     big = np.ones(48 * 2**20 // 8)  # 48 MB
     me = psutil.Process()
     with worker_pool(2) as pool:
@@ -117,6 +119,8 @@ def test_the_local_pool_hands_tasks_over_in_files_it_deletes_and_keeps_none_of_t
         assert pool.submit(_nbytes, big).result() == big.nbytes
         with pytest.raises(ValueError, match="task 1 failed"):
             list(pool.map(_fail, [1]))
+        with pytest.raises((pickle.PicklingError, AttributeError)):
+            pool.map(_nbytes, [lambda: big])  # a task that cannot be written leaves no half of it
         assert not any(folder.iterdir())  # each file deleted once read, a failing task's too
     assert not folder.exists()
 

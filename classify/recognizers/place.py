@@ -310,8 +310,10 @@ class PlaceAware(ClassifierMixin, BaseEstimator):
         ]
         temps = np.asarray(self.temperatures, np.float64)
         best = (np.inf, None)
-        # One (N, C) buffer of mixtures for every width and mixture: a large N x C is a few of these.
-        ll, step = np.empty((len(Zs), C)), 1024
+        # One (N, C) buffer of mixtures for every width and mixture, filled a chunk of rows at a time: a large
+        # N x C is a few of these.
+        ll = np.empty((len(Zs), C))
+        step = 1024
         for a, h in enumerate(widths):
             if every is not None:
                 place, free = every[0][a], every[1][a]

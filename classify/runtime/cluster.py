@@ -17,7 +17,8 @@
   matters on a machine shared with other users, who can all reach its
   loopback ports;
 * neither: ``n_jobs`` spawned worker processes (one runs in this process),
-  which talk over pipes and open no port.
+  which read their tasks from files in a private temporary folder
+  (:class:`FilePool`), send results back over pipes and open no port.
 
 A Dask worker runs whatever the scheduler sends it, and results come back
 pickled: whoever reaches a plain ``tcp://`` scheduler can run code on every
@@ -156,6 +157,7 @@ def worker_pool(n_jobs: int, preload: tuple = ()):
     Workers are spawned, not forked: the parent may hold Embree and BLAS threads.
     They start at once and import the modules named in ``preload`` (the
     toolkit's take seconds) while the caller goes on, e.g. loading its meshes.
+    They take their tasks from files (:class:`FilePool`).
     """
     if int(n_jobs) <= 1:
         yield Inline()
@@ -184,7 +186,8 @@ class FilePool:
     the whole stage, with the heap the pickling fragmented.  Here each task is
     pickled straight into a file (protocol 5: arrays written from where they
     lie), and the worker reads it and deletes it.  Results come back through
-    the pipe.
+    the pipe.  A run killed outright (SIGKILL) leaves its unread tasks'
+    files in the folder, under the system's temporary directory.
 
     Parameters
     ----------
@@ -207,8 +210,12 @@ class FilePool:
         import pickle
 
         path = self.folder / f"{next(self._written)}.pkl"
-        with open(path, "wb") as f:
-            pickle.dump((fn, args), f, protocol=5)
+        try:
+            with open(path, "wb") as f:
+                pickle.dump((fn, args), f, protocol=5)
+        except BaseException:
+            path.unlink(missing_ok=True)  # no half-written task left for a worker
+            raise
         return str(path)
 
 
