@@ -379,7 +379,8 @@ class PlaceAware(ClassifierMixin, BaseEstimator):
                 with np.errstate(invalid="ignore"):
                     for b, s in enumerate(inv):
                         # -s * d2 - log(max(count, 1)), -inf where no sample counts
-                        term = np.subtract(np.multiply(-s, d2[rows], out=free[b, rows]), logcount, out=free[b, rows])
+                        term = free[b, rows]
+                        np.subtract(np.multiply(-s, d2[rows], out=term), logcount, out=term)
                         term[count[rows] <= 0] = _NEG
         for a in range(0, n, chunk):
             span = np.arange(a, min(a + chunk, n))

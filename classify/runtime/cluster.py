@@ -42,6 +42,8 @@ from __future__ import annotations
 import itertools
 import logging
 import multiprocessing
+import os
+import pickle
 import sys
 import tempfile
 from concurrent.futures import ProcessPoolExecutor
@@ -114,9 +116,7 @@ def _die_with_parent() -> None:
     """Have the kernel end this process when its parent ends (Linux), so that a run stopped by a signal
     leaves no worker computing for nobody; elsewhere, nothing."""
     import ctypes
-    import os
     import signal
-    import sys
 
     if sys.platform.startswith("linux"):
         PR_SET_PDEATHSIG = 1
@@ -207,8 +207,6 @@ class FilePool:
         return self.pool.submit(_run_task_file, self._write(fn, args))
 
     def _write(self, fn, args) -> str:
-        import pickle
-
         path = self.folder / f"{next(self._written)}.pkl"
         try:
             with open(path, "wb") as f:
@@ -221,9 +219,6 @@ class FilePool:
 
 def _run_task_file(path: str):
     """Run the task :class:`FilePool` wrote to ``path``, deleting the file once read."""
-    import os
-    import pickle
-
     try:
         with open(path, "rb") as f:
             fn, args = pickle.load(f)
