@@ -123,6 +123,96 @@ def test_a_touch_registers_the_test_instance_only_onto_its_shortlist(fitted):
     assert 1 <= len(knowledge._landmarks[id(test.places)][1]) <= 3
 
 
+def _limited(knowledge, shortlist, exact_places):
+    """``knowledge`` whose recognizer scores ``shortlist`` objects per touch and registers onto ``exact_places``, with
+    an empty cache of registrations."""
+    import dataclasses
+
+    model = copy.copy(knowledge.model)
+    model.shortlist, model.exact_places = shortlist, exact_places
+    out = dataclasses.replace(knowledge, model=model)
+    object.__setattr__(out, "_landmarks", {})
+    return out
+
+
+def _touches_of_object(training, feels, j, rng):
+    test = training[f"object{j:02d}", 2]
+    return feels[j][8:14] + 0.5 * rng.normal(size=(6, 42)), test.places.positions[8:14], test.places
+
+
+def test_past_the_shortlist_only_the_nearest_objects_ask_for_the_exact_place(fitted):
+    training, feels, full, _ = fitted
+    model = copy.copy(full.model)
+    model.shortlist, model.exact_places = 6, 2
+    X, positions, places = _touches_of_object(training, feels, 3, np.random.default_rng(4))
+    asked = {}
+
+    def where(c, rows, exact):
+        asked[c] = (rows.copy(), None if exact is None else exact.copy())
+        return full.signatures_at(positions[rows], places, [c])[:, 0]
+
+    model.log_likelihood(X, where)
+    d2, _ = model.free_.nearest(model._standardized(X), np.full(len(X), -1))
+    rank = np.argsort(np.argsort(d2, axis=1, kind="stable"), axis=1)  # 0: the nearest object
+    for r in range(len(X)):
+        listed = sorted(c for c, (rows, _) in asked.items() if r in rows)
+        assert listed == sorted(np.flatnonzero(rank[r] < 6).tolist())
+        exact = sorted(c for c in listed if asked[c][1][np.flatnonzero(asked[c][0] == r)[0]])
+        assert exact == sorted(np.flatnonzero(rank[r] < 2).tolist())
+    # With every object scored there is no screening, and every place is asked for in full.
+    asked.clear()
+    full.model.log_likelihood(X, where)
+    assert sorted(asked) == list(range(OBJECTS)) and all(e is None for _, e in asked.values())
+
+
+def test_registration_onto_the_whole_shortlist_is_the_full_location_bit_for_bit(fitted):
+    training, feels, full, _ = fitted
+    X, positions, places = _touches_of_object(training, feels, 5, np.random.default_rng(5))
+    everywhere = _limited(full, 6, 6)
+    # Every object's place by registration, given as an array: what the shortlist then reads of it.
+    G = full.signatures_at(positions, places)
+    np.testing.assert_array_equal(everywhere.posterior_at(X, positions, places), everywhere.model.predict_proba(X, G))
+    # With no exact place, every object locates the touch against the instance's own landmarks.
+    nowhere = _limited(full, 6, 0)
+    own = signatures(places)[8:14]
+    np.testing.assert_array_equal(
+        nowhere.model.log_likelihood(X, lambda c, rows, exact: own[rows]), nowhere.model.log_likelihood(X, own)
+    )
+    post = nowhere.posterior_at(X, positions, places)
+    assert not nowhere._landmarks or not nowhere._landmarks[id(places)][1]  # nothing registered
+    assert int(np.argmax(post.prod(axis=0))) == 5
+
+
+def test_registrations_per_test_instance_stay_bounded_past_the_shortlist(fitted):
+    training, feels, full, _ = fitted
+    rng = np.random.default_rng(6)
+    X, positions, places = _touches_of_object(training, feels, 7, rng)
+    counts = []
+    for exact_places in (1, 2, 6):
+        knowledge = _limited(full, 6, exact_places)
+        knowledge.posterior_at(X, positions, places)
+        registered = knowledge._landmarks[id(places)][1]
+        assert 1 <= len(registered) <= exact_places * len(X)
+        counts.append(len(registered))
+        # A forecast past the shortlist registers onto none of its hypotheses.
+        before = set(registered)
+        forecast = knowledge.forecast(places, np.array([0, 3, 7, 9]))
+        assert set(knowledge._landmarks[id(places)][1]) == before
+        np.testing.assert_allclose(forecast.weights.sum(axis=-1), 1.0)
+    assert counts[0] < counts[-1]  # the whole shortlist of six touches reaches more objects
+
+
+def test_exact_places_is_a_non_negative_integer():
+    from classify.recognizers.place import PlaceAware
+
+    X = np.random.default_rng(0).normal(size=(8, 3))
+    with pytest.raises(ValueError, match="exact_places must be a non-negative integer, got -1"):
+        PlaceAware(exact_places=-1).fit(
+            X, np.repeat([0, 1], 4), signatures=np.zeros((8, 2)), instances=np.tile([1, 2], 4), places=np.zeros(8, int)
+        )
+    assert PlaceAware().get_params()["exact_places"] == 8
+
+
 def test_a_forecast_over_some_objects_is_the_full_forecast_restricted(fitted):
     training, _, full, _ = fitted
     places = training["object02", 2].places

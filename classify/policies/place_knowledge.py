@@ -98,7 +98,11 @@ class PlaceKnowledge:
     (``meshsal.points.places.landmarks_in``), so that they are located
     against j's own landmarks even when the instance's tessellation put its
     landmarks elsewhere; every hypothesis is treated alike, and how well the
-    places fit is never evidence.  The forecast of a place under j is what
+    places fit is never evidence.  Past the recognizer's shortlist, a touch is
+    located so only under the ``exact_places`` objects its screening puts
+    nearest, and a forecast under none: elsewhere the instance's own
+    landmarks locate it, so that the registrations per test instance stay
+    bounded however many objects there are.  The forecast of a place under j is what
     j's codebook touches at its matched places would make of the belief.
 
     Attributes
@@ -155,12 +159,24 @@ class PlaceKnowledge:
             self._references[c] = registration_places(self.references[c])
         return self._references[c]
 
-    def signatures_at(self, positions, places: Places, classes=None) -> np.ndarray:
+    def signatures_at(self, positions, places: Places, classes=None, registered=None) -> np.ndarray:
         """(k, J, LANDMARKS) where points of the instance of ``places`` lie on each object of ``classes``
-        (default: every object)."""
+        (default: every object).
+
+        ``registered`` (k,) bool, optional: the points located by registering
+        the instance onto each object (default: every point); the others are
+        located against the instance's own landmarks, as its places are.
+        """
+        from meshsal.points.places import LANDMARKS
         from meshsal.points.places import signatures as located
 
         J = range(self.n_classes) if classes is None else classes
+        if registered is not None and not np.all(registered):
+            own = located(positions, places.positions[:LANDMARKS])
+            if not np.any(registered):
+                return np.repeat(own[:, None], len(J), axis=1)
+            mask = np.asarray(registered, bool)[:, None]
+            return np.stack([np.where(mask, located(positions, self.landmarks(places, int(j))), own) for j in J], 1)
         return np.stack([located(positions, self.landmarks(places, int(j))) for j in J], axis=1)
 
     def posterior(self, imprints: np.ndarray, places: Places) -> np.ndarray:
@@ -172,17 +188,23 @@ class PlaceKnowledge:
         if len(imprints) == 0:
             return np.zeros((0, self.n_classes))
         positions = np.asarray(positions, np.float64)
-        # Located on an object only when the model asks: when the object is on a touch's shortlist.
-        return self.model.predict_proba(
-            imprints, lambda c, rows: self.signatures_at(positions[rows], places, [c])[:, 0]
-        )
+
+        # Located on an object only when the model asks: when the object is on a touch's shortlist; past the
+        # shortlist, by registration only under the objects the screening puts nearest (``exact``).
+        def where(c, rows, exact):
+            return self.signatures_at(positions[rows], places, [c], exact)[:, 0]
+
+        return self.model.predict_proba(imprints, where)
 
     def forecast(self, places: Places, classes=None) -> Forecast:
         """The :class:`Forecast` of an instance's candidate places under ``classes`` (default: every object),
         from the codebooks of the matched entries."""
         C, P = self.n_classes, len(places)
         J = np.arange(C) if classes is None else np.asarray(classes, np.int64)
-        G = self.signatures_at(places.positions, places, J)
+        # Past the shortlist the places are located against the instance's own landmarks under every
+        # hypothesis: a forecast only ranks places, and registering onto each new hypothesis would cost more
+        # than the touches it plans.
+        G = self.signatures_at(places.positions, places, J, np.zeros(P, bool) if C > self.hypotheses else None)
         K = self.forecast_neighbours
         S = self.table[0].values.shape[1]
         out = np.full((J.size, P, K * S, J.size), 1.0 / J.size)

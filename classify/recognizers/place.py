@@ -47,7 +47,7 @@ from sklearn.base import BaseEstimator, ClassifierMixin
 from sklearn.utils.validation import check_is_fitted
 
 from classify.recognizers.banks import Bank, entries, lse, sample_d2, spacing, within_place_whitening
-from classify.recognizers.shortlist import SHORTLIST, FreeStack, SparseRows, nearest_classes, spread
+from classify.recognizers.shortlist import EXACT_PLACES, SHORTLIST, FreeStack, SparseRows, nearest_classes, spread
 
 __all__ = ["PlaceAware", "describe_touches"]
 
@@ -135,6 +135,12 @@ class PlaceAware(ClassifierMixin, BaseEstimator):
         samples come nearest it (``classify.recognizers.shortlist``); every
         other object keeps a lower bound of its likelihood.  With no more
         objects than this, every object is scored in full.
+    exact_places : int
+        Past the shortlist, the shortlisted objects (nearest by the screening
+        first) under which a touch's place is asked for in full when
+        ``signatures`` is a function; under the rest of the shortlist it may
+        be located more cheaply (``PlaceKnowledge`` then uses the touched
+        instance's own landmarks instead of registering it onto the object).
     fit_objects : int
         Objects whose held-out instances score the fit's grid (evenly spread
         over the objects when there are more).
@@ -175,6 +181,7 @@ class PlaceAware(ClassifierMixin, BaseEstimator):
         fit_places=100,
         whiten=True,
         shortlist=SHORTLIST,
+        exact_places=EXACT_PLACES,
         fit_objects=64,
         random_state=0,
     ):
@@ -189,6 +196,7 @@ class PlaceAware(ClassifierMixin, BaseEstimator):
         self.fit_places = fit_places
         self.whiten = whiten
         self.shortlist = shortlist
+        self.exact_places = exact_places
         self.fit_objects = fit_objects
         self.random_state = random_state
 
@@ -238,6 +246,8 @@ class PlaceAware(ClassifierMixin, BaseEstimator):
             raise ValueError(
                 f"shortlist and fit_objects must be positive integers, got {self.shortlist}, {self.fit_objects}"
             )
+        if not (0 <= self.exact_places == int(self.exact_places)):
+            raise ValueError(f"exact_places must be a non-negative integer, got {self.exact_places}")
         self.mean_ = Z0.mean(axis=0)
         self.scale_ = np.maximum(Z0.std(axis=0), 1e-9 * max(float(Z0.std()), 1e-300))
         if session is None:
@@ -357,8 +367,10 @@ class PlaceAware(ClassifierMixin, BaseEstimator):
         """Place and place-free log-likelihood terms, each (len(widths), n, C), of touches Z at places G.
 
         ``G`` is (n, L), the same place under every object, (n, C, L), or a
-        function ``G(c, rows)`` giving rows' places under object c as (len(rows), L).
-        Past the shortlist an object off a touch's shortlist has no place term
+        function ``G(c, rows, exact)`` giving rows' places under object c as
+        (len(rows), L); ``exact`` is (len(rows),) bool, whether c is among the
+        row's ``exact_places`` nearest objects by the screening, or None when
+        every object is scored.  Past the shortlist an object off a touch's shortlist has no place term
         (-inf) and the place-free term's nearest kernel alone: lower bounds.
         The third value is the (n, C) bool shortlist then, else None.
         ``screen`` is ``self.free_.nearest(Z, exclude)`` when already at hand.
@@ -369,18 +381,18 @@ class PlaceAware(ClassifierMixin, BaseEstimator):
         inv = 0.5 / np.asarray(widths, np.float64) ** 2
         member = None
         if C > self.shortlist:
-            d2, count = self.free_.nearest(Z, exclude) if screen is None else screen
+            screened, count = self.free_.nearest(Z, exclude) if screen is None else screen
             member = np.zeros((n, C), bool)
             # A chunk of rows at a time, in place: (n, C) arrays are large at a thousand objects.
             for a in range(0, n, chunk):
                 rows = slice(a, a + chunk)
-                np.put_along_axis(member[rows], nearest_classes(d2[rows], self.shortlist), True, 1)
+                np.put_along_axis(member[rows], nearest_classes(screened[rows], self.shortlist), True, 1)
                 logcount = np.log(np.maximum(count[rows], 1))
                 with np.errstate(invalid="ignore"):
                     for b, s in enumerate(inv):
-                        # -s * d2 - log(max(count, 1)), -inf where no sample counts
+                        # -s * screened - log(max(count, 1)), -inf where no sample counts
                         term = free[b, rows]
-                        np.subtract(np.multiply(-s, d2[rows], out=term), logcount, out=term)
+                        np.subtract(np.multiply(-s, screened[rows], out=term), logcount, out=term)
                         term[count[rows] <= 0] = _NEG
         for a in range(0, n, chunk):
             span = np.arange(a, min(a + chunk, n))
@@ -388,7 +400,13 @@ class PlaceAware(ClassifierMixin, BaseEstimator):
                 bank = self.banks_[c]
                 rows = span if member is None else span[member[span, c]]
                 z, ex = Z[rows], exclude[rows]
-                g = G(c, rows) if callable(G) else (G[rows] if G.ndim == 2 else G[rows, c])
+                if callable(G):
+                    exact = None
+                    if member is not None:
+                        exact = (screened[rows] < screened[rows, c, None]).sum(axis=1) < self.exact_places
+                    g = G(c, rows, exact)
+                else:
+                    g = G[rows] if G.ndim == 2 else G[rows, c]
                 idx, logw = self._match(bank, g)
                 d2 = sample_d2(bank, z, idx, ex)  # (m, K, S), inf where left out
                 fd2 = np.maximum(np.einsum("md,md->m", z, z)[:, None] + bank.free_sq[None] - 2.0 * z @ bank.free.T, 0.0)
@@ -420,8 +438,10 @@ class PlaceAware(ClassifierMixin, BaseEstimator):
         ----------
         X : (n, rows, cols) imprints or (n, d) descriptors
         signatures : (n, L) where each touch's place lies on the touched instance, (n, C, L) where it lies
-            under each object's hypothesis, or a function ``(c, rows) -> (len(rows), L)`` of the same, called
-            only for the objects on a touch's shortlist
+            under each object's hypothesis, or a function ``(c, rows, exact) -> (len(rows), L)`` of the same,
+            called only for the objects on a touch's shortlist; ``exact`` (len(rows),) bool says which touches
+            have c among their ``exact_places`` nearest objects by the screening (None when every object is
+            scored): under the others a caller may locate the place more cheaply
         exclude : (n,) int, optional
             A training instance whose touches each query leaves out (-1: none).
         """

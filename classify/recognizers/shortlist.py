@@ -24,10 +24,21 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["SCREEN_ROWS", "SHORTLIST", "FreeStack", "SparseRows", "knn_shortlist", "nearest_classes", "spread"]
+__all__ = [
+    "EXACT_PLACES",
+    "SCREEN_ROWS",
+    "SHORTLIST",
+    "FreeStack",
+    "SparseRows",
+    "knn_shortlist",
+    "nearest_classes",
+    "spread",
+]
 
 #: Objects scored in full per touch, and hypotheses a forecast holds, by default.
 SHORTLIST = 16
+#: Of a touch's shortlist, the objects under which its place is located in full (by registration), by default.
+EXACT_PLACES = 8
 #: Distances of this many (touch, sample) pairs are held at once.
 _BLOCK = 1 << 22
 
