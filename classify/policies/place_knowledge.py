@@ -202,8 +202,8 @@ class PlaceKnowledge:
         C, P = self.n_classes, len(places)
         J = np.arange(C) if classes is None else np.asarray(classes, np.int64)
         # Past the shortlist the places are located against the instance's own landmarks under every
-        # hypothesis: a forecast only ranks places, and registering onto each new hypothesis would cost more
-        # than the touches it plans.
+        # hypothesis: a forecast only ranks places.  Registering onto its hypotheses (255 objects, 4 exact
+        # places) took 78 registrations per test instance instead of 49, and moved the rates by 1.6 points at most.
         G = self.signatures_at(places.positions, places, J, np.zeros(P, bool) if C > self.hypotheses else None)
         K = self.forecast_neighbours
         S = self.table[0].values.shape[1]
