@@ -171,13 +171,16 @@ class PlaceKnowledge:
         from meshsal.points.places import signatures as located
 
         J = range(self.n_classes) if classes is None else classes
-        if registered is not None and not np.all(registered):
-            own = located(positions, places.positions[:LANDMARKS])
-            if not np.any(registered):
-                return np.repeat(own[:, None], len(J), axis=1)
-            mask = np.asarray(registered, bool)[:, None]
-            return np.stack([np.where(mask, located(positions, self.landmarks(places, int(j))), own) for j in J], 1)
-        return np.stack([located(positions, self.landmarks(places, int(j))) for j in J], axis=1)
+        mask = None if registered is None else np.asarray(registered, bool)[:, None]
+        own = None if mask is None or mask.all() else located(positions, places.positions[:LANDMARKS])
+
+        def under(j: int) -> np.ndarray:
+            if own is not None and not mask.any():
+                return own  # registered onto nothing
+            at = located(positions, self.landmarks(places, j))
+            return at if own is None else np.where(mask, at, own)
+
+        return np.stack([under(int(j)) for j in J], axis=1)
 
     def posterior(self, imprints: np.ndarray, places: Places) -> np.ndarray:
         """(k, C) single-touch posteriors of imprints (k, rows, cols) taken at the first k of ``places``."""
