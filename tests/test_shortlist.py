@@ -312,6 +312,52 @@ def test_the_place_free_knowledge_keeps_each_touchs_most_probable_objects(monkey
     assert part.posteriors.shape[0] == part.posteriors.shape[-1] == 3
 
 
+def test_episodes_stepped_together_end_as_alone_and_feel_each_round_in_one_batch(monkeypatch):
+    from classify.policies import TouchKnowledge, episode_steps, fit_knowledge, run_episodes
+    from classify.recognizers.touches import Recognizer
+
+    monkeypatch.setattr(TouchKnowledge, "hypotheses", 3)  # past it a place is felt when first touched
+    rng = np.random.default_rng(8)
+    training, tests = {}, []
+    for j in range(6):
+        for i in (0, 1, 2):
+            imprints = np.clip(rng.normal(0.1 * j, 0.05, (1, 12, 16, 16)), 0, 1).astype(np.float32)
+            sample = PlaceSample(_places(rng.normal(size=(12, 3)) * 40, rng), imprints)
+            if i:
+                training[f"object{j}", i] = sample
+            else:
+                tests.append(sample)
+    knowledge = fit_knowledge(training, Recognizer("knn", features="polar"))
+    calls = []
+    scored = TouchKnowledge.posterior
+
+    def counted(self, imprints, places=None):
+        calls.append(len(imprints))
+        return scored(self, imprints, places)
+
+    monkeypatch.setattr(TouchKnowledge, "posterior", counted)
+    for spacing in (0.0, 90.0):  # every episode touches four times; episodes run out of places at different touches
+        calls.clear()
+        alone = [
+            run_episode(InfoGainPolicy(), t, knowledge, 4, spacing, np.random.default_rng(c))
+            for c, t in enumerate(tests)
+        ]
+        lengths = [len(e.touched) for e in alone]
+        assert calls == [1] * sum(lengths)
+        calls.clear()
+        steps = [
+            episode_steps(InfoGainPolicy(), t, knowledge, 4, spacing, np.random.default_rng(c))
+            for c, t in enumerate(tests)
+        ]
+        together = run_episodes(steps, [Felt(knowledge, t.imprints[0], t.places) for t in tests])
+        # One batch per round, of the episodes still touching.
+        assert calls == [sum(n > k for n in lengths) for k in range(max(lengths))]
+        for a, b in zip(alone, together):
+            np.testing.assert_array_equal(a.touched, b.touched)
+            np.testing.assert_allclose(a.beliefs, b.beliefs, rtol=1e-9)
+    assert len(set(lengths)) > 1
+
+
 @pytest.mark.parametrize("grid", [True, False])
 def test_knn_shortlist_with_every_object_a_candidate_is_predict_proba(grid):
     import classify

@@ -12,7 +12,9 @@ from classify.policies.episodes import (
     Felt,
     available_places,
     decisions,
+    episode_steps,
     run_episode,
+    run_episodes,
     stopping_curve,
     touched_belief,
 )
@@ -62,6 +64,8 @@ __all__ = [
     "POLICIES",
     "RandomPolicy",
     "run_episode",
+    "episode_steps",
+    "run_episodes",
     "signatures",
     "stopping_curve",
     "touched_belief",

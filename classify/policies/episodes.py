@@ -21,7 +21,17 @@ import numpy as np
 from classify.policies.knowledge import Places, PlaceSample, TouchKnowledge
 from classify.policies.policy import Forecasts, TouchPolicy, TouchState, hypotheses
 
-__all__ = ["Episode", "Felt", "available_places", "touched_belief", "run_episode", "decisions", "stopping_curve"]
+__all__ = [
+    "Episode",
+    "Felt",
+    "available_places",
+    "touched_belief",
+    "run_episode",
+    "episode_steps",
+    "run_episodes",
+    "decisions",
+    "stopping_curve",
+]
 
 
 @dataclass(frozen=True, eq=False)
@@ -62,6 +72,27 @@ class Felt:
             at = self.places.positions[[p]]
             self._one[p] = self.knowledge.posterior_at(self.imprints[[p]], at, self.places)[0]
         return self._one[p]
+
+    @staticmethod
+    def feel(wanted: list) -> None:
+        """Compute what the touches ``wanted``, (Felt, place) pairs, give where not computed yet.
+
+        Under a place-free knowledge (``knowledge.place_free``: its posterior
+        reads the imprints only) the touches of every instance are scored in one
+        batch per knowledge: one pass over the training touches instead of one
+        per touch.  A place-aware knowledge locates each instance's touches on
+        its own, when read.
+        """
+        batches = {}
+        for felt, p in wanted:
+            if felt._all is None and p not in felt._one and getattr(felt.knowledge, "place_free", False):
+                batches.setdefault(id(felt.knowledge), {})[id(felt), p] = (felt, p)
+        for batch in batches.values():
+            todo = list(batch.values())
+            knowledge = todo[0][0].knowledge
+            rows = knowledge.posterior(np.stack([felt.imprints[p] for felt, p in todo]))
+            for (felt, p), row in zip(todo, rows):
+                felt._one[p] = row
 
 
 def available_places(places: Places, touched, min_spacing: float) -> np.ndarray:
@@ -134,6 +165,27 @@ def run_episode(
     -------
     Episode
     """
+    if felt is None:
+        felt = Felt(knowledge, sample.imprints[session], sample.places)  # never seen by the policy
+    steps = episode_steps(policy, sample, knowledge, touches, min_spacing, rng, session)
+    return run_episodes([steps], [felt])[0]
+
+
+def episode_steps(
+    policy: TouchPolicy,
+    sample: PlaceSample,
+    knowledge: TouchKnowledge,
+    touches: int,
+    min_spacing: float,
+    rng: np.random.Generator,
+    session: int = 0,
+):
+    """:func:`run_episode` one touch at a time: a generator that yields each place it touches, is sent back what
+    the touch there felt ((C,) float64, ``knowledge.posterior`` of the imprint), and returns the :class:`Episode`.
+
+    Many episodes stepped together (:func:`run_episodes`) have each round's
+    touches felt in one batch.
+    """
     import time
 
     places = sample.places
@@ -141,8 +193,6 @@ def run_episode(
     C = knowledge.n_classes
     # Objects of equal belief are drawn from a stream of their own, so the policy's draws stay its own.
     ties = rng.spawn(1)[0] if C > knowledge.hypotheses else None
-    if felt is None:
-        felt = Felt(knowledge, sample.imprints[session], places)  # never seen by the policy
     belief = np.full(C, 1.0 / C)
     touched, beliefs, seconds = [], [], []
     for _ in range(touches):
@@ -165,7 +215,7 @@ def run_episode(
         if not (0 <= p < len(places) and available[p]):
             raise ValueError(f"policy {type(policy).__name__} chose place {p}, which is not available")
         touched.append(p)
-        belief = touched_belief(belief, felt[p])
+        belief = touched_belief(belief, (yield p))
         beliefs.append(belief)
     return Episode(
         np.asarray(touched, np.int64),
@@ -173,6 +223,30 @@ def run_episode(
         np.asarray(beliefs, np.float64).reshape(-1, C),
         np.asarray(seconds),
     )
+
+
+def run_episodes(episodes: list, felts: list) -> list:
+    """Step episodes together, touch by touch: a list of :class:`Episode`, one per generator of :func:`episode_steps`.
+
+    ``felts`` holds each episode's :class:`Felt` (or (P, C) array).  Each
+    round's touches of every episode are felt together (:meth:`Felt.feel`),
+    then each episode takes its next step; an episode's draws and belief are
+    its own, so it ends as it would alone.
+    """
+    out = [None] * len(episodes)
+    wanted = dict.fromkeys(range(len(episodes)))
+    felt_now = dict.fromkeys(range(len(episodes)))  # what each episode is sent: nothing before its first touch
+    while wanted:
+        asked = {}
+        for e in wanted:
+            try:
+                asked[e] = episodes[e].send(felt_now[e])
+            except StopIteration as done:
+                out[e] = done.value
+        Felt.feel([(felts[e], p) for e, p in asked.items() if isinstance(felts[e], Felt)])
+        felt_now = {e: felts[e][p] for e, p in asked.items()}
+        wanted = asked
+    return out
 
 
 def decisions(beliefs: np.ndarray, rng: np.random.Generator) -> np.ndarray:

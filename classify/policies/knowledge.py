@@ -276,6 +276,9 @@ class TouchKnowledge:
 
     #: Hypotheses a forecast holds at most (``classify.policies.policy.hypotheses``).
     hypotheses = SHORTLIST
+    #: :meth:`posterior` reads the imprints only: touches of many instances are scored in one batch
+    #: (``classify.policies.episodes.Felt.feel``).
+    place_free = True
 
     def forecast(self, places: Places, classes=None) -> Forecast:
         """The :class:`Forecast` of an instance's candidate places under ``classes`` (default: every object)."""

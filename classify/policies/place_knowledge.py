@@ -130,6 +130,9 @@ class PlaceKnowledge:
     def n_classes(self) -> int:
         return len(self.names)
 
+    #: A touch is scored where it was taken, on its own instance's places: never in a batch of instances.
+    place_free = False
+
     @property
     def hypotheses(self) -> int:
         """Hypotheses a forecast holds at most: the recognizer's shortlist."""

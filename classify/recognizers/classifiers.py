@@ -173,6 +173,8 @@ class KNN(ClassifierMixin, BaseEstimator):
     grid_rows_ : the training rows' integer codes and squared norms when
         they lie on the ADC's grid (else None), prepared once for every
         prediction.
+    float_rows_ : the training rows and their squared norms, prepared once
+        for every prediction of queries off the grid.
 
     Notes
     -----
@@ -303,8 +305,9 @@ class KNN(ClassifierMixin, BaseEstimator):
             self.k_ = ks[0]
         self.X_ = X[inner.rows]
         self.k_ = min(self.k_, len(self.X_))
-        # Every prediction compares with the training rows' integer codes: computed once.
+        # Every prediction compares with the training rows as prepared here (integer codes on the grid): once.
         self.grid_rows_ = Rows.of(self.X_, True) if inner.exact else None
+        self.float_rows_ = Rows.of(self.X_, False)
         self.codes_ = inner.codes
         self.tiebreak_ = inner.keys
         self.n_features_in_ = X.shape[1]
@@ -317,7 +320,7 @@ class KNN(ClassifierMixin, BaseEstimator):
         if X.shape[1] != self.n_features_in_:
             raise ValueError(f"KNN: X has {X.shape[1]} features, the model was fitted with {self.n_features_in_}")
         out = np.empty((len(X), len(self.classes_)))
-        rows = self.grid_rows_ if self.grid_rows_ is not None and on_grid(X) else Rows.of(self.X_, False)
+        rows = self.grid_rows_ if self.grid_rows_ is not None and on_grid(X) else self.float_rows_
         step = block_rows(len(self.X_))
         for start in range(0, len(X), step):  # a block of distances at a time: memory stays flat
             block = X[start : start + step]

@@ -232,7 +232,7 @@ def knn_shortlist(model, X, H: int, candidates: int | None = None) -> tuple[np.n
     J = min(C, max(int(H), int(candidates or 2 * H)))
     starts = np.searchsorted(codes, np.arange(C + 1))
     exact = model.grid_rows_ is not None and on_grid(X)
-    every = model.grid_rows_ if exact else Rows.of(model.X_, False)
+    every = model.grid_rows_ if exact else model.float_rows_
     rows_of = [
         Rows(every.values[starts[c] : starts[c + 1]], every.sq[starts[c] : starts[c + 1]], exact) for c in range(C)
     ]
