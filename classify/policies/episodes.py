@@ -9,7 +9,9 @@ them (``classify.recognizers.fusion``), or the tempered place-aware
 likelihoods of ``PlaceKnowledge``; the decision after
 k touches is its most probable class, ties broken by the episode's tie
 stream.  :func:`stopping_curve` applies a stopping rule afterwards: stop when
-the top class's belief reaches p, or after the last touch.
+the top class's belief reaches p, or after the last touch.  Many episodes can
+step together (:func:`episode_steps`, :func:`run_episodes`), their touches of
+each round felt in one batch.
 """
 
 from __future__ import annotations
@@ -234,18 +236,18 @@ def run_episodes(episodes: list, felts: list) -> list:
     its own, so it ends as it would alone.
     """
     out = [None] * len(episodes)
-    wanted = dict.fromkeys(range(len(episodes)))
-    felt_now = dict.fromkeys(range(len(episodes)))  # what each episode is sent: nothing before its first touch
-    while wanted:
+    running, sent = range(len(episodes)), [None] * len(episodes)  # nothing is sent before the first touch
+    while running:
         asked = {}
-        for e in wanted:
+        for e in running:
             try:
-                asked[e] = episodes[e].send(felt_now[e])
+                asked[e] = episodes[e].send(sent[e])
             except StopIteration as done:
                 out[e] = done.value
         Felt.feel([(felts[e], p) for e, p in asked.items() if isinstance(felts[e], Felt)])
-        felt_now = {e: felts[e][p] for e, p in asked.items()}
-        wanted = asked
+        for e, p in asked.items():
+            sent[e] = felts[e][p]
+        running = list(asked)
     return out
 
 
