@@ -358,6 +358,37 @@ def test_episodes_stepped_together_end_as_alone_and_feel_each_round_in_one_batch
     assert len(set(lengths)) > 1
 
 
+def test_place_free_episodes_step_together_and_place_aware_ones_one_at_a_time(fitted, monkeypatch):
+    # Stepping together batches a place-free knowledge's touches; a place-aware one's would only hold more
+    # forecasts at once.
+    import classify.experiment.sequential as sequential
+    from classify.policies import fit_knowledge
+    from classify.recognizers.touches import Recognizer
+
+    training, _, _, short = fitted
+    alive, most = [0], [0]
+    steps = sequential.episode_steps
+
+    def counted(*args, **kwargs):
+        alive[0] += 1
+        most[0] = max(most[0], alive[0])
+        try:
+            return (yield from steps(*args, **kwargs))
+        finally:
+            alive[0] -= 1
+
+    monkeypatch.setattr(sequential, "episode_steps", counted)
+    names = short.names
+    described = tuple(PlaceSample(training[n, 2].places, training[n, 2].codebook[None, :, 0, :]) for n in names)
+    imprinted = tuple(training[n, 2] for n in names)
+    place_free = fit_knowledge(training, Recognizer("knn", features="polar"))
+    for knowledge, tests, expected in ((short, described, 1), (place_free, imprinted, OBJECTS)):
+        most[0] = 0
+        out = sequential.run_policies(knowledge, tests, names, ("info_gain",), 2, 0.0, 0, 0, ())
+        assert most[0] == expected and alive[0] == 0
+        assert (out.touched >= 0).all()
+
+
 @pytest.mark.parametrize("grid", [True, False])
 def test_knn_shortlist_with_every_object_a_candidate_is_predict_proba(grid):
     import classify

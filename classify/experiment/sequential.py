@@ -31,8 +31,8 @@ from classify.recognizers.touches import Recognizer
 
 __all__ = ["PolicyJob", "PolicyOutcome", "policy_job", "run_policies", "policy_recognition", "policy_measurement"]
 
-#: Episodes stepped together: each round's touches are felt in one batch (one pass over the training touches for
-#: this many), while the episodes' forecasts held at once stay a few hundred MB at 1,000 objects.
+#: Episodes stepped together under a place-free knowledge: each round's touches are felt in one batch (one pass
+#: over the training touches for this many), and few episodes' forecasts are held at once.
 TOGETHER = 32
 
 
@@ -125,11 +125,13 @@ def run_policies(
     touched = np.full((len(policies), n, K), -1, np.int64)
     choice_s = np.zeros(len(policies))
     felt = [Felt(knowledge, test.imprints[0], test.places) for test in tests]
+    # A few episodes at a time in step, where their touches are felt in one batch; a place-aware knowledge's
+    # episodes one at a time, since stepping together would only hold more of its (larger) forecasts at once.
+    together = TOGETHER if getattr(knowledge, "place_free", False) else 1
     for q, name in enumerate(policies):
         seconds = []
         episodes = []
-        # A few episodes at a time in step: their touches are felt in one batch, and their forecasts stay few.
-        for a in range(0, n, TOGETHER):
+        for a in range(0, n, together):
             steps = [
                 episode_steps(
                     POLICIES.get(name)(),
@@ -139,9 +141,9 @@ def run_policies(
                     min_spacing,
                     recognition_rng(seed, replicate, 0, names[c], Stream.EPISODE, name_seed(name)),
                 )
-                for c in range(a, min(a + TOGETHER, n))
+                for c in range(a, min(a + together, n))
             ]
-            episodes += run_episodes(steps, felt[a : a + TOGETHER])
+            episodes += run_episodes(steps, felt[a : a + together])
         for c, episode in enumerate(episodes):
             ties = recognition_rng(seed, replicate, 0, names[c], Stream.EPISODE_TIES)
             picks = decisions(episode.beliefs, ties)
