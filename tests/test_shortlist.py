@@ -14,10 +14,12 @@ from classify.policies import (
     Forecasts,
     Places,
     PlaceSample,
+    episode_steps,
     expected_entropy,
     fit_place_knowledge,
     hypotheses,
     run_episode,
+    run_episodes,
     signatures,
 )
 from classify.policies.policy import InfoGainPolicy
@@ -313,7 +315,7 @@ def test_the_place_free_knowledge_keeps_each_touchs_most_probable_objects(monkey
 
 
 def test_episodes_stepped_together_end_as_alone_and_feel_each_round_in_one_batch(monkeypatch):
-    from classify.policies import TouchKnowledge, episode_steps, fit_knowledge, run_episodes
+    from classify.policies import TouchKnowledge, fit_knowledge
     from classify.recognizers.touches import Recognizer
 
     monkeypatch.setattr(TouchKnowledge, "hypotheses", 3)  # past it a place is felt when first touched
