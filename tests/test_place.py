@@ -168,8 +168,9 @@ def test_the_fit_standardizes_in_place_as_its_predictions_do_with_few_touch_size
     finally:
         tracemalloc.stop()
     # Out of place, the fit held the descriptors, their standardized copy, the places' means, the residuals and
-    # the whitened copy at once (4.2 of them here); in place, about 3.
-    assert peak < 3.5 * touches, peak / touches
+    # the whitened copy at once (4.2 of them here); standardized in place, 3.1; with the standardized copy let go
+    # once whitened, so that it never lies beside the banks, 2.2.
+    assert peak < 2.6 * touches, peak / touches
     # The in-place operations are those of the predictions' standardization, bit for bit.
     expected = within_place_whitening((X - model.mean_) / model.scale_, y, key)
     assert np.array_equal(model.whitening_, expected)

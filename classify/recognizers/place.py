@@ -222,16 +222,16 @@ class PlaceAware(ClassifierMixin, BaseEstimator):
         -------
         self
         """
-        Z0 = describe_touches(X)
+        Z = describe_touches(X)
         y = np.asarray(y, np.int64)
         sig = np.asarray(signatures, np.float64)
         inst = np.asarray(instances, np.int64)
         keys = np.asarray(places, np.int64)
         n = len(y)
-        if not (len(Z0) == n == len(sig) == len(inst) == len(keys)):
+        if not (len(Z) == n == len(sig) == len(inst) == len(keys)):
             raise ValueError(
                 f"X, y, signatures, instances and places must have one row per touch, got "
-                f"{len(Z0)}, {n}, {len(sig)}, {len(inst)}, {len(keys)}"
+                f"{len(Z)}, {n}, {len(sig)}, {len(inst)}, {len(keys)}"
             )
         self.classes_ = np.unique(y)
         if self.classes_.size < 2:
@@ -248,14 +248,14 @@ class PlaceAware(ClassifierMixin, BaseEstimator):
             )
         if not (0 <= self.exact_places == int(self.exact_places)):
             raise ValueError(f"exact_places must be a non-negative integer, got {self.exact_places}")
-        self.mean_ = Z0.mean(axis=0)
-        self.scale_ = np.maximum(Z0.std(axis=0), 1e-9 * max(float(Z0.std()), 1e-300))
+        self.mean_ = Z.mean(axis=0)
+        self.scale_ = np.maximum(Z.std(axis=0), 1e-9 * max(float(Z.std()), 1e-300))
         if session is None:
             first = np.unique(np.c_[y, inst, keys], axis=0, return_index=True)[1]
-            session = (Z0[first], y[first], sig[first], inst[first])
-        # Standardized in place: the operations of _standardized, with one touch-sized array alive instead of
-        # three (a thousand objects' codebooks are millions of touches).
-        Z = Z0
+            session = (Z[first], y[first], sig[first], inst[first])
+        # Standardized in place and whitened into a new array that replaces it (Z its only name): the operations
+        # of _standardized with one touch-sized array alive instead of three, and two beside the banks (a thousand
+        # objects' codebooks are millions of touches).
         Z -= self.mean_
         Z /= self.scale_
         self.whitening_ = within_place_whitening(Z, y, keys) if self.whiten else np.eye(Z.shape[1])
