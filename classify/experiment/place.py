@@ -22,6 +22,7 @@ the protocol ``instance``, the policies under ``sequential``.
 from __future__ import annotations
 
 import dataclasses
+import itertools
 from dataclasses import dataclass
 
 import numpy as np
@@ -52,10 +53,11 @@ class PlaceJob:
 
     Attributes
     ----------
-    training : dict (object name, instance) -> classify.policies.PlaceSample (or packed) with its codebook, training
+    training : dict (object name, instance) -> classify.policies.PlaceSample (packed, or stored on disk:
+        ``classify.experiment.spill``) with its codebook, training
         instances
     plans : dict method -> dict (object name, instance) -> TouchSample with its codebook, training instances
-    tests : tuple of PlaceSample, the test instances in the order of ``names``
+    tests : tuple of PlaceSample (packed or stored), the test instances in the order of ``names``
     test_plans : dict method -> tuple of TouchSample, the test instances' plans in the order of ``names``
     names : tuple of str, the objects sorted by name (the classes)
     methods, policies : tuple of str
@@ -199,10 +201,9 @@ def place_jobs(stage: InstanceStage, objects: ObjectSet, n: int, config: Experim
 def _arrays(job: PlaceJob):
     """Every array a job's outcome depends on, for its cache key, one at a time (packed places unpack to give
     theirs)."""
-    samples = [*job.training.values(), *job.tests]
-    for m in job.methods:
-        samples += [*job.plans[m].values(), *job.test_plans[m]]
-    for sample in samples:
+    plans = [s for m in job.methods for s in (*job.plans[m].values(), *job.test_plans[m])]
+    # Places read one at a time: a stored sample reads its file on each use.
+    for sample in itertools.chain((s.in_memory() for s in (*job.training.values(), *job.tests)), plans):
         yield from sample.to_arrays().values()
         if sample.codebook is not None:
             yield sample.codebook

@@ -14,6 +14,7 @@ dromedary, so these are the paper's 4- and 6-object sets).
 from __future__ import annotations
 
 import dataclasses
+import tempfile
 import time
 from concurrent.futures import ProcessPoolExecutor
 from contextlib import nullcontext
@@ -216,8 +217,14 @@ def _timed(usage: dict, name: str, work):
 def _measure_block(objects: ObjectSet, config: ExperimentConfig, runtime: Runtime, block, usage) -> tuple:
     """A block of replicates measured under the instance protocol: (its touch models, its measurements).
 
-    Its instances (:func:`instance_stage`) live only in this call, so the next block's take their place.
+    Its instances (:func:`instance_stage`) live only in this call, so the next block's take their place; with
+    ``runtime.places_dir`` their places wait in a folder of the block, removed with it.
     """
+    with tempfile.TemporaryDirectory(dir=runtime.places_dir) if runtime.places_dir else nullcontext() as folder:
+        return _measure_in(objects, config, dataclasses.replace(runtime, places_dir=folder), block, usage)
+
+
+def _measure_in(objects: ObjectSet, config: ExperimentConfig, runtime: Runtime, block, usage) -> tuple:
     place = "place" in config.classifiers
     sets = _object_sets(len(objects))
     stage = _timed(
@@ -323,12 +330,14 @@ def run_experiment(
     paper_methods = [m for m in config.methods if m not in MODEL_METHODS]
     usage, measurements, models = {}, [], []
     workers = nullcontext(executor) if executor is not None else worker_pool(n_jobs, preload=WORKER_MODULES)
-    with threadpool_limits(1), workers as pool:
+    local = executor is None or isinstance(executor, ProcessPoolExecutor)
+    # Workers on this machine share its disk, where the instances' places wait for their jobs.
+    places_dir = tempfile.TemporaryDirectory(prefix="visuotactile-places-") if local else nullcontext()
+    with threadpool_limits(1), workers as pool, places_dir as folder:
         # Local workers start while the objects load, and build the toys; a bad file still stops the run before any work.
-        local = executor is None or isinstance(executor, ProcessPoolExecutor)
         objects = load_objects(objects, settings, pool if local else None, skip_bad=skip_bad)
         # Workers render with one thread each; alone, the stage renders with every core.
-        runtime = Runtime(pool, cache_dir, None if isinstance(pool, Inline) else 1, quiet)
+        runtime = Runtime(pool, cache_dir, None if isinstance(pool, Inline) else 1, quiet, places_dir=folder)
         if "paper" in config.protocols and paper_methods:
             measurements += _timed(usage, "paper", lambda: _paper_measurements(objects, paper_methods, config, runtime))
         if "instance" in config.protocols:

@@ -16,7 +16,6 @@ the method.
 
 from __future__ import annotations
 
-import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
@@ -43,7 +42,7 @@ class PolicyJob:
     Attributes
     ----------
     training : dict (object name, instance) -> classify.policies.PlaceSample, training instances only
-    tests : tuple of PlaceSample, the test instances in the order of ``names``
+    tests : tuple of PlaceSample (packed or stored), the test instances in the order of ``names``
     names : tuple of str, the objects sorted by name (the classes)
     recognizer : Recognizer
     policies : tuple of str, names in ``classify.policies.POLICIES``
@@ -167,7 +166,7 @@ def policy_jobs(stage, objects, n: int, config: ExperimentConfig) -> list:
     for r in stage.replicates:
         # The place-free knowledge reads imprints only: the codebooks (the place-aware recognizer's) stay behind.
         training = {
-            (objects.names[i], j): dataclasses.replace(stage.places[r, i, j], codebook=None)
+            (objects.names[i], j): stage.places[r, i, j].without_codebook()
             for i in order
             for j in range(1, settings.train_instances + 1)
         }

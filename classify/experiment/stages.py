@@ -12,6 +12,7 @@ cluster); every stage reads and writes the content-keyed cache.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import warnings
 from dataclasses import dataclass
 from typing import NamedTuple
@@ -41,6 +42,7 @@ from classify.experiment.samples import (
     nominal_mesh,
     paper_sample,
 )
+from classify.experiment.spill import stored
 from classify.experiment.survey import fit_replicate_model
 from classify.reporting.results import ConfusionMatrix
 from classify.runtime import cache as cache_mod
@@ -164,7 +166,9 @@ class Runtime:
     ``cache_dir`` the cache (None: none); ``threads`` rendering and attention
     threads per task (None: the CPU count; changes nothing); ``quiet`` no
     progress bars; ``label`` what every progress bar's description starts with
-    (e.g. the block of replicates it works on).
+    (e.g. the block of replicates it works on); ``places_dir`` a folder this
+    process and the pool's workers share, where the instances' places wait on
+    disk for their jobs (``classify.experiment.spill``; None: in memory).
     """
 
     pool: object
@@ -172,6 +176,7 @@ class Runtime:
     threads: int | None = None
     quiet: bool = True
     label: str = ""
+    places_dir: object = None
 
     def map(self, fn, tasks: list, desc: str):
         return list(progress(self.pool.map(fn, tasks), total=len(tasks), desc=self.label + desc, quiet=self.quiet))
@@ -190,7 +195,8 @@ class SampleKey(NamedTuple):
 class InstanceStage:
     """The instances of some replicates: every instance's sample for every method (by :class:`SampleKey`), each
     replicate's touch model (in the order of ``replicates``), and with touch policies every instance's places
-    (``classify.policies.PlaceSample`` by (replicate, object, instance), packed: ``PlaceSample.packed``)."""
+    (``classify.policies.PlaceSample`` by (replicate, object, instance), packed: ``PlaceSample.packed``; with
+    ``Runtime.places_dir``, ``classify.experiment.spill.StoredPlaceSample``)."""
 
     samples: dict
     models: tuple = ()
@@ -203,11 +209,15 @@ def _paper_sample(task: PaperSampleTask) -> TouchSample:
         return paper_sample(task)
 
 
-def _instance_samples(task: SampleTask):
+def _instance_samples(task: SampleTask, folder=None):
     with threadpool_limits(1), naming(task.name):
         out = instance_samples(task)
-    # The run holds every instance's places until its last stage: packed, a third of the bytes.
-    return out if out.places is None else dataclasses.replace(out, places=out.places.packed())
+    if out.places is None:
+        return out
+    # The block holds every instance's places until its last stage: packed, a third of the bytes, and with a
+    # folder on disk (classify.experiment.spill), only their path.
+    places = out.places.packed()
+    return dataclasses.replace(out, places=places if folder is None else stored(places, folder))
 
 
 def _fit_model(surveys: dict):
@@ -269,7 +279,7 @@ def instance_stage(
         )
 
     done = runtime.map(
-        _instance_samples,
+        functools.partial(_instance_samples, folder=runtime.places_dir if places else None),
         [task(r, i, j, plain, survey=bool(learned), places=places, codebook=codebook) for r, i, j in where],
         "instances: points+imprints",
     )

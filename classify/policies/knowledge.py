@@ -33,7 +33,7 @@ ball's pool starts anywhere), which is what a touch can tell apart anyway.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -125,6 +125,13 @@ class PlaceSample:
         """This sample (see :meth:`PackedPlaceSample.unpacked`)."""
         return self
 
+    def in_memory(self) -> PlaceSample:
+        """This sample: its arrays are in memory (a sample an experiment stored on disk reads them)."""
+        return self
+
+    def without_codebook(self) -> PlaceSample:
+        return replace(self, codebook=None)
+
 
 @dataclass(frozen=True, eq=False)
 class PackedPlaceSample:
@@ -154,6 +161,12 @@ class PackedPlaceSample:
     def unpacked(self) -> PlaceSample:
         """The :class:`PlaceSample`, its imprints as float32 readings."""
         return PlaceSample(self.places, self.imprints, self.codebook)
+
+    def in_memory(self) -> PackedPlaceSample:
+        return self
+
+    def without_codebook(self) -> PackedPlaceSample:
+        return replace(self, codebook=None)
 
 
 def _adc_codes(imprints) -> np.ndarray | None:
@@ -315,7 +328,8 @@ def fit_knowledge(training: dict, recognizer):
 
     Parameters
     ----------
-    training : dict (object name, instance index) -> PlaceSample or PackedPlaceSample
+    training : dict (object name, instance index) -> PlaceSample or PackedPlaceSample (or any sample whose
+        ``in_memory()`` gives one)
         Training instances only (index >= 1); every session of every place is a training touch.
     recognizer : classify.recognizers.touches.Recognizer
         The single-touch classifier (selection is not applied: every place counts).  The place-aware
@@ -339,6 +353,7 @@ def fit_knowledge(training: dict, recognizer):
         return fit_place_knowledge(training, recognizer.params or {})
     F, y, inst, vertex, located = [], [], [], [], []
     for c, _, j, sample in in_object_order(training, names):
+        sample = sample.in_memory()  # read once: a stored sample reads its file on each use
         imprints = sample.imprints  # read once: a packed sample unpacks on each read
         sessions, P = imprints.shape[:2]
         # Described sample by sample: the descriptors are all that is read from here on.

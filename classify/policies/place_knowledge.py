@@ -52,6 +52,7 @@ def place_touches(samples: dict, names: tuple, points=None) -> tuple:
 
     X, y, sig, inst, keys = [], [], [], [], []
     for c, name, j, sample in in_object_order(samples, names):
+        sample = sample.in_memory()  # read once: a stored sample reads its file on each use
         if sample.codebook is None:
             raise ValueError(f"{name}, training instance {j}: no touch codebook (run with the place-aware recognizer)")
         if points is None:
@@ -78,6 +79,7 @@ def _session_touches(samples: dict, names: tuple) -> tuple:
 
     X, y, sig, inst = [], [], [], []
     for c, _, j, sample in in_object_order(samples, names):
+        sample = sample.in_memory()
         ok = sample.places.touchable
         X.append(polar_fourier(sample.imprints[0][ok]))
         y.append(np.full(ok.sum(), c))
@@ -238,7 +240,7 @@ def fit_place_knowledge(training: dict, params: dict | None = None) -> PlaceKnow
     table, weights = model.forecast_table()
     # Each object's first training instance.
     first = {}
-    for _, name, _, sample in in_object_order(training, names):
-        first.setdefault(name, sample)
-    references = tuple(first[name].places.positions for name in names)
+    for _, name, j, _ in in_object_order(training, names):
+        first.setdefault(name, j)
+    references = tuple(training[name, first[name]].places.positions for name in names)
     return PlaceKnowledge(names, model, table, weights, references)
