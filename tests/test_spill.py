@@ -11,7 +11,7 @@ from quick import QUICK
 from classify.experiment import place as place_mod
 from classify.experiment.spill import StoredPlaceSample, stored
 from classify.policies import PackedPlaceSample, Places, PlaceSample
-from classify.runtime.cluster import Inline
+from classify.runtime.cluster import FilePool, Inline
 from meshsal.util.npzfile import NpzError
 
 
@@ -71,6 +71,16 @@ def _objects():
     return [shapes.box(half=40.0, n=20).replace(name="box"), shapes.sphere(radius=50.0, n=24).replace(name="ball")]
 
 
+#: The place-aware jobs' places, as :func:`_spy` saw them (a module's function: a file pool pickles its tasks).
+SEEN = []
+_PLACE_JOB = place_mod.place_job
+
+
+def _spy(job):
+    SEEN.append(list(job.training.values()) + list(job.tests))
+    return _PLACE_JOB(job)
+
+
 def test_places_wait_on_disk_for_their_jobs_give_the_results_of_places_in_memory_and_go_with_their_run(
     tmp_path, monkeypatch
 ):
@@ -81,24 +91,26 @@ def test_places_wait_on_disk_for_their_jobs_give_the_results_of_places_in_memory
         policies=("info_gain",),
         replicates=2,
     )
-    seen = []
-    run_job = place_mod.place_job
-
-    def spy(job):
-        seen.append(list(job.training.values()) + list(job.tests))
-        return run_job(job)
-
-    monkeypatch.setattr(place_mod, "place_job", spy)
-    # Workers on this machine (here the calling process): the places wait on disk.
-    quick.run(_objects(), config, out_dir=tmp_path / "disk", n_jobs=1, replicates_at_once=1)
+    seen = SEEN
+    seen.clear()
+    monkeypatch.setattr(place_mod, "place_job", _spy)
+    # Local processes, as the command line's default pool hands them tasks (here run in this process, so that
+    # the spy sees the jobs): the places wait on disk.
+    (tmp_path / "tasks").mkdir()
+    pool = FilePool(Inline(), tmp_path / "tasks")
+    quick.run(_objects(), config, out_dir=tmp_path / "disk", executor=pool, replicates_at_once=1)
     on_disk = [s for job in seen for s in job]
     assert len(seen) == 2 and all(isinstance(s, StoredPlaceSample) for s in on_disk)
     assert len({s.path for s in on_disk}) == len(on_disk) == 2 * 2 * 3  # replicates x objects x instances
     folders = {s.path.rsplit("/", 2)[0] for s in on_disk}
     assert len(folders) == 1 and not any(os.path.exists(f) for f in folders)
-    # An executor that may run elsewhere: in memory.
+
+    # An executor whose workers may run elsewhere (a Dask cluster's): in memory.
+    class Elsewhere:
+        map = Inline.map
+
     seen.clear()
-    quick.run(_objects(), config, out_dir=tmp_path / "memory", executor=Inline(), replicates_at_once=1)
+    quick.run(_objects(), config, out_dir=tmp_path / "memory", executor=Elsewhere(), replicates_at_once=1)
     assert all(isinstance(s, PackedPlaceSample) for job in seen for s in job)
     for name in ("results.csv", "stopping.csv"):
         assert (tmp_path / "disk" / name).read_bytes() == (tmp_path / "memory" / name).read_bytes(), name

@@ -49,7 +49,7 @@ from classify.reporting.results import (
     write_outputs,
 )
 from classify.runtime import cache as cache_mod
-from classify.runtime.cluster import Inline, worker_pool
+from classify.runtime.cluster import FilePool, Inline, worker_pool
 from classify.runtime.usage import StageUsage, cpu_seconds, measured, resident_mb
 from meshsal.points import METHODS, MODEL_METHODS
 
@@ -331,8 +331,10 @@ def run_experiment(
     usage, measurements, models = {}, [], []
     workers = nullcontext(executor) if executor is not None else worker_pool(n_jobs, preload=WORKER_MODULES)
     local = executor is None or isinstance(executor, ProcessPoolExecutor)
-    # Workers on this machine share its disk, where the instances' places wait for their jobs.
-    places_dir = tempfile.TemporaryDirectory(prefix="visuotactile-places-") if local else nullcontext()
+    # Local processes share this machine's disk, where the instances' places wait for their jobs; a Dask
+    # cluster's workers may not.
+    on_disk = local or isinstance(executor, Inline | FilePool)
+    places_dir = tempfile.TemporaryDirectory(prefix="visuotactile-places-") if on_disk else nullcontext()
     with threadpool_limits(1), workers as pool, places_dir as folder:
         # Local workers start while the objects load, and build the toys; a bad file still stops the run before any work.
         objects = load_objects(objects, settings, pool if local else None, skip_bad=skip_bad)
