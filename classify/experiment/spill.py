@@ -1,16 +1,16 @@
 """Instance places kept on disk while a block's stages run: the run holds paths, each job reads what it uses.
 
 With touch policies or the place-aware recognizer every instance has
-places, and a training instance's have touch codebooks: about 200 kB an
+places, and a training instance's have touch codebooks: about 150 kB an
 instance, gigabytes at a thousand objects.  Held in memory, the main
 process keeps all of them for the block, and each worker that fits a
-replicate keeps a second copy of that replicate's.  With workers on this
-machine each instance task writes its places to a folder of the block
+replicate keeps a second copy of that replicate's.  With local worker
+processes each instance task writes its places to a folder of the block
 (:func:`stored`) and hands back a :class:`StoredPlaceSample`, a path.  Jobs
 carry the paths; fitting reads one instance's arrays at a time (the
 samples' ``in_memory``), so neither the main process nor a worker holds a
-replicate's places whole.  A cluster reached by address keeps them in
-memory: its workers may not share this machine's disk.
+replicate's places whole.  On a Dask cluster they stay in memory: its
+workers may not share this machine's disk.
 """
 
 from __future__ import annotations
@@ -47,7 +47,7 @@ class StoredPlaceSample:
     def in_memory(self) -> PlaceSample | PackedPlaceSample:
         """The sample, read from the file (packed when it was written packed)."""
         a = read_npz(self.path, "stored instance places")
-        places = Places(a["vertex_ids"], a["positions"], a["normals"], a["features"], a["touchable"].astype(bool))
+        places = Places.from_arrays(a)
         book = a.get("codebook") if self.with_codebook else None
         if "codes" in a:
             return PackedPlaceSample(places, a["codes"], book)
@@ -92,14 +92,7 @@ def stored(sample: PlaceSample | PackedPlaceSample, folder) -> StoredPlaceSample
     >>> s.imprints.shape, s.places.touchable.tolist()
     ((1, 2, 4, 4), [True, True])
     """
-    p = sample.places
-    arrays = {
-        "vertex_ids": p.vertex_ids,
-        "positions": p.positions,
-        "normals": p.normals,
-        "features": p.features,
-        "touchable": p.touchable,
-    }
+    arrays = sample.places.to_arrays()
     if isinstance(sample, PackedPlaceSample):
         arrays["codes"] = sample.codes
     else:

@@ -78,6 +78,19 @@ class Places:
     def __len__(self) -> int:
         return int(self.vertex_ids.size)
 
+    def to_arrays(self) -> dict:
+        return {
+            "vertex_ids": self.vertex_ids,
+            "positions": self.positions,
+            "normals": self.normals,
+            "features": self.features,
+            "touchable": self.touchable,
+        }
+
+    @staticmethod
+    def from_arrays(a: dict) -> Places:
+        return Places(a["vertex_ids"], a["positions"], a["normals"], a["features"], a["touchable"].astype(bool))
+
 
 @dataclass(frozen=True, eq=False)
 class PlaceSample:
@@ -94,22 +107,11 @@ class PlaceSample:
     codebook: np.ndarray | None = None
 
     def to_arrays(self) -> dict:
-        p = self.places
-        return {
-            "vertex_ids": p.vertex_ids,
-            "positions": p.positions,
-            "normals": p.normals,
-            "features": p.features,
-            "touchable": p.touchable,
-            "imprints": self.imprints,
-        }
+        return {**self.places.to_arrays(), "imprints": self.imprints}
 
     @staticmethod
     def from_arrays(a: dict) -> PlaceSample:
-        return PlaceSample(
-            Places(a["vertex_ids"], a["positions"], a["normals"], a["features"], a["touchable"].astype(bool)),
-            a["imprints"],
-        )
+        return PlaceSample(Places.from_arrays(a), a["imprints"])
 
     @property
     def landmarks(self) -> np.ndarray:

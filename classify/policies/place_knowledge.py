@@ -79,7 +79,7 @@ def _session_touches(samples: dict, names: tuple) -> tuple:
 
     X, y, sig, inst = [], [], [], []
     for c, _, j, sample in in_object_order(samples, names):
-        sample = sample.in_memory()
+        sample = sample.without_codebook().in_memory()  # read once, and never the codebook it does not use
         ok = sample.places.touchable
         X.append(polar_fourier(sample.imprints[0][ok]))
         y.append(np.full(ok.sum(), c))
