@@ -33,7 +33,7 @@ def place_keys(signatures: np.ndarray) -> np.ndarray:
     )
 
 
-def place_touches(samples: dict, names: tuple, points=None) -> tuple:
+def place_touches(samples: dict, names: tuple, points=None, dtype=None) -> tuple:
     """Codebook touches of training instances as the place-aware recognizer takes them.
 
     Parameters
@@ -43,6 +43,7 @@ def place_touches(samples: dict, names: tuple, points=None) -> tuple:
     points : dict (object name, instance index) -> a fixed plan's training sample, optional
         Its ``positions`` (k, 3) and ``codebook`` (k, draws, d): the plan's
         points, located against the instance's landmarks, instead of the places.
+    dtype : numpy dtype of X, optional (default: the codebooks')
 
     Returns
     -------
@@ -69,7 +70,7 @@ def place_touches(samples: dict, names: tuple, points=None) -> tuple:
         sig.append(np.repeat(where, draws, axis=0))
         inst.append(np.full(book.shape[0] * draws, j))
         keys.append(np.repeat(place_keys(where), draws))
-    return tuple(np.concatenate(a) for a in (X, y, sig, inst, keys))
+    return (np.concatenate(X, dtype=dtype), *(np.concatenate(a) for a in (y, sig, inst, keys)))
 
 
 def _session_touches(samples: dict, names: tuple) -> tuple:
@@ -233,10 +234,12 @@ def fit_place_knowledge(training: dict, params: dict | None = None) -> PlaceKnow
     from classify.recognizers.classifiers import make
 
     names = tuple(sorted({name for name, _ in training}))
-    X, y, sig, inst, keys = place_touches(training, names)
+    X, y, sig, inst, keys = place_touches(training, names, dtype=np.float64)
+    # The fit standardizes X in place (no float64 copy beside it), and X is spent.
     model = make("place", **(params or {}).get("place", {})).fit(
-        X, y, signatures=sig, instances=inst, places=keys, session=_session_touches(training, names)
+        X, y, signatures=sig, instances=inst, places=keys, session=_session_touches(training, names), overwrite_X=True
     )
+    del X
     table, weights = model.forecast_table()
     # Each object's first training instance.
     first = {}

@@ -58,8 +58,11 @@ _TEMPERATURES = tuple(float(t) for t in np.round(np.geomspace(0.25, 64.0, 17), 4
 _TEMPERED = 1 << 16
 
 
-def describe_touches(X) -> np.ndarray:
-    """Polar descriptors of imprints (N, rows, cols), or descriptors (N, d) as they are: (N, d) float64."""
+def describe_touches(X, copy: bool = True) -> np.ndarray:
+    """Polar descriptors of imprints (N, rows, cols), or descriptors (N, d) as they are: (N, d) float64.
+
+    With ``copy=False``, float64 descriptors come back as the same array.
+    """
     X = np.asarray(X)
     if X.ndim == 3:
         from tactile.features import polar_fourier
@@ -67,7 +70,7 @@ def describe_touches(X) -> np.ndarray:
         return polar_fourier(X)
     if X.ndim != 2:
         raise ValueError(f"touches must be imprints (N, rows, cols) or descriptors (N, d), got shape {X.shape}")
-    return X.astype(np.float64)
+    return X.astype(np.float64, copy=copy)
 
 
 def _tempered_nll(total: np.ndarray, truth: np.ndarray, temps: np.ndarray) -> np.ndarray:
@@ -202,7 +205,7 @@ class PlaceAware(ClassifierMixin, BaseEstimator):
 
     # -- fitting ---------------------------------------------------------------------------------
 
-    def fit(self, X, y, *, signatures, instances, places, session=None):
+    def fit(self, X, y, *, signatures, instances, places, session=None, overwrite_X=False):
         """Build the banks and choose the bandwidth, mixture and temperature by leaving instances out.
 
         Parameters
@@ -217,12 +220,16 @@ class PlaceAware(ClassifierMixin, BaseEstimator):
             Touches of one acquisition session per training instance (one
             device at all its places): what the held-out instance feels in the
             fit.  Default: the first codebook touch of each of its places.
+        overwrite_X : bool
+            Float64 descriptors ``X`` may be standardized in place (``X`` is
+            then overwritten): a thousand objects' codebooks are millions of
+            touches, and a float64 copy beside them is hundreds of megabytes.
 
         Returns
         -------
         self
         """
-        Z = describe_touches(X)
+        Z = describe_touches(X, copy=not overwrite_X)
         y = np.asarray(y, np.int64)
         sig = np.asarray(signatures, np.float64)
         inst = np.asarray(instances, np.int64)
