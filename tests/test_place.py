@@ -181,6 +181,48 @@ def test_the_fit_standardizes_in_place_as_its_predictions_do_with_few_touch_size
         assert np.array_equal(bank.samples[bank.instances >= 0], Z[mine][order].astype(np.float32))
 
 
+def test_a_fit_that_may_overwrite_its_descriptors_is_the_same_fit_with_one_touch_sized_array_fewer(monkeypatch):
+    import tracemalloc
+
+    X, y, sig, inst, key = _many_touches()
+    kept = X.copy()
+    params = dict(fit_sets=5, bandwidths=(0.5, 1.0), mixtures=(0.01, 0.1))
+    # The banks' peak: up to the choice of the parameters, whose buffers here, a few rows of every object, are
+    # as large as the touches themselves (a thousand objects' codebooks are many times larger).
+    peaks, choose = [], PlaceAware._choose
+
+    def measured(self, session):
+        peaks.append((tracemalloc.get_traced_memory()[1] - held) / X.nbytes)
+        return choose(self, session)
+
+    monkeypatch.setattr(PlaceAware, "_choose", measured)
+    tracemalloc.start()
+    try:
+        held = 0
+        usual = PlaceAware(**params).fit(X, y, signatures=sig, instances=inst, places=key)
+        assert np.array_equal(X, kept)  # left as it is by default
+        tracemalloc.reset_peak()
+        held = tracemalloc.get_traced_memory()[0]
+        model = PlaceAware(**params).fit(X, y, signatures=sig, instances=inst, places=key, overwrite_X=True)
+    finally:
+        tracemalloc.stop()
+    assert not np.array_equal(X, kept)  # standardized and whitened where it lies
+    # By default, the standardized copy and a temporary of its size; overwriting, X and the temporary.
+    assert peaks[0] > 1.9 and peaks[1] < 1.35, peaks
+    assert (model.bandwidth_, model.mixture_, model.temperature_) == (
+        usual.bandwidth_,
+        usual.mixture_,
+        usual.temperature_,
+    )
+    assert np.array_equal(model.whitening_, usual.whitening_)
+    for a, b in zip(model.banks_, usual.banks_):
+        assert np.array_equal(a.samples, b.samples) and np.array_equal(a.free, b.free)
+    # float32 descriptors are converted, never overwritten.
+    X32 = kept.astype(np.float32)
+    PlaceAware(**params).fit(X32, y, signatures=sig, instances=inst, places=key, overwrite_X=True)
+    assert np.array_equal(X32, kept.astype(np.float32))
+
+
 # -- the place-aware knowledge on two shapes that differ in one place --------------------------------------
 
 

@@ -56,6 +56,8 @@ _NEG = -np.inf
 _TEMPERATURES = tuple(float(t) for t in np.round(np.geomspace(0.25, 64.0, 17), 4))
 #: Tempered log-likelihoods held at once while fitting the temperature (512 KB: a core's cache).
 _TEMPERED = 1 << 16
+#: Rows whitened at a time in the fit.
+_ROWS = 1 << 14
 
 
 def describe_touches(X, copy: bool = True) -> np.ndarray:
@@ -260,13 +262,14 @@ class PlaceAware(ClassifierMixin, BaseEstimator):
         if session is None:
             first = np.unique(np.c_[y, inst, keys], axis=0, return_index=True)[1]
             session = (Z[first], y[first], sig[first], inst[first])
-        # Standardized in place and whitened into a new array that replaces it (Z its only name): the operations
-        # of _standardized with one touch-sized array alive instead of three, and two beside the banks (a thousand
-        # objects' codebooks are millions of touches).
+        # Standardized and whitened in place, a block of rows at a time: the operations of _standardized (a row's
+        # product does not depend on the other rows) with one touch-sized array beside the banks, not two (a
+        # thousand objects' codebooks are millions of touches).
         Z -= self.mean_
         Z /= self.scale_
         self.whitening_ = within_place_whitening(Z, y, keys) if self.whiten else np.eye(Z.shape[1])
-        Z = Z @ self.whitening_
+        for a in range(0, n, _ROWS):
+            Z[a : a + _ROWS] = Z[a : a + _ROWS] @ self.whitening_
         self.banks_ = []
         for c in self.classes_:
             mine = y == c
