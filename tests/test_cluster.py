@@ -9,7 +9,15 @@ import pytest
 from conftest import missing
 
 from classify.cli import main
-from classify.runtime.cluster import LOOPBACK, QUIET, one_thread, open_executor, tls_security, worker_pool
+from classify.runtime.cluster import (
+    LOOPBACK,
+    QUIET,
+    one_thread,
+    open_executor,
+    shares_disk,
+    tls_security,
+    worker_pool,
+)
 
 
 def _listening() -> set:
@@ -89,6 +97,7 @@ def test_a_task_runs_on_one_thread_wherever_it_runs():
     # Workers of a LocalCluster and of the local process pool start on one thread; a worker started
     # elsewhere, as a plain 'dask worker', gets the caps from each task (tests/test_batch.py runs on one).
     with open_executor(workers=2) as executor:
+        assert shares_disk(executor)  # its workers read the files this process writes
         assert list(executor.map(_threads, range(2))) == [(1, 1)] * 2
         # Without a dashboard, no profiler samples the task's thread and the loops tick slowly.
         assert list(executor.map(_housekeeping, range(2))) == [tuple(QUIET.values())] * 2

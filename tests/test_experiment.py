@@ -209,13 +209,14 @@ def test_real_imprint_set_gives_table_2_with_folds_grouped_by_point(tmp_path, ca
 
 
 def test_results_csv_is_identical_in_process_on_a_local_cluster_and_on_a_tcp_cluster(tmp_path, dask_cluster):
-    from classify.runtime.cluster import open_executor
+    from classify.runtime.cluster import open_executor, shares_disk
 
     config = QUICK.replace(methods=("uniform",), classifiers=("knn", "naive_bayes", "decision_tree"))
     quick.run(_objects(), config, n_jobs=1, out_dir=tmp_path / "serial")
     with open_executor(workers=2) as executor:
         quick.run(_objects(), config, executor=executor, out_dir=tmp_path / "local")
     with open_executor(scheduler=dask_cluster.address) as executor:
+        assert not shares_disk(executor)  # a cluster by address may run elsewhere: places stay in memory
         quick.run(_objects(), config, executor=executor, out_dir=tmp_path / "tcp")
     serial = (tmp_path / "serial" / "results.csv").read_text()
     assert serial == (tmp_path / "local" / "results.csv").read_text() == (tmp_path / "tcp" / "results.csv").read_text()

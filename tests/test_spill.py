@@ -11,7 +11,7 @@ from quick import QUICK
 from classify.experiment import place as place_mod
 from classify.experiment.spill import StoredPlaceSample, stored
 from classify.policies import PackedPlaceSample, Places, PlaceSample
-from classify.runtime.cluster import FilePool, Inline
+from classify.runtime.cluster import FilePool, Inline, open_executor, shares_disk
 from meshsal.util.npzfile import NpzError
 
 
@@ -112,5 +112,11 @@ def test_places_wait_on_disk_for_their_jobs_give_the_results_of_places_in_memory
     seen.clear()
     quick.run(_objects(), config, out_dir=tmp_path / "memory", executor=Elsewhere(), replicates_at_once=1)
     assert all(isinstance(s, PackedPlaceSample) for job in seen for s in job)
+    # A LocalCluster's worker reads the places this process's run writes, as a local process does.
+    monkeypatch.undo()  # the spy is this process's
+    with open_executor(workers=1) as executor:
+        assert shares_disk(executor)
+        quick.run(_objects(), config, out_dir=tmp_path / "cluster", executor=executor, replicates_at_once=1)
     for name in ("results.csv", "stopping.csv"):
-        assert (tmp_path / "disk" / name).read_bytes() == (tmp_path / "memory" / name).read_bytes(), name
+        disk = (tmp_path / "disk" / name).read_bytes()
+        assert disk == (tmp_path / "memory" / name).read_bytes() == (tmp_path / "cluster" / name).read_bytes(), name

@@ -49,7 +49,7 @@ from classify.reporting.results import (
     write_outputs,
 )
 from classify.runtime import cache as cache_mod
-from classify.runtime.cluster import FilePool, Inline, worker_pool
+from classify.runtime.cluster import Inline, shares_disk, worker_pool
 from classify.runtime.usage import StageUsage, cpu_seconds, measured, resident_mb
 from meshsal.points import METHODS, MODEL_METHODS
 
@@ -331,9 +331,8 @@ def run_experiment(
     usage, measurements, models = {}, [], []
     workers = nullcontext(executor) if executor is not None else worker_pool(n_jobs, preload=WORKER_MODULES)
     local = executor is None or isinstance(executor, ProcessPoolExecutor)
-    # Local processes share this machine's disk, where the instances' places wait for their jobs; a Dask
-    # cluster's workers may not.
-    on_disk = local or isinstance(executor, Inline | FilePool)
+    # The instances' places wait for their jobs on this machine's disk when the workers share it.
+    on_disk = shares_disk(executor)
     places_dir = tempfile.TemporaryDirectory(prefix="visuotactile-places-") if on_disk else nullcontext()
     with threadpool_limits(1), workers as pool, places_dir as folder:
         # Local workers start while the objects load, and build the toys; a bad file still stops the run before any work.

@@ -5,12 +5,13 @@ places, and a training instance's have touch codebooks: about 150 kB an
 instance, gigabytes at a thousand objects.  Held in memory, the main
 process keeps all of them for the block, and each worker that fits a
 replicate keeps a second copy of that replicate's.  With local worker
-processes each instance task writes its places to a folder of the block
+processes or a LocalCluster (``classify.runtime.cluster.shares_disk``)
+each instance task writes its places to a folder of the block
 (:func:`stored`) and hands back a :class:`StoredPlaceSample`, a path.  Jobs
 carry the paths; fitting reads one instance's arrays at a time (the
 samples' ``in_memory``), so neither the main process nor a worker holds a
-replicate's places whole.  On a Dask cluster they stay in memory: its
-workers may not share this machine's disk.
+replicate's places whole.  On a Dask cluster by address they stay in
+memory: its workers may not share this machine's disk.
 """
 
 from __future__ import annotations

@@ -56,7 +56,9 @@ __all__ = [
     "QUIET",
     "one_thread",
     "worker_pool",
+    "OnThisMachine",
     "open_executor",
+    "shares_disk",
     "tls_security",
     "worker_env",
     "LOOPBACK",
@@ -79,6 +81,30 @@ class Inline:
 
     def map(self, fn, *iterables):
         return map(fn, *iterables)
+
+
+class OnThisMachine:
+    """A Dask executor whose workers run on this machine (a LocalCluster's): they read the files this process
+    writes."""
+
+    def __init__(self, executor):
+        self.executor = executor
+
+    def map(self, fn, *iterables):
+        return self.executor.map(fn, *iterables)
+
+
+def shares_disk(executor) -> bool:
+    """Whether ``executor``'s workers read the files this process writes: local worker processes, this process
+    (``None``, :class:`Inline`) or a LocalCluster's (:class:`OnThisMachine`); never a cluster by address, whose
+    workers may run elsewhere.
+
+    Examples
+    --------
+    >>> shares_disk(Inline()), shares_disk(None)
+    (True, True)
+    """
+    return executor is None or isinstance(executor, ProcessPoolExecutor | Inline | FilePool | OnThisMachine)
 
 
 @contextmanager
@@ -387,4 +413,4 @@ def open_executor(
     ):
         if dashboard is not None:
             print(f"dashboard: {client.dashboard_link}", file=sys.stderr)
-        yield client.get_executor()
+        yield OnThisMachine(client.get_executor())
