@@ -207,7 +207,7 @@ def test_a_fit_that_may_overwrite_its_descriptors_is_the_same_fit_with_one_touch
     finally:
         tracemalloc.stop()
     assert not np.array_equal(X, kept)  # standardized and whitened where it lies
-    # By default, the standardized copy and a temporary of its size; overwriting, X and the temporary.
+    # By default, the standardized copy and a temporary of its size; overwriting, the temporary alone (X is ours).
     assert peaks[0] > 1.9 and peaks[1] < 1.35, peaks
     assert (model.bandwidth_, model.mixture_, model.temperature_) == (
         usual.bandwidth_,

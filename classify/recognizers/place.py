@@ -270,8 +270,8 @@ class PlaceAware(ClassifierMixin, BaseEstimator):
         Z -= self.mean_
         Z /= self.scale_
         self.whitening_ = within_place_whitening(Z, y, keys) if self.whiten else np.eye(Z.shape[1])
-        for a in range(0, max(n - _ROWS, 0) + 1, _ROWS):
-            b = a + _ROWS if a + 2 * _ROWS <= n else n
+        starts = range(0, max(n - _ROWS, 1), _ROWS)
+        for a, b in zip(starts, [*starts[1:], n]):
             Z[a:b] = Z[a:b] @ self.whitening_
         self.banks_ = []
         for c in self.classes_:
