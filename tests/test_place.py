@@ -223,6 +223,47 @@ def test_a_fit_that_may_overwrite_its_descriptors_is_the_same_fit_with_one_touch
     assert np.array_equal(X32, kept.astype(np.float32))
 
 
+# Past the shortlist (screened, one width at a time) and within it; a session in instance order and shuffled.
+@pytest.mark.parametrize("shortlist, shuffled", [(4, False), (64, True)])
+def test_the_fit_scores_its_held_out_touches_a_block_at_a_time_to_the_same_choice_in_less_memory(
+    shortlist, shuffled, monkeypatch
+):
+    import tracemalloc
+
+    import classify.recognizers.place as place
+
+    X, y, sig, inst, key = _many_touches(C=32, instances=3, places=16, draws=2, d=6)
+    first = np.unique(np.c_[y, inst, key], axis=0, return_index=True)[1]
+    if shuffled:  # an instance's rows are brought together before they are scored
+        first = np.random.default_rng(1).permutation(first)
+    session = (X[first], y[first], sig[first], inst[first])
+    choose = PlaceAware._choose
+
+    def fitted(budget):
+        monkeypatch.setattr(place, "_CHUNK", 8)
+        monkeypatch.setattr(place, "_HELD_OUT", budget)
+        peak = []
+
+        def measured(self, session):
+            tracemalloc.start()
+            try:
+                return choose(self, session)
+            finally:
+                peak.append(tracemalloc.get_traced_memory()[1])
+                tracemalloc.stop()
+
+        monkeypatch.setattr(PlaceAware, "_choose", measured)
+        model = PlaceAware(fit_sets=5, bandwidths=(0.5, 1.0), mixtures=(0.01, 0.1), shortlist=shortlist)
+        model.fit(X, y, signatures=sig, instances=inst, places=key, session=session)
+        return (model.fit_loss_, model.bandwidth_, model.mixture_, model.temperature_), peak[0]
+
+    whole, whole_peak = fitted(1 << 40)  # every held-out touch in one block
+    blocks, blocks_peak = fitted(1)  # blocks of one chunk: an instance's 16 rows span two or three
+    assert blocks == whole  # the loss too, bit for bit
+    # All at once, several (held-out touches, objects) arrays and their temporaries; a block at a time, a few rows'.
+    assert blocks_peak < whole_peak / 3, (whole_peak, blocks_peak)
+
+
 # -- the place-aware knowledge on two shapes that differ in one place --------------------------------------
 
 
@@ -486,4 +527,4 @@ def test_tempered_losses_are_the_logsumexp_of_the_tempered_totals_bit_for_bit(ce
     truth = rng.integers(0, 3, 43)
     temps = np.geomspace(0.25, 64.0, 17)
     want = [np.mean(lse(total / T, axis=1) - total[np.arange(43), truth] / T) for T in temps]
-    assert place._tempered_nll(total, truth, temps).tolist() == want
+    assert place._tempered_losses(total, truth, temps).mean(axis=1).tolist() == want

@@ -58,6 +58,10 @@ _TEMPERATURES = tuple(float(t) for t in np.round(np.geomspace(0.25, 64.0, 17), 4
 _TEMPERED = 1 << 16
 #: Rows whitened at a time in the fit (5.5 MB of 42 descriptors).
 _ROWS = 1 << 14
+#: Touches scored at a time under each object by ``PlaceAware._log_terms``.
+_CHUNK = 1 << 10
+#: Bytes of each (held-out touches, objects) array the fit's choice of parameters holds at once.
+_HELD_OUT = 1 << 25
 
 
 def describe_touches(X, copy: bool = True) -> np.ndarray:
@@ -75,9 +79,9 @@ def describe_touches(X, copy: bool = True) -> np.ndarray:
     return X.astype(np.float64, copy=copy)
 
 
-def _tempered_nll(total: np.ndarray, truth: np.ndarray, temps: np.ndarray) -> np.ndarray:
-    """(temps,) mean negative log posterior of the true objects, summed log-likelihoods ``total`` (m, C) tempered by
-    each of ``temps``: ``lse(total / T) - total[truth] / T``, averaged over rows.
+def _tempered_losses(total: np.ndarray, truth: np.ndarray, temps: np.ndarray) -> np.ndarray:
+    """(temps, m) negative log posterior of the true objects, summed log-likelihoods ``total`` (m, C) tempered by
+    each of ``temps``: ``lse(total / T) - total[truth] / T``.  A row's losses do not depend on the other rows.
 
     One temperature and a few rows at a time, in one buffer that stays in the
     cache (each pass over a large one waits on memory more than it computes);
@@ -103,7 +107,7 @@ def _tempered_nll(total: np.ndarray, truth: np.ndarray, temps: np.ndarray) -> np
             np.exp(np.subtract(scaled, top, out=scaled), out=scaled)
             with np.errstate(divide="ignore"):
                 losses[j, a:b] = (np.log(scaled.sum(axis=1, keepdims=True)) + top)[:, 0] - picked
-    return losses.mean(axis=1)
+    return losses
 
 
 class PlaceAware(ClassifierMixin, BaseEstimator):
@@ -304,7 +308,7 @@ class PlaceAware(ClassifierMixin, BaseEstimator):
                 continue
             rows = np.flatnonzero((ys == c) & (insts == t))
             keep.append(rows[np.unique(np.linspace(0, rows.size - 1, min(rows.size, self.fit_places)).astype(int))])
-        keep = np.sort(np.concatenate(keep))
+        keep = np.concatenate(keep)  # an instance's rows together, so that its sets are complete in one or two blocks
         Zs, ys, sigs, insts = Zs[keep], ys[keep], sigs[keep], insts[keep]
         # The width unit: how far a held-out touch lies from its own place's training touches.
         near = []
@@ -318,11 +322,6 @@ class PlaceAware(ClassifierMixin, BaseEstimator):
         near = np.concatenate(near)
         unit = float(np.median(near)) if near.size else 1.0
         widths = unit * np.asarray(self.bandwidths, np.float64)
-        # (widths, N, C) place and place-free log-likelihoods of every held-out touch; one width at a time past
-        # the shortlist, where N x C is large.
-        every = self._log_terms(Zs, sigs, insts, widths) if C <= self.shortlist else None
-        # Past the shortlist each width reads the same screening, done once.
-        screen = self.free_.nearest(Zs, insts) if every is None else None
         rng = np.random.default_rng(self.random_state)
         groups = [np.flatnonzero((ys == c) & (insts == t)) for c, t in sorted(set(zip(ys.tolist(), insts.tolist())))]
         sets = [
@@ -332,37 +331,76 @@ class PlaceAware(ClassifierMixin, BaseEstimator):
             if rows.size >= k
         ]
         temps = np.asarray(self.temperatures, np.float64)
+        cells = [(a, float(h), float(w)) for a, h in enumerate(widths) for w in self.mixtures]
+        counts = [k for k in self.fit_touches if any(kk == k for kk, _, _ in sets)]
+        chosen = {k: [(rows, truth) for kk, rows, truth in sets if kk == k] for k in counts}
+        # The last row of each row's instance: its sets are complete once that row is scored.
+        until = np.empty(len(Zs), np.int64)
+        for rows in groups:
+            until[rows] = rows.max()
+        # (temps, sets) summed tempered losses of each set's fit_sets draws, for each cell and touch count: the
+        # loss is their mean, the same whatever the blocks.
+        sums = {(i, k): np.empty((temps.size, len(chosen[k]))) for i in range(len(cells)) for k in counts}
+        # The held-out touches are scored a block of rows at a time, so that the (rows, C) arrays stay a few tens of
+        # megabytes at a thousand objects.  A block is whole chunks of _log_terms, so each row is scored beside the
+        # same rows as in one call; the log-likelihoods of rows whose instance goes on in the next block wait for it.
+        N = len(Zs)
+        block = _CHUNK * max(1, _HELD_OUT // (_CHUNK * 8 * C))
+        waiting = np.empty(0, np.int64)
+        held = [np.empty((0, C)) for _ in cells]
+        for A in range(0, N, block):
+            B = min(A + block, N)
+            span = slice(A, B)
+            if C <= self.shortlist:
+                every = self._log_terms(Zs[span], sigs[span], insts[span], widths, chunk=_CHUNK)
+            else:  # one width at a time, each reading the same screening
+                every, screen = None, self.free_.nearest(Zs[span], insts[span])
+            present = np.concatenate([waiting, np.arange(A, B)])
+            where = np.full(N, -1, np.int64)
+            where[present] = np.arange(present.size)
+            done = {k: [j for j, (rows, _) in enumerate(chosen[k]) if A <= until[rows[0, 0]] < B] for k in counts}
+            waiting_next = present[until[present] >= B]
+            for a, h in enumerate(widths):
+                if every is not None:
+                    place, free = every[0][a], every[1][a]
+                else:
+                    place = free = None  # the last width's terms go before this one's are computed
+                    place, free, _ = self._log_terms(
+                        Zs[span], sigs[span], insts[span], [h], chunk=_CHUNK, screen=screen
+                    )
+                place, free = place.reshape(B - A, C), free.reshape(B - A, C)
+                for i in (i for i, cell in enumerate(cells) if cell[0] == a):
+                    w = cells[i][2]
+                    ll = np.empty((present.size, C))
+                    ll[: waiting.size] = held[i]
+                    fresh = ll[waiting.size :]
+                    for r in range(0, B - A, _CHUNK):  # logaddexp(log(1 - w) + place, log(w) + free)
+                        rows = slice(r, r + _CHUNK)
+                        np.logaddexp(
+                            np.add(np.log1p(-w), place[rows], out=fresh[rows]), np.log(w) + free[rows], out=fresh[rows]
+                        )
+                    for k in counts:
+                        if not done[k]:
+                            continue
+                        part = [chosen[k][j] for j in done[k]]
+                        total = np.empty((sum(len(rows) for rows, _ in part), C))  # (m, C), each set's summed rows
+                        start = 0
+                        for rows, _ in part:
+                            np.sum(ll[where[rows]], axis=1, out=total[start : start + len(rows)])
+                            start += len(rows)
+                        truth = np.concatenate([np.full(len(rows), t) for rows, t in part])
+                        each = _tempered_losses(total, truth, temps).reshape(temps.size, len(part), self.fit_sets)
+                        sums[i, k][:, done[k]] = each.sum(axis=2)
+                    held[i] = ll[where[waiting_next]]
+            waiting = waiting_next
         best = (np.inf, None)
-        # One (N, C) buffer of mixtures for every width and mixture, filled a chunk of rows at a time: a large
-        # N x C is a few of these.
-        ll = np.empty((len(Zs), C))
-        step = 1024
-        for a, h in enumerate(widths):
-            if every is not None:
-                place, free = every[0][a], every[1][a]
-            else:
-                place = free = None  # the last width's terms go before this one's are computed
-                place, free, _ = self._log_terms(Zs, sigs, insts, [h], screen=screen)
-            place, free = place.reshape(len(Zs), C), free.reshape(len(Zs), C)
-            for w in self.mixtures:
-                for r in range(0, len(Zs), step):  # logaddexp(log(1 - w) + place, log(w) + free)
-                    rows = slice(r, r + step)
-                    np.logaddexp(np.add(np.log1p(-w), place[rows], out=ll[rows]), np.log(w) + free[rows], out=ll[rows])
-                loss = np.zeros(temps.size)
-                for k in self.fit_touches:
-                    chosen = [(rows, truth) for kk, rows, truth in sets if kk == k]
-                    if not chosen:
-                        continue
-                    total = np.empty((sum(len(rows) for rows, _ in chosen), C))  # (m, C), each set's summed rows
-                    start = 0
-                    for rows, _ in chosen:
-                        np.sum(ll[rows], axis=1, out=total[start : start + len(rows)])
-                        start += len(rows)
-                    truth = np.concatenate([np.full(len(rows), t) for rows, t in chosen])
-                    loss += _tempered_nll(total, truth, temps) / len(self.fit_touches)
-                t = int(np.argmin(loss))
-                if loss[t] < best[0] - 1e-12:
-                    best = (float(loss[t]), (float(h), float(w), float(temps[t])))
+        for i, (_, h, w) in enumerate(cells):
+            loss = np.zeros(temps.size)
+            for k in counts:
+                loss += sums[i, k].sum(axis=1) / (self.fit_sets * len(chosen[k])) / len(self.fit_touches)
+            t = int(np.argmin(loss))
+            if loss[t] < best[0] - 1e-12:
+                best = (float(loss[t]), (h, w, float(temps[t])))
         self.fit_loss_ = best[0]
         self.bandwidth_, self.mixture_, self.temperature_ = best[1]
 
