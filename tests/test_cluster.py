@@ -214,6 +214,7 @@ if __name__ == "__main__":
 
 
 def test_workers_end_with_a_run_that_is_killed(tmp_path):
+    import os
     import signal
     import subprocess
     import sys
@@ -221,7 +222,9 @@ def test_workers_end_with_a_run_that_is_killed(tmp_path):
 
     script = tmp_path / "run.py"
     script.write_text(_ORPHAN)
-    run = subprocess.Popen([sys.executable, str(script)], stdout=subprocess.PIPE, text=True)
+    # The killed run's task folder, with its unread task, is left where TMPDIR says: here, not in /tmp.
+    env = {**os.environ, "TMPDIR": str(tmp_path)}
+    run = subprocess.Popen([sys.executable, str(script)], stdout=subprocess.PIPE, text=True, env=env)
     pids = [int(p) for p in run.stdout.readline().split()]
     assert len(pids) == 2 and all(psutil.pid_exists(p) for p in pids)
     run.send_signal(signal.SIGKILL)  # no clean-up runs: only the kernel can end the workers now
@@ -230,3 +233,4 @@ def test_workers_end_with_a_run_that_is_killed(tmp_path):
     while any(psutil.pid_exists(p) and psutil.Process(p).status() != psutil.STATUS_ZOMBIE for p in pids):
         assert time.monotonic() < deadline, f"workers {pids} outlive their killed parent"
         time.sleep(0.2)
+    assert len(list(tmp_path.glob("visuotactile-tasks-*"))) == 1
