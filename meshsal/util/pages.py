@@ -62,7 +62,11 @@ def machine() -> str:
 
 
 def commit(where=None) -> str:
-    """The checkout's commit (short hash, ``+changes`` when the tree differs from it), or ``unknown``."""
+    """The checkout's commit (short hash, ``+changes`` when the code differs from it), or ``unknown``.
+
+    Changes under ``docs/`` do not count: they are what the commands write
+    (a benchmark's picture is written before its page), not what they measure.
+    """
     where = Path(__file__).resolve().parents[2] if where is None else Path(where)
 
     def git(*args):
@@ -72,7 +76,7 @@ def commit(where=None) -> str:
         head = git("rev-parse", "--short=10", "HEAD")
         if head.returncode != 0:
             return "unknown"
-        dirty = git("status", "--porcelain", "--untracked-files=no").stdout.strip()
+        dirty = git("status", "--porcelain", "--untracked-files=no", "--", ":/", ":(top,exclude)docs").stdout.strip()
     except (OSError, subprocess.SubprocessError):
         return "unknown"
     return head.stdout.strip() + (" +changes" if dirty else "")
