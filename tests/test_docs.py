@@ -170,7 +170,7 @@ def test_a_page_names_its_commit_and_changes_to_the_code_but_not_to_the_pages_it
     (tmp_path / "docs").mkdir()
     (tmp_path / "docs" / "page.md").write_text("# A page\n")
     git("add", ".")
-    git("-c", "user.name=t", "-c", "user.email=t@t", "commit", "-qm", "first")
+    git("-c", "user.name=t", "-c", "user.email=t@t", "-c", "commit.gpgsign=false", "commit", "-qm", "first")
     head = subprocess.run(
         ["git", "-C", str(tmp_path), "rev-parse", "--short=10", "HEAD"], capture_output=True, text=True
     )

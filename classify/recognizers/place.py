@@ -308,7 +308,7 @@ class PlaceAware(ClassifierMixin, BaseEstimator):
                 continue
             rows = np.flatnonzero((ys == c) & (insts == t))
             keep.append(rows[np.unique(np.linspace(0, rows.size - 1, min(rows.size, self.fit_places)).astype(int))])
-        keep = np.concatenate(keep)  # an instance's rows together, so that its sets are complete in one or two blocks
+        keep = np.concatenate(keep)  # an instance's rows together: the choice scores them in blocks of rows
         Zs, ys, sigs, insts = Zs[keep], ys[keep], sigs[keep], insts[keep]
         # The width unit: how far a held-out touch lies from its own place's training touches.
         near = []
@@ -331,23 +331,28 @@ class PlaceAware(ClassifierMixin, BaseEstimator):
             if rows.size >= k
         ]
         temps = np.asarray(self.temperatures, np.float64)
-        cells = [(a, float(h), float(w)) for a, h in enumerate(widths) for w in self.mixtures]
         counts = [k for k in self.fit_touches if any(kk == k for kk, _, _ in sets)]
         chosen = {k: [(rows, truth) for kk, rows, truth in sets if kk == k] for k in counts}
-        # The last row of each row's instance: its sets are complete once that row is scored.
-        until = np.empty(len(Zs), np.int64)
+        # An instance's rows are contiguous: its first and its last row, for each row.
+        first, until = np.empty(len(Zs), np.int64), np.empty(len(Zs), np.int64)
         for rows in groups:
-            until[rows] = rows.max()
-        # (temps, sets) summed tempered losses of each set's fit_sets draws, for each cell and touch count: the
-        # loss is their mean, the same whatever the blocks.
-        sums = {(i, k): np.empty((temps.size, len(chosen[k]))) for i in range(len(cells)) for k in counts}
+            first[rows], until[rows] = rows[0], rows[-1]
+        ends = {k: np.array([until[rows[0, 0]] for rows, _ in chosen[k]]) for k in counts}
+        # (temps, sets) summed tempered losses of each set's fit_sets draws, for each width, mixture and touch
+        # count: the loss is their mean, the same whatever the blocks.
+        sums = {
+            (a, m, k): np.empty((temps.size, len(chosen[k])))
+            for a in range(len(widths))
+            for m in range(len(self.mixtures))
+            for k in counts
+        }
         # The held-out touches are scored a block of rows at a time, so that the (rows, C) arrays stay a few tens of
         # megabytes at a thousand objects.  A block is whole chunks of _log_terms, so each row is scored beside the
-        # same rows as in one call; the log-likelihoods of rows whose instance goes on in the next block wait for it.
+        # same rows as in one call; the log-likelihoods of an instance that goes on in the next block wait for it
+        # (rows lo to A, one array per width and mixture).
         N = len(Zs)
         block = _CHUNK * max(1, _HELD_OUT // (_CHUNK * 8 * C))
-        waiting = np.empty(0, np.int64)
-        held = [np.empty((0, C)) for _ in cells]
+        lo, held = 0, {}
         for A in range(0, N, block):
             B = min(A + block, N)
             span = slice(A, B)
@@ -355,11 +360,8 @@ class PlaceAware(ClassifierMixin, BaseEstimator):
                 every = self._log_terms(Zs[span], sigs[span], insts[span], widths, chunk=_CHUNK)
             else:  # one width at a time, each reading the same screening
                 every, screen = None, self.free_.nearest(Zs[span], insts[span])
-            present = np.concatenate([waiting, np.arange(A, B)])
-            where = np.full(N, -1, np.int64)
-            where[present] = np.arange(present.size)
-            done = {k: [j for j, (rows, _) in enumerate(chosen[k]) if A <= until[rows[0, 0]] < B] for k in counts}
-            waiting_next = present[until[present] >= B]
+            done = {k: np.flatnonzero((ends[k] >= A) & (ends[k] < B)) for k in counts}
+            next_lo = first[B - 1] if until[B - 1] >= B else B
             for a, h in enumerate(widths):
                 if every is not None:
                     place, free = every[0][a], every[1][a]
@@ -369,38 +371,34 @@ class PlaceAware(ClassifierMixin, BaseEstimator):
                         Zs[span], sigs[span], insts[span], [h], chunk=_CHUNK, screen=screen
                     )
                 place, free = place.reshape(B - A, C), free.reshape(B - A, C)
-                for i in (i for i, cell in enumerate(cells) if cell[0] == a):
-                    w = cells[i][2]
-                    ll = np.empty((present.size, C))
-                    ll[: waiting.size] = held[i]
-                    fresh = ll[waiting.size :]
-                    for r in range(0, B - A, _CHUNK):  # logaddexp(log(1 - w) + place, log(w) + free)
-                        rows = slice(r, r + _CHUNK)
-                        np.logaddexp(
-                            np.add(np.log1p(-w), place[rows], out=fresh[rows]), np.log(w) + free[rows], out=fresh[rows]
-                        )
+                for m, w in enumerate(self.mixtures):
+                    ll = np.empty((B - lo, C))  # rows lo to B
+                    if A > lo:
+                        ll[: A - lo] = held[a, m]
+                    for r in range(A, B, _CHUNK):  # logaddexp(log(1 - w) + place, log(w) + free)
+                        out, rows = ll[r - lo : r - lo + _CHUNK], slice(r - A, r - A + _CHUNK)
+                        np.logaddexp(np.add(np.log1p(-w), place[rows], out=out), np.log(w) + free[rows], out=out)
                     for k in counts:
-                        if not done[k]:
+                        if done[k].size == 0:
                             continue
-                        part = [chosen[k][j] for j in done[k]]
-                        total = np.empty((sum(len(rows) for rows, _ in part), C))  # (m, C), each set's summed rows
-                        start = 0
-                        for rows, _ in part:
-                            np.sum(ll[where[rows]], axis=1, out=total[start : start + len(rows)])
-                            start += len(rows)
-                        truth = np.concatenate([np.full(len(rows), t) for rows, t in part])
-                        each = _tempered_losses(total, truth, temps).reshape(temps.size, len(part), self.fit_sets)
-                        sums[i, k][:, done[k]] = each.sum(axis=2)
-                    held[i] = ll[where[waiting_next]]
-            waiting = waiting_next
+                        total = np.empty((done[k].size * self.fit_sets, C))  # each draw's summed rows
+                        for n, j in enumerate(done[k]):
+                            rows = chosen[k][j][0] - lo
+                            np.sum(ll[rows], axis=1, out=total[n * self.fit_sets : (n + 1) * self.fit_sets])
+                        truth = np.repeat([chosen[k][j][1] for j in done[k]], self.fit_sets)
+                        each = _tempered_losses(total, truth, temps).reshape(temps.size, done[k].size, self.fit_sets)
+                        sums[a, m, k][:, done[k]] = each.sum(axis=2)
+                    held[a, m] = ll[next_lo - lo :].copy()  # a view would keep the whole block
+            lo = next_lo
         best = (np.inf, None)
-        for i, (_, h, w) in enumerate(cells):
-            loss = np.zeros(temps.size)
-            for k in counts:
-                loss += sums[i, k].sum(axis=1) / (self.fit_sets * len(chosen[k])) / len(self.fit_touches)
-            t = int(np.argmin(loss))
-            if loss[t] < best[0] - 1e-12:
-                best = (float(loss[t]), (h, w, float(temps[t])))
+        for a, h in enumerate(widths):
+            for m, w in enumerate(self.mixtures):
+                loss = np.zeros(temps.size)
+                for k in counts:
+                    loss += sums[a, m, k].sum(axis=1) / (self.fit_sets * len(chosen[k])) / len(self.fit_touches)
+                t = int(np.argmin(loss))
+                if loss[t] < best[0] - 1e-12:
+                    best = (float(loss[t]), (float(h), float(w), float(temps[t])))
         self.fit_loss_ = best[0]
         self.bandwidth_, self.mixture_, self.temperature_ = best[1]
 
