@@ -162,8 +162,9 @@ def test_the_measurements_page_lists_the_pages_commands_wrote(generate, tmp_path
 def test_a_page_names_its_commit_and_changes_to_the_code_but_not_to_the_pages_it_writes(tmp_path):
     from meshsal.util.pages import commit
 
-    def git(*args):
-        subprocess.run(["git", "-C", str(tmp_path), *args], check=True, capture_output=True)
+    def git(*args) -> str:
+        done = subprocess.run(["git", "-C", str(tmp_path), *args], check=True, capture_output=True, text=True)
+        return done.stdout.strip()
 
     git("init", "-q")
     (tmp_path / "code.py").write_text("x = 1\n")
@@ -171,13 +172,11 @@ def test_a_page_names_its_commit_and_changes_to_the_code_but_not_to_the_pages_it
     (tmp_path / "docs" / "page.md").write_text("# A page\n")
     git("add", ".")
     git("-c", "user.name=t", "-c", "user.email=t@t", "-c", "commit.gpgsign=false", "commit", "-qm", "first")
-    head = subprocess.run(
-        ["git", "-C", str(tmp_path), "rev-parse", "--short=10", "HEAD"], capture_output=True, text=True
-    )
-    assert commit(tmp_path) == head.stdout.strip()
+    head = git("rev-parse", "--short=10", "HEAD")
+    assert commit(tmp_path) == head
     (tmp_path / "docs" / "page.md").write_text("# A page, measured again\n")
-    assert commit(tmp_path) == head.stdout.strip()
-    assert commit(tmp_path / "docs") == head.stdout.strip()  # asked from inside docs/ too
+    assert commit(tmp_path) == head
+    assert commit(tmp_path / "docs") == head  # asked from inside docs/ too
     (tmp_path / "code.py").write_text("x = 2\n")
-    assert commit(tmp_path) == head.stdout.strip() + " +changes"
-    assert commit(tmp_path / "docs") == head.stdout.strip() + " +changes"
+    assert commit(tmp_path) == head + " +changes"
+    assert commit(tmp_path / "docs") == head + " +changes"
