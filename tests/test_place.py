@@ -142,6 +142,62 @@ def test_the_estimator_clones_validates_and_extends_its_banks():
     np.testing.assert_allclose(weights[1].sum(axis=1), 1.0)
 
 
+def _aliased(C=5, places=4, draws=3, seed=4):
+    """C objects whose evenly spaced place-free picks (two of them) all fall on instance 1: each place holds
+    ``draws`` touches of instances 1 and 2, and the last place only instance 1's."""
+    rng = np.random.default_rng(seed)
+    X, y, sig, inst, key = [], [], [], [], []
+    for c in range(C):
+        for p in range(places + 1):
+            for j in (1, 2) if p < places else (1,):
+                X.append(rng.normal(2.0 * c + 0.3 * p, 0.3, (draws, 4)))
+                y += [c] * draws
+                sig += [[p, c]] * draws
+                inst += [j] * draws
+                key += [p] * draws
+    return np.concatenate(X), np.array(y), np.array(sig, float), np.array(inst), np.array(key)
+
+
+def test_the_place_free_subsample_leaves_samples_whichever_instance_is_left_out():
+    from classify.recognizers.banks import free_subsample
+
+    X, y, sig, inst, key = _aliased(C=1)
+    plain = np.lexsort((inst, key))[[0, len(key) - 1]]
+    assert set(inst[plain]) == {1}  # the stimulus: evenly spaced picks see one instance
+    picks = free_subsample(key, inst, 2)
+    assert set(inst[picks]) == {1, 2} and len(set(picks.tolist())) == len(picks)
+    # Picks over several instances are the evenly spaced ones, in place order; one instance keeps them too.
+    keys, instances = np.repeat(np.arange(10), 6), np.tile(np.repeat([1, 2, 3], 2), 10)
+    spaced = np.lexsort((instances, keys))[np.unique(np.linspace(0, 59, 16).astype(np.int64))]
+    np.testing.assert_array_equal(free_subsample(keys, instances, 16), spaced)
+    np.testing.assert_array_equal(free_subsample(keys, np.ones(60, int), 16), spaced)
+    np.testing.assert_array_equal(free_subsample(keys, instances, 100), np.lexsort((instances, keys)))
+
+
+def test_past_the_shortlist_a_held_out_instance_still_scores_its_own_object():
+    # With every place-free sample on instance 1, leaving it out left the object no sample: it was never
+    # screened onto a touch's shortlist and its likelihood was -inf, for every bandwidth, mixture and temperature.
+    X, y, sig, inst, key = _aliased()
+    model = PlaceAware(free_samples=2, shortlist=2).fit(X, y, signatures=sig, instances=inst, places=key)
+    assert all(set(bank.free_instances.tolist()) == {1, 2} for bank in model.banks_)
+    assert np.isfinite(model.fit_loss_)
+    held = inst == 1
+    ll = model.log_likelihood(X[held], sig[held], exclude=inst[held])
+    assert np.isfinite(ll[np.arange(held.sum()), y[held]]).all()
+    assert np.mean(np.argmax(ll, axis=1) == y[held]) > 0.9
+
+
+def test_an_object_on_one_training_instance_is_known_but_never_held_out():
+    X, y, sig, inst, key = _aliased(C=3)
+    lone = y == 2
+    inst = np.where(lone, 3, inst)  # object 2 is seen on instance 3 alone
+    model = PlaceAware(free_samples=2).fit(X, y, signatures=sig, instances=inst, places=key)
+    assert np.isfinite(model.fit_loss_)
+    assert model.predict(X[lone][:3], sig[lone][:3]).tolist() == [2, 2, 2]
+    with pytest.raises(ValueError, match="an object with touches on two training instances"):
+        PlaceAware().fit(X, y, signatures=sig, instances=np.where(y == 0, 1, 2), places=key)
+
+
 def _many_touches(C=20, instances=2, places=150, draws=8, d=42, seed=0):
     """Codebook-like touches: C objects, each place of each instance touched ``draws`` times (descriptors)."""
     rng = np.random.default_rng(seed)

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["Bank", "entries", "lse", "sample_d2", "spacing", "within_place_whitening"]
+__all__ = ["Bank", "entries", "free_subsample", "lse", "sample_d2", "spacing", "within_place_whitening"]
 
 
 def lse(a: np.ndarray, axis: int, keepdims: bool = False) -> np.ndarray:
@@ -52,6 +52,52 @@ def entries(keys, Z, signatures, instances):
         samples[e, :c] = Z[a : a + c]
         inst[e, :c] = instances[a : a + c]
     return unique, signatures[start], samples, inst
+
+
+def free_subsample(keys, instances, size: int) -> np.ndarray:
+    """Indices of one object's place-free subsample among its touches: about ``size`` of them, in place order.
+
+    The picks are evenly spaced over the touches in place order (each place's
+    touches by instance), so they spread over the places.  Leaving a training
+    instance out must leave samples of the object, or the place-free term and
+    the screening would never name it for that instance's touches.  When the
+    spacing takes every pick from one instance (it aliases with places that
+    each hold as many touches as the step) and the object has others, each
+    instance's own touches are spread over instead, by their share of the
+    touches and at least one each.
+
+    Parameters
+    ----------
+    keys : (n,) int64, each touch's place key
+    instances : (n,) int64, each touch's training instance
+    size : int
+
+    Returns
+    -------
+    (F,) int64, F <= n, ordered by place key, then instance
+
+    Examples
+    --------
+    Two places of two instances, four touches each: the plain spacing would
+    take only instance 1's touches.
+
+    >>> keys, inst = np.repeat([0, 1], 8), np.tile(np.repeat([1, 2], 4), 2)
+    >>> np.unique(inst[free_subsample(keys, inst, 2)]).tolist()
+    [1, 2]
+    """
+    keys, instances = np.asarray(keys, np.int64), np.asarray(instances, np.int64)
+    n = len(keys)
+    order = np.lexsort((instances, keys))
+    pick = order[np.unique(np.linspace(0, n - 1, min(size, n)).astype(np.int64))]
+    ids, counts = np.unique(instances, return_counts=True)
+    if np.unique(instances[pick]).size > 1 or ids.size == 1:
+        return pick
+    taken = np.zeros(n, bool)
+    for v, count in zip(ids, counts):
+        own = np.flatnonzero(instances[order] == v)  # positions in place order
+        share = min(count, max(1, round(size * count / n)))
+        taken[own[np.unique(np.linspace(0, count - 1, share).astype(np.int64))]] = True
+    return order[taken]
 
 
 def spacing(signatures) -> float:

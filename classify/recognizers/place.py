@@ -46,7 +46,15 @@ import numpy as np
 from sklearn.base import BaseEstimator, ClassifierMixin
 from sklearn.utils.validation import check_is_fitted
 
-from classify.recognizers.banks import Bank, entries, lse, sample_d2, spacing, within_place_whitening
+from classify.recognizers.banks import (
+    Bank,
+    entries,
+    free_subsample,
+    lse,
+    sample_d2,
+    spacing,
+    within_place_whitening,
+)
 from classify.recognizers.shortlist import EXACT_PLACES, SHORTLIST, FreeStack, SparseRows, nearest_classes, spread
 
 __all__ = ["PlaceAware", "describe_touches"]
@@ -281,10 +289,9 @@ class PlaceAware(ClassifierMixin, BaseEstimator):
         for c in self.classes_:
             mine = y == c
             k, s, samples, sample_inst = entries(keys[mine], Z[mine], sig[mine], inst[mine])
-            pick = np.unique(np.linspace(0, mine.sum() - 1, min(self.free_samples, mine.sum())).astype(np.int64))
-            order = np.lexsort((inst[mine], keys[mine]))[pick]
+            free = free_subsample(keys[mine], inst[mine], self.free_samples)
             self.banks_.append(
-                Bank(k, s, samples, sample_inst, Z[mine][order], inst[mine][order], self.match_width * spacing(s))
+                Bank(k, s, samples, sample_inst, Z[mine][free], inst[mine][free], self.match_width * spacing(s))
             )
         self.free_ = FreeStack.of([b.free for b in self.banks_], [b.free_instances for b in self.banks_])
         del Z
@@ -302,12 +309,19 @@ class PlaceAware(ClassifierMixin, BaseEstimator):
         # At most fit_places touches of each held-out instance, spread over its places, score the grid.
         C = len(self.banks_)
         scored = spread(C, self.fit_objects)
+        # An instance is held out only if its object keeps touches of another one (else nothing scores it).
+        trained = [set(np.unique(bank.instances[bank.instances >= 0]).tolist()) for bank in self.banks_]
         keep = []
         for c, t in sorted(set(zip(ys.tolist(), insts.tolist()))):
-            if c not in scored:
+            if c not in scored or not trained[c] - {t}:
                 continue
             rows = np.flatnonzero((ys == c) & (insts == t))
             keep.append(rows[np.unique(np.linspace(0, rows.size - 1, min(rows.size, self.fit_places)).astype(int))])
+        if not keep:
+            raise ValueError(
+                "the place-aware recognizer needs an object with touches on two training instances (it leaves one "
+                "out and scores it with the others), got one instance per object"
+            )
         keep = np.concatenate(keep)  # an instance's rows together: the choice scores them in blocks of rows
         Zs, ys, sigs, insts = Zs[keep], ys[keep], sigs[keep], insts[keep]
         # The width unit: how far a held-out touch lies from its own place's training touches.
