@@ -27,6 +27,7 @@ _EXPORTS = {
     "Acquisition": "perturbation",
     "acquire_all": "perturbation",
     "select_by_similarity": "selection",
+    "select_leaving_out": "selection",
     "ImprintSet": "imprint_set",
     "imprint_grid": "picture",
 }

@@ -1,5 +1,7 @@
 """The evaluation protocols: grouped folds, no leakage, instance-disjoint calibration, seeded fusion."""
 
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -161,6 +163,28 @@ def test_protocols_fitting_the_evolutionary_svms_together_give_the_outcomes_of_f
         for name in ("rates", "confusion", "kept"):
             assert np.array_equal(getattr(a, name), getattr(b, name)), name
     assert np.array_equal(together[1].stop_correct, alone[1].stop_correct)
+
+
+def test_instance_selection_drops_per_held_out_set_what_selection_of_that_set_drops(monkeypatch):
+    # Object 1's imprints of instance 2 copy object 0's: they go wherever both are in the training set.
+    data = _instance_data()
+    X, y, inst = data.train_X.copy(), data.train_y, data.train_instance
+    X[(y == 1) & (inst == 2)] = X[(y == 0) & (inst == 2)]
+    data = dataclasses.replace(data, train_X=X)
+    fitted = []
+    real = Recognizer.fit_subsets
+
+    def spy(self, F, labels, groups, subsets):
+        fitted.extend(subsets)
+        return real(self, F, labels, groups, subsets)
+
+    monkeypatch.setattr(Recognizer, "fit_subsets", spy)
+    protocols.instance_job(InstanceJob(data, Recognizer("naive_bayes", True, {}, 0.85), 5, 7, 11, 2))
+    sets = [np.flatnonzero(inst != held) for held in (1, 2, 3)] + [np.arange(len(inst))]
+    expected = [protocols.select_training(X, y, rows) for rows in sets]
+    assert len(fitted) == 4 and all(np.array_equal(a, b) for a, b in zip(fitted, expected))
+    # With instance 2 held out every imprint stays; with it in, its copies and what they resemble go.
+    assert [len(rows) == len(kept) for rows, kept in zip(sets, expected)] == [False, True, False, False]
 
 
 def test_instance_job_is_paired_and_deterministic():

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from tactile import select_by_similarity
+from tactile import select_by_similarity, select_leaving_out
 from tactile.selection import normalized_rows
 
 
@@ -56,8 +56,31 @@ def test_blocks_give_the_same_answer(monkeypatch):
 
     X, y = planted_set()
     expected = select_by_similarity(X, y)
-    monkeypatch.setattr(selection, "_BLOCK", 7)
+    monkeypatch.setattr(selection, "_CELLS", 7 * len(y))  # blocks of 7 rows
     np.testing.assert_array_equal(select_by_similarity(X, y), expected)
+
+
+@pytest.mark.parametrize("threshold", [0.85, 0.1])
+def test_leaving_a_group_out_is_the_selection_of_the_rest(monkeypatch, threshold):
+    import tactile.selection as selection
+
+    # Near copies across objects and groups, within one group, and flat imprints in two groups.
+    X, y = planted_set()
+    X[7] = X[21] + 0.02 * np.random.default_rng(1).standard_normal((16, 16))
+    X[0], X[15] = 0.0, 0.7
+    groups = np.tile([1, 2, 3], 10)
+    monkeypatch.setattr(selection, "_CELLS", 5 * len(y))  # blocks of 5 rows
+    ids, keep = select_leaving_out(X, y, groups, threshold=threshold)
+    assert ids.tolist() == [1, 2, 3] and keep.shape == (4, 30)
+    for g, left_out in enumerate(ids):
+        rest = groups != left_out
+        expected = np.zeros(30, bool)
+        expected[rest] = select_by_similarity(X[rest], y[rest], threshold=threshold)
+        np.testing.assert_array_equal(keep[g], expected)
+    np.testing.assert_array_equal(keep[-1], select_by_similarity(X, y, threshold=threshold))
+    assert not keep[:, [13, 25]].all(axis=0).any()  # the planted pair: dropped unless one of it is left out
+    with pytest.raises(ValueError, match="groups must have one entry per imprint"):
+        select_leaving_out(X, y, groups[:-1])
 
 
 @pytest.mark.parametrize(

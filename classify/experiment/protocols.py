@@ -50,6 +50,7 @@ __all__ = [
     "Split",
     "paper_splits",
     "select_training",
+    "select_training_sets",
     "PaperJob",
     "PaperOutcome",
     "paper_job",
@@ -120,6 +121,16 @@ def select_training(imprints, labels, train, threshold=0.85) -> np.ndarray:
     train = np.asarray(train)
     keep = np.asarray(tactile.select_by_similarity(imprints[train], labels[train], threshold=threshold), bool)
     return train[keep]
+
+
+def select_training_sets(imprints, labels, instances, threshold=0.85) -> list:
+    """:func:`select_training` of the training set with each training instance left out in turn (in increasing
+    instance), then of the whole set: (N_i,) int64 indices each, from one pass over the pairs
+    (``tactile.select_leaving_out``)."""
+    import tactile
+
+    _, keep = tactile.select_leaving_out(imprints, labels, instances, threshold=threshold)
+    return [np.flatnonzero(k) for k in keep]
 
 
 def _confusion(truth, guess, n_classes) -> np.ndarray:
@@ -275,11 +286,14 @@ class InstanceOutcome:
     stop_touches: np.ndarray
 
 
-def _fit_selected(data: InstanceData, F, row_sets, rec: Recognizer):
-    """A model fitted on each set of training rows (after selection), all fitted together, and the rows kept."""
-    X, y = data.train_X, data.train_y
+def _fit_selected(data: InstanceData, F, rec: Recognizer):
+    """Models fitted with each training instance held out in turn, then on all of them (after selection), all
+    fitted together, and their rows."""
+    X, y, inst = data.train_X, data.train_y, data.train_instance
     if rec.selection:
-        row_sets = [select_training(X, y, rows, rec.threshold) for rows in row_sets]
+        row_sets = select_training_sets(X, y, inst, rec.threshold)
+    else:
+        row_sets = [*(np.flatnonzero(inst != held) for held in np.unique(inst)), np.arange(len(y))]
     groups = point_groups(data.train_y, data.train_point, data.train_instance)
     return list(rec.fit_subsets(F, y, groups, row_sets)), row_sets
 
@@ -309,8 +323,7 @@ def instance_job(job: InstanceJob) -> InstanceOutcome:
     with threadpool_limits(1):
         F = describe(data.train_X, rec.features)
         # The calibration's models (each training instance held out in turn) and the final one, fitted together.
-        row_sets = [np.flatnonzero(data.train_instance != held) for held in np.unique(data.train_instance)]
-        models, row_sets = _fit_selected(data, F, [*row_sets, np.arange(len(data.train_y))], rec)
+        models, row_sets = _fit_selected(data, F, rec)
         cal = _calibration(data, F, models[:-1], row_sets[:-1], n_classes)
         model, rows = models[-1], row_sets[-1]
         proba = [
