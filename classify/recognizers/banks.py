@@ -78,11 +78,12 @@ def free_subsample(keys, instances, size: int) -> np.ndarray:
 
     Examples
     --------
-    Two places of two instances, four touches each: the plain spacing would
-    take only instance 1's touches.
+    Place 0 touched four times on instances 1 and 2, place 1 once on
+    instance 1: two evenly spaced picks, the first touch and the last, are
+    both instance 1's.
 
-    >>> keys, inst = np.repeat([0, 1], 8), np.tile(np.repeat([1, 2], 4), 2)
-    >>> np.unique(inst[free_subsample(keys, inst, 2)]).tolist()
+    >>> keys, inst = np.array([0] * 8 + [1]), np.array([1] * 4 + [2] * 4 + [1])
+    >>> inst[free_subsample(keys, inst, 2)].tolist()
     [1, 2]
     """
     keys, instances = np.asarray(keys, np.int64), np.asarray(instances, np.int64)
