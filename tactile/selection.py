@@ -76,14 +76,9 @@ def select_leaving_out(X, y, groups, threshold: float = 0.85) -> tuple[np.ndarra
 
     Parameters
     ----------
-    X : (N, rows, cols) or (N, D) array_like
-        Imprints.
-    y : (N,) array_like
-        Object labels.
+    X, y, threshold : as :func:`select_by_similarity` takes them
     groups : (N,) array_like of int
         E.g. each imprint's training instance.
-    threshold : float
-        In [-1, 1].
 
     Returns
     -------
@@ -102,7 +97,7 @@ def select_leaving_out(X, y, groups, threshold: float = 0.85) -> tuple[np.ndarra
     """
     groups = np.asarray(groups).reshape(-1)
     ids, codes = np.unique(groups, return_inverse=True)
-    alike = _alike_in_groups(X, y, codes.reshape(-1), len(ids), threshold)
+    alike = _alike_in_groups(X, y, codes, len(ids), threshold)
     keep = np.empty((len(ids) + 1, len(groups)), bool)
     for g in range(len(ids)):
         keep[g] = ~np.delete(alike, g, axis=1).any(axis=1) & (codes != g)
@@ -123,7 +118,7 @@ def _alike_in_groups(X, y, codes: np.ndarray, n_groups: int, threshold) -> np.nd
         raise ValueError(f"threshold must be in [-1, 1], got {threshold}")
     n = Z.shape[0]
     alike = np.zeros((n, n_groups), dtype=bool)
-    columns = [codes == g for g in range(n_groups)] if n_groups > 1 else [slice(None)]
+    columns = [codes == g for g in range(n_groups)]
     step = max(1, _CELLS // max(n, 1))
     for start in range(0, n, step):
         rows = slice(start, min(start + step, n))

@@ -93,9 +93,9 @@ def free_subsample(keys, instances, size: int) -> np.ndarray:
     ids, counts = np.unique(instances, return_counts=True)
     if np.unique(instances[pick]).size > 1 or ids.size == 1:
         return pick
-    taken = np.zeros(n, bool)
+    taken, placed = np.zeros(n, bool), instances[order]
     for v, count in zip(ids, counts):
-        own = np.flatnonzero(instances[order] == v)  # positions in place order
+        own = np.flatnonzero(placed == v)  # positions in place order
         share = min(count, max(1, round(size * count / n)))
         taken[own[np.unique(np.linspace(0, count - 1, share).astype(np.int64))]] = True
     return order[taken]
