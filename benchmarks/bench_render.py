@@ -14,11 +14,12 @@ inside the image of the mesh's convex hull, as no other ray can hit.  The
 contenders take turns, one call each per round, so that a noisy moment of
 the shared machine falls on all of them; figures are medians over the
 rounds, and each ratio is the median (and range) of the ratios within a
-round.  Open3D's tracer on the renderer's own rays alone, against its ray
-per pixel, is the ceiling of any renderer that traces those rays with
-Embree: it is printed under the target.  Then, where the renderer's time
-goes: one call on one thread under ``cProfile`` (a few hundred calls, so
-its overhead is small), split into tracing, shading and the rest.  Prints the machine line and writes its
+round.  Under the target it prints Open3D's tracer on the renderer's own
+rays alone against its ray per pixel: what a renderer that traced only the
+rays it needs as fast as Open3D traces them, and did nothing else, would
+reach.  Then, where the renderer's time goes: one call on one thread under
+``cProfile`` (a few hundred calls, so its overhead is small), split into
+tracing, shading and the rest.  Prints the machine line and writes its
 tables to ``docs/benchmarks/bench_render.md``.
 
     python benchmarks/bench_render.py [--meshes-dir ../shared/meshes] [--repeats 11]
@@ -190,13 +191,13 @@ def main(argv=None) -> int:
             f"\ntarget: 72 views >= 2x Open3D's throughput (ours built in the call, Open3D's scene prebuilt) -> "
             f"{'met' if np.median(ratio) >= 2 else 'missed'} ({np.median(ratio):.2f}x)"
         )
-        # A renderer that traces rays must trace at least the pixels the hull covers; Open3D's own tracer on
-        # only those rays, with no scene to build and nothing to shade, bounds what such a renderer reaches.
+        # A ray-casting renderer traces at least the rays inside the hull's image: Open3D tracing only those,
+        # with no scene to build and nothing to shade, is what such a renderer reaches at Open3D's speed.
         ceiling = times["o3d prebuilt"] / times["o3d same"]
         lines.append(
-            "ceiling of a ray-casting renderer: Open3D's tracer on the renderer's rays alone (scene prebuilt, "
-            f"nothing shaded) -> {np.median(ceiling):.2f}x ({ceiling.min():.2f}-{ceiling.max():.2f}x) Open3D's "
-            "ray per pixel"
+            "ceiling at Open3D's tracing speed: its tracer on the renderer's rays alone (scene prebuilt, "
+            f"nothing shaded) -> {np.median(ceiling):.2f}x ({ceiling.min():.2f}-{ceiling.max():.2f}x) its ray "
+            "per pixel"
         )
     lines.append("\nWhere one call's time goes (tracer prebuilt, one thread, cProfile):\n")
     lines.append("| stage | seconds | share |\n|---|---:|---:|")
