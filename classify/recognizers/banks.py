@@ -10,7 +10,16 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["Bank", "entries", "free_subsample", "lse", "sample_d2", "spacing", "within_place_whitening"]
+__all__ = [
+    "Bank",
+    "entries",
+    "evenly_spaced",
+    "free_subsample",
+    "lse",
+    "sample_d2",
+    "spacing",
+    "within_place_whitening",
+]
 
 
 def lse(a: np.ndarray, axis: int, keepdims: bool = False) -> np.ndarray:
@@ -54,6 +63,22 @@ def entries(keys, Z, signatures, instances):
     return unique, signatures[start], samples, inst
 
 
+def evenly_spaced(n: int, size: int) -> np.ndarray:
+    """Indices of at most ``size`` of ``n`` positions, evenly spaced from the first to the last, increasing.
+
+    Positions are truncated (``shortlist.spread`` rounds them): the
+    place-aware fit picks its place-free touches and held-out touches so.
+
+    Examples
+    --------
+    >>> evenly_spaced(10, 4).tolist()
+    [0, 3, 6, 9]
+    >>> evenly_spaced(8, 3).tolist()
+    [0, 3, 7]
+    """
+    return np.unique(np.linspace(0, n - 1, min(size, n)).astype(np.int64))
+
+
 def free_subsample(keys, instances, size: int) -> np.ndarray:
     """Indices of one object's place-free subsample among its touches: about ``size`` of them, in place order.
 
@@ -89,7 +114,7 @@ def free_subsample(keys, instances, size: int) -> np.ndarray:
     keys, instances = np.asarray(keys, np.int64), np.asarray(instances, np.int64)
     n = len(keys)
     order = np.lexsort((instances, keys))
-    pick = order[np.unique(np.linspace(0, n - 1, min(size, n)).astype(np.int64))]
+    pick = order[evenly_spaced(n, size)]
     ids, counts = np.unique(instances, return_counts=True)
     if np.unique(instances[pick]).size > 1 or ids.size == 1:
         return pick
@@ -97,7 +122,7 @@ def free_subsample(keys, instances, size: int) -> np.ndarray:
     for v, count in zip(ids, counts):
         own = np.flatnonzero(placed == v)  # positions in place order
         share = min(count, max(1, round(size * count / n)))
-        taken[own[np.unique(np.linspace(0, count - 1, share).astype(np.int64))]] = True
+        taken[own[evenly_spaced(count, share)]] = True
     return order[taken]
 
 

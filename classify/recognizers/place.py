@@ -49,6 +49,7 @@ from sklearn.utils.validation import check_is_fitted
 from classify.recognizers.banks import (
     Bank,
     entries,
+    evenly_spaced,
     free_subsample,
     lse,
     sample_d2,
@@ -316,7 +317,7 @@ class PlaceAware(ClassifierMixin, BaseEstimator):
             if c not in scored or not trained[c] - {t}:
                 continue
             rows = np.flatnonzero((ys == c) & (insts == t))
-            keep.append(rows[np.unique(np.linspace(0, rows.size - 1, min(rows.size, self.fit_places)).astype(int))])
+            keep.append(rows[evenly_spaced(rows.size, self.fit_places)])
         if not keep:
             raise ValueError(
                 "the place-aware recognizer needs an object with touches on two training instances (it leaves one "
