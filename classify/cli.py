@@ -8,7 +8,10 @@ package registers its own subcommands here.
 from __future__ import annotations
 
 import argparse
+import contextlib
+import signal
 import sys
+import threading
 import warnings
 
 
@@ -392,10 +395,35 @@ def main(argv: list[str] | None = None) -> int:
 
     pin_kernels()
     args = build_parser().parse_args(argv)
-    with warnings.catch_warnings():
+    with warnings.catch_warnings(), _terminate_cleanly():
         # A user reads what was repaired in which file, not the line of our code that said so.
         warnings.showwarning = _warning_printer(args.command)
         return _run(args)
+
+
+class _Terminated(Exception):
+    """SIGTERM arrived: raised in the main thread so that temporary folders and pools close on the way out."""
+
+
+@contextlib.contextmanager
+def _terminate_cleanly():
+    """Turn SIGTERM (a batch scheduler's time limit, ``kill``) into :class:`_Terminated` for the block.
+
+    Python's default action ends the process at once, leaving a run's spilled places and task files in the
+    temporary folder; an exception unwinds through the ``with`` blocks that delete them.
+    """
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+
+    def terminated(signum, frame):
+        raise _Terminated
+
+    previous = signal.signal(signal.SIGTERM, terminated)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, previous)
 
 
 def _warning_printer(command: str):
@@ -421,6 +449,9 @@ def _run(args) -> int:
     except KeyboardInterrupt:
         print(f"visuotactile {args.command}: interrupted", file=sys.stderr)
         return 130
+    except _Terminated:
+        print(f"visuotactile {args.command}: terminated", file=sys.stderr)
+        return 128 + signal.SIGTERM
 
 
 if __name__ == "__main__":
