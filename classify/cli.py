@@ -401,8 +401,12 @@ def main(argv: list[str] | None = None) -> int:
         return _run(args)
 
 
-class _Terminated(Exception):
-    """SIGTERM arrived: raised in the main thread so that temporary folders and pools close on the way out."""
+class _Terminated(BaseException):
+    """SIGTERM arrived: raised in the main thread so that temporary folders and pools close on the way out.
+
+    Not an ``Exception``, as ``KeyboardInterrupt`` is not: a batch that records a mesh's failure and goes on
+    must not take the signal for one.
+    """
 
 
 @contextlib.contextmanager
