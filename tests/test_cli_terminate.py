@@ -23,7 +23,15 @@ def test_a_signal_during_an_experiment_removes_its_temporary_folders_and_exits_w
     command = [sys.executable, "-m", "classify.cli", "experiment", "--objects", "cow,cup,hand", "--methods"]
     command += ["uniform", "--classifiers", "knn", "--protocols", "instance", "--n-points", "4", "--view-size"]
     command += ["64", "--replicates", "4", "--jobs", "2", "--out", str(tmp_path / "out"), "--quiet"]
-    run = subprocess.Popen(command, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    # A child inherits an ignored SIGINT (a background job's, a test runner's worker's): Ctrl-C's default, as in a shell.
+    run = subprocess.Popen(
+        command,
+        env=env,
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.PIPE,
+        text=True,
+        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),
+    )
     try:
         deadline = time.monotonic() + 240
         # Wait until the run holds a temporary folder of its own (the local workers' task files).
