@@ -23,7 +23,7 @@ def test_a_signal_during_an_experiment_removes_its_temporary_folders_and_exits_w
     command = [sys.executable, "-m", "classify.cli", "experiment", "--objects", "cow,cup,hand", "--methods"]
     command += ["uniform", "--classifiers", "knn", "--protocols", "instance", "--n-points", "4", "--view-size"]
     command += ["64", "--replicates", "4", "--jobs", "2", "--out", str(tmp_path / "out"), "--quiet"]
-    # A child inherits an ignored SIGINT (a background job's, a test runner's worker's): Ctrl-C's default, as in a shell.
+    # A child inherits an ignored SIGINT (CI's, any background job's): it gets Ctrl-C's default, as in a terminal.
     run = subprocess.Popen(
         command,
         env=env,
