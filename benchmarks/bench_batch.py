@@ -70,7 +70,7 @@ def _subset(corpus: Path, count: int, into: Path) -> Path:
 
 def _run(folder: Path, workers: int, store: Path) -> dict:
     with open_executor(workers=workers) as executor:
-        client = executor._client
+        client = executor.client
         client.run(__import__, "classify.batch.run")  # the workers' imports stay out of the figures
         # This process holds the scheduler, the nannies and the client.
         (_, here), there, load = _cpu(), client.run(_cpu), os.getloadavg()[0]

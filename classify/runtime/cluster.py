@@ -85,10 +85,12 @@ class Inline:
 
 class OnThisMachine:
     """A Dask executor whose workers run on this machine (a LocalCluster's): they read the files this process
-    writes."""
+    writes.  ``client`` is the cluster's ``distributed.Client``, e.g. to ask every worker something with
+    ``client.run``."""
 
-    def __init__(self, executor):
+    def __init__(self, executor, client):
         self.executor = executor
+        self.client = client
 
     def map(self, fn, *iterables):
         return self.executor.map(fn, *iterables)
@@ -413,4 +415,4 @@ def open_executor(
     ):
         if dashboard is not None:
             print(f"dashboard: {client.dashboard_link}", file=sys.stderr)
-        yield OnThisMachine(client.get_executor())
+        yield OnThisMachine(client.get_executor(), client)

@@ -1,0 +1,32 @@
+"""The benchmarks' measuring code against the library it measures: a benchmark that reaches for an attribute the
+library no longer has fails here, on tiny inputs, and not at the end of an hour's run."""
+
+import sys
+from pathlib import Path
+
+import pytest
+import shapes
+
+BENCHMARKS = Path(__file__).resolve().parents[1] / "benchmarks"
+
+
+@pytest.fixture
+def bench_batch(monkeypatch):
+    monkeypatch.syspath_prepend(str(BENCHMARKS))  # the benchmarks import their helpers as 'benchlib'
+    import bench_batch
+
+    yield bench_batch
+    sys.modules.pop("bench_batch", None)
+
+
+def test_bench_batch_counts_the_meshes_and_the_cpu_time_of_every_process(bench_batch, tmp_path):
+    folder = tmp_path / "meshes"
+    folder.mkdir()
+    for i in range(2):
+        shapes.write_obj(folder / f"m{i}.obj", shapes.icosphere(radius=1.0 + i, subdivisions=2))
+    run = bench_batch._run(folder, 1, tmp_path / "store")
+    assert run["workers"] == 1 and run["done"] == 2
+    # The CPU time of every process holds the tasks' own, which the worker measured.
+    assert run["cpu"] >= run["tasks"] > 0
+    assert run["wall"] > 0 and run["peak_mb"] > 0
+    assert set(run["stages"]) == set(bench_batch.STAGES)
