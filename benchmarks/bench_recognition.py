@@ -55,7 +55,7 @@ def row(task, ours, peer, note=""):
     ratio = peer[1] / ours[1] if ours[1] > 0 else float("inf")
     return (
         f"| {task} | {ours[1] * 1e3:.1f} ms ({ours[2] * 1e3:.1f} CPU) | {peer[1] * 1e3:.1f} ms "
-        f"({peer[2] * 1e3:.1f} CPU) | {ratio:.1f}x | {note} |"
+        f"({peer[2] * 1e3:.1f} CPU) | {ratio:.2g}x | {note} |"
     )
 
 
