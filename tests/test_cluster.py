@@ -105,6 +105,24 @@ def test_a_task_runs_on_one_thread_wherever_it_runs():
         assert list(pool.map(_threads, range(2))) == [(1, 1)] * 2
 
 
+def test_dask_workers_load_pymeshlab_on_their_main_thread_before_any_task(dask_cluster):
+    # Loaded first in a task's thread, PyMeshLab's GnuTLS aborts the worker process as it exits.
+    from distributed import Client
+
+    def _imported_at_start(dask_worker):  # local: sent by value to workers that cannot import the tests
+        """Whether the worker holds the plugin that loads PyMeshLab on its main thread, and PyMeshLab is loaded."""
+        import sys
+
+        return "visuotactile-main-thread-imports" in dask_worker.plugins and "pymeshlab" in sys.modules
+
+    with open_executor(workers=2) as executor:
+        assert list(executor.client.run(_imported_at_start).values()) == [True, True]
+    with Client(dask_cluster.address) as client:  # workers started elsewhere, before any client
+        assert not any(client.run(_imported_at_start).values())
+        with open_executor(scheduler=dask_cluster.address):
+            assert list(client.run(_imported_at_start).values()) == [True, True]
+
+
 def _nbytes(a):
     return a.nbytes
 

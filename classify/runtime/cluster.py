@@ -34,7 +34,9 @@ workers also start with the thread caps and the pinned kernels of
 ``meshsal.util.reproducible`` in their environment.  Workers of an external
 cluster pick their kernels by CPU unless started pinned, e.g.
 ``python -m meshsal.util.reproducible dask worker ADDRESS``, for the same
-numbers as everywhere else.
+numbers as everywhere else.  Every Dask worker that :func:`open_executor` reaches loads PyMeshLab and
+the thread pools on its main thread as it starts (a worker plugin): loaded first inside a task, PyMeshLab
+aborts the worker as it exits.
 """
 
 from __future__ import annotations
@@ -152,6 +154,27 @@ def _die_with_parent() -> None:
         parent = multiprocessing.parent_process()
         if parent is not None and os.getppid() != parent.pid:  # the parent ended before the request
             os._exit(1)
+
+
+def _main_thread_imports():
+    """A Dask worker plugin that loads the thread pools (:func:`_load_thread_pools`) as the worker starts, on its
+    main thread (a plugin's ``setup`` runs on the worker's event loop), not in a task's thread.
+
+    PyMeshLab first loaded in a task's thread leaves its bundled GnuTLS a heap
+    that aborts the worker as the process exits ("malloc_consolidate():
+    unaligned fastbin chunk detected", in GnuTLS's destructor), after every
+    result is in: in about half of the runs of a batch on a LocalCluster.
+    Loaded on the main thread, it never does.
+    """
+    from distributed.diagnostics.plugin import WorkerPlugin
+
+    class MainThreadImports(WorkerPlugin):
+        name = "visuotactile-main-thread-imports"
+
+        def setup(self, worker):
+            _load_thread_pools()
+
+    return MainThreadImports()
 
 
 def _start_worker(preload=()):
@@ -386,6 +409,7 @@ def open_executor(
         except OSError as exc:
             raise OSError(f"cannot reach the Dask scheduler at {scheduler}: {exc}") from None
         with client:
+            client.register_plugin(_main_thread_imports())
             yield client.get_executor()
         return
     if int(workers) < 1:
@@ -413,6 +437,7 @@ def open_executor(
         ) as cluster,
         Client(cluster, security=security) as client,
     ):
+        client.register_plugin(_main_thread_imports())
         if dashboard is not None:
             print(f"dashboard: {client.dashboard_link}", file=sys.stderr)
         yield OnThisMachine(client.get_executor(), client)
