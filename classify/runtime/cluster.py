@@ -160,11 +160,11 @@ def _main_thread_imports():
     """A Dask worker plugin that loads the thread pools (:func:`_load_thread_pools`) as the worker starts, on its
     main thread (a plugin's ``setup`` runs on the worker's event loop), not in a task's thread.
 
-    PyMeshLab first loaded in a task's thread leaves its bundled GnuTLS a heap
-    that aborts the worker as the process exits ("malloc_consolidate():
-    unaligned fastbin chunk detected", in GnuTLS's destructor), after every
-    result is in: in about half of the runs of a batch on a LocalCluster.
-    Loaded on the main thread, it never does.
+    With PyMeshLab first loaded in a task's thread, the worker aborts as the
+    process exits, after every result is in ("malloc_consolidate(): unaligned
+    fastbin chunk detected": a free of the task thread's heap arena in the
+    destructor of PyMeshLab's bundled GnuTLS), in about half of the batches
+    on a LocalCluster; loaded on the main thread first, in none of a dozen.
     """
     from distributed.diagnostics.plugin import WorkerPlugin
 
