@@ -90,9 +90,9 @@ class OnThisMachine:
     writes.  ``client`` is the cluster's ``distributed.Client``, e.g. to ask every worker something with
     ``client.run``."""
 
-    def __init__(self, executor, client):
-        self.executor = executor
+    def __init__(self, client):
         self.client = client
+        self.executor = client.get_executor()
 
     def map(self, fn, *iterables):
         return self.executor.map(fn, *iterables)
@@ -440,4 +440,4 @@ def open_executor(
         client.register_plugin(_main_thread_imports())
         if dashboard is not None:
             print(f"dashboard: {client.dashboard_link}", file=sys.stderr)
-        yield OnThisMachine(client.get_executor(), client)
+        yield OnThisMachine(client)
