@@ -236,6 +236,38 @@ def test_forecast_rows_past_the_shortlist_keep_their_objects_in_order(fitted):
     assert np.all(np.diff(rows.classes, axis=-1) > 0)
 
 
+@pytest.mark.parametrize("which", ["full", "short"])
+def test_forecast_rows_do_not_depend_on_which_objects_rows_are_scored_together(fitted, monkeypatch, which):
+    from classify.recognizers import place as place_module
+
+    model = fitted[2 if which == "full" else 3].model
+    together = model.forecast_table(samples=3)
+    # One object's rows per call: the finest grouping.
+    monkeypatch.setattr(place_module, "_CHUNK", 1)
+    monkeypatch.setattr(place_module, "_HELD_OUT", 1)
+    alone = model.forecast_table(samples=3)
+    for (a, wa), (b, wb) in zip(zip(*together), zip(*alone)):
+        np.testing.assert_array_equal(a.classes, b.classes)
+        np.testing.assert_array_equal(wa, wb)
+        if which == "full":  # every object scored: bit for bit
+            np.testing.assert_array_equal(a.values, b.values)
+        else:  # the screening's float32 products round with the rows beside them
+            np.testing.assert_allclose(a.values, b.values, rtol=1e-6)
+            np.testing.assert_allclose(a.rest, b.rest, rtol=1e-6)
+    # A row is its touch's own posterior: scored alone, with its instance left out.
+    bank = model.banks_[4]
+    e, s = 5, int(np.flatnonzero(bank.instances[5] >= 0)[-1])
+    place, free, _ = model._log_terms(
+        bank.samples[e, s][None], bank.signatures[e][None], bank.instances[e, s][None], [model.bandwidth_]
+    )
+    ll = np.logaddexp(np.log1p(-model.mixture_) + place[0, 0], np.log(model.mixture_) + free[0, 0]) / model.temperature_
+    post = np.exp(ll - np.logaddexp.reduce(ll))
+    last = min(3, int((bank.instances[e] >= 0).sum())) - 1  # the entry's last pick is its last valid sample
+    row = together[0][4][e, last]
+    np.testing.assert_allclose(row.values, post[row.classes], rtol=1e-6)
+    assert row.classes.shape == ((OBJECTS,) if which == "full" else (3,)) and together[1][4][e, last] > 0
+
+
 def test_hypotheses_are_the_most_probable_with_ties_drawn():
     belief = np.array([0.05, 0.4, 0.05, 0.3, 0.2])
     assert hypotheses(belief, 3, np.random.default_rng(0)).tolist() == [1, 3, 4]

@@ -447,10 +447,17 @@ class PlaceAware(ClassifierMixin, BaseEstimator):
         if C > self.shortlist:
             screened, count = self.free_.nearest(Z, exclude) if screen is None else screen
             member = np.zeros((n, C), bool)
+            # An object is among a row's exact_places nearest when fewer objects lie strictly nearer: when it lies
+            # no farther than the row's exact_places-th least distance, which is a shortlisted one's.
+            limit, E = np.full(n, -np.inf), min(self.exact_places, self.shortlist)
             # A chunk of rows at a time, in place: (n, C) arrays are large at a thousand objects.
             for a in range(0, n, chunk):
                 rows = slice(a, a + chunk)
-                np.put_along_axis(member[rows], nearest_classes(screened[rows], self.shortlist), True, 1)
+                listed = nearest_classes(screened[rows], self.shortlist)
+                np.put_along_axis(member[rows], listed, True, 1)
+                if E > 0:
+                    near = np.take_along_axis(screened[rows], listed, axis=1)
+                    limit[rows] = np.partition(near, E - 1, axis=1)[:, E - 1]
                 logcount = np.log(np.maximum(count[rows], 1))
                 with np.errstate(invalid="ignore"):
                     for b, s in enumerate(inv):
@@ -467,7 +474,7 @@ class PlaceAware(ClassifierMixin, BaseEstimator):
                 if callable(G):
                     exact = None
                     if member is not None:
-                        exact = (screened[rows] < screened[rows, c, None]).sum(axis=1) < self.exact_places
+                        exact = screened[rows, c] <= limit[rows]
                     g = G(c, rows, exact)
                 else:
                     g = G[rows] if G.ndim == 2 else G[rows, c]
@@ -580,41 +587,63 @@ class PlaceAware(ClassifierMixin, BaseEstimator):
         weights : list of (E_j, samples) float64, summing to 1 per entry
         """
         check_is_fitted(self, "banks_")
-        posteriors, weights = [], []
         C = len(self.banks_)
         T = min(C, self.shortlist)
+        # Each entry's picks: up to ``samples`` of its touches, spread over its valid samples (the first count[e],
+        # sorted by instance).
+        picked = []
         for bank in self.banks_:
-            E, S = bank.instances.shape
-            valid = bank.instances >= 0
-            count = valid.sum(axis=1)
+            E = len(bank.instances)
+            count = (bank.instances >= 0).sum(axis=1)
             take = np.zeros((E, samples), np.int64)
             used = np.zeros((E, samples), bool)
             for e in range(E):
                 m = min(samples, int(count[e]))
-                # Valid samples are the first count[e], sorted by instance: spread the picks over them.
                 take[e, :m] = np.unique(np.linspace(0, count[e] - 1, m).round().astype(np.int64))[:m]
                 used[e, :m] = True
             rows_e, rows_s = np.nonzero(used)
-            Z = bank.samples[rows_e, take[rows_e, rows_s]]
-            G = bank.signatures[rows_e]
-            ex = bank.instances[rows_e, take[rows_e, rows_s]]
-            place, free, member = self._log_terms(Z, G, ex, [self.bandwidth_])
+            picked.append((used, rows_e, rows_s, take[rows_e, rows_s]))
+        # Many objects' rows are scored together: under each object, the rows that shortlist it come in one
+        # call, not one per object whose rows they are.  A group's (rows, C) arrays stay near _HELD_OUT bytes.
+        most = max(_CHUNK, _HELD_OUT // (8 * C))
+        posteriors, weights = [], []
+        j = 0
+        while j < C:
+            group, n = [j], len(picked[j][1])
+            while group[-1] + 1 < C and n + len(picked[group[-1] + 1][1]) <= most:
+                group.append(group[-1] + 1)
+                n += len(picked[group[-1]][1])
+            j = group[-1] + 1
+            banks = [(self.banks_[g], *picked[g][1:]) for g in group]
+            Z = np.concatenate([bank.samples[e, k] for bank, e, _, k in banks])
+            G = np.concatenate([bank.signatures[e] for bank, e, _, _ in banks])
+            ex = np.concatenate([bank.instances[e, k] for bank, e, _, k in banks])
+            place, free, member = self._log_terms(Z, G, ex, [self.bandwidth_], chunk=max(len(Z), 1))
             w = self.mixture_
             ll = np.logaddexp(np.log1p(-w) + place[0], np.log(w) + free[0]) / self.temperature_
             post = np.exp(ll - lse(ll, axis=1, keepdims=True))
-            values = np.full((E, samples, T), 1.0 / C)
-            classes = np.tile(np.arange(T), (E, samples, 1))
-            rest = np.full((E, samples), 1.0 / C)
             if member is None:
-                values[rows_e, rows_s] = post
+                values, classes, rest = post, np.tile(np.arange(T), (len(post), 1)), np.full(len(post), 1.0 / C)
             else:
-                shortlisted = np.nonzero(member)[1].reshape(len(post), T)
-                values[rows_e, rows_s] = np.take_along_axis(post, shortlisted, axis=1)
-                classes[rows_e, rows_s] = shortlisted
-                rest[rows_e, rows_s] = np.maximum(1.0 - values[rows_e, rows_s].sum(axis=1), 0.0) / (C - T)
-            weight = np.where(used, 1.0 / np.maximum(used.sum(axis=1, keepdims=True), 1), 0.0)
-            posteriors.append(SparseRows(values, classes, rest, C))
-            weights.append(weight)
+                classes = np.nonzero(member)[1].reshape(len(post), T)
+                values = np.take_along_axis(post, classes, axis=1)
+                rest = np.maximum(1.0 - values.sum(axis=1), 0.0) / (C - T)
+            start = 0
+            for g in group:
+                used, rows_e, rows_s, _ = picked[g]
+                E, stop = len(used), start + len(rows_e)
+                # Rows past an entry's touches are uniform, with no weight.
+                v = np.full((E, samples, T), 1.0 / C)
+                k = np.tile(np.arange(T), (E, samples, 1))
+                r = np.full((E, samples), 1.0 / C)
+                v[rows_e, rows_s], k[rows_e, rows_s], r[rows_e, rows_s] = (
+                    values[start:stop],
+                    classes[start:stop],
+                    rest[start:stop],
+                )
+                posteriors.append(SparseRows(v, k, r, C))
+                weights.append(np.where(used, 1.0 / np.maximum(used.sum(axis=1, keepdims=True), 1), 0.0))
+                start = stop
         return posteriors, weights
 
     def match(self, c: int, signatures) -> tuple[np.ndarray, np.ndarray]:

@@ -19,7 +19,6 @@ shortlisted objects, and one value shared by every other object.
 
 from __future__ import annotations
 
-import functools
 from dataclasses import dataclass
 
 import numpy as np
@@ -45,47 +44,34 @@ _BLOCK = 1 << 22
 
 @dataclass(frozen=True, eq=False)
 class FreeStack:
-    """Every object's place-free samples, one array per training instance, for screening all objects with a few
-    matrix products.
+    """Every object's place-free samples in one matrix, for screening all objects with a matrix product.
 
-    ``ids`` (V,) int64 the training instances; ``samples`` tuple of V (F_v, C, d)
-    float32, the f-th sample of every object in row f, padded; ``sq`` tuple of
-    V (F_v, C) float32 their squared norms (inf for padding); ``counts`` (V, C)
-    int64 each object's samples of each instance.  A touch that leaves out an
-    instance skips its array: no mask over the samples, and the counts are
-    known beforehand.  Each object's nearest sample is then the least of F_v
-    rows of C, taken a whole row at a time.
+    ``ids`` (V,) int64 the training instances; ``rows`` (N, d + 1) float32,
+    each sample ``f`` as ``(-2 f, |f|^2)``, grouped by instance, then by
+    object; ``counts`` (V, C) int64 each object's samples of each instance.
+    A touch ``z`` times a row, with a 1 appended, is ``|f|^2 - 2 z.f``: its
+    squared distance to ``f`` less ``|z|^2``, from the product alone.  The
+    least over each (instance, object) group is then one reduction, and a
+    touch that leaves out an instance drops that instance's groups, so no
+    mask over the samples is needed and no row is padding.
     """
 
     ids: np.ndarray
-    samples: tuple
-    sq: tuple
+    rows: np.ndarray
     counts: np.ndarray
 
     @staticmethod
     def of(frees: list, instances: list) -> FreeStack:
         """From per-object (F_c, d) samples and (F_c,) instances."""
         ids = np.unique(np.concatenate([np.asarray(i, np.int64) for i in instances]))
-        C, d = len(frees), frees[0].shape[1]
-        # Each instance's samples of each object.
-        parts = [[np.asarray(f)[np.asarray(i) == v] for f, i in zip(frees, instances)] for v in ids]
+        C, d = len(frees), np.asarray(frees[0]).shape[1]
+        parts = [[np.asarray(f, np.float32)[np.asarray(i) == v] for f, i in zip(frees, instances)] for v in ids]
         counts = np.array([[len(p) for p in row] for row in parts], np.int64).reshape(-1, C)
-        samples, sq = [], []
-        for row, width in zip(parts, counts.max(axis=1)):
-            stack = np.zeros((width, C, d), np.float32)
-            norms = np.full((width, C), np.inf, np.float32)
-            for c, mine in enumerate(row):
-                stack[: len(mine), c] = mine
-                norms[: len(mine), c] = np.einsum("fd,fd->f", mine, mine)
-            samples.append(stack)
-            sq.append(norms)
-        return FreeStack(ids, tuple(samples), tuple(sq), counts)
-
-    @functools.cached_property
-    def _twice(self) -> tuple:
-        """``2 * samples``: their products with a touch are twice its products with the samples, exactly (a
-        power of two scales every product and partial sum without rounding), one pass fewer per screen."""
-        return tuple(2.0 * s for s in self.samples)
+        samples = np.concatenate([p for row in parts for p in row]).reshape(-1, d)
+        rows = np.empty((len(samples), d + 1), np.float32)
+        rows[:, :d] = -2.0 * samples  # a power of two: exact
+        rows[:, d] = np.einsum("fd,fd->f", samples, samples)
+        return FreeStack(ids, rows, counts)
 
     def nearest(self, Z: np.ndarray, exclude: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Squared distance from each touch to each object's nearest sample, and how many samples count.
@@ -100,29 +86,28 @@ class FreeStack:
         d2 : (n, C) float64 (inf where every sample is left out)
         count : (n, C) int64
         """
-        C, n = self.counts.shape[1], len(Z)
+        (V, C), n = self.counts.shape, len(Z)
         exclude = np.asarray(exclude, np.int64)
         count = np.tile(self.counts.sum(axis=0), (n, 1))
         for v, per in zip(self.ids, self.counts):
             count[exclude == v] -= per
+        # Each (instance, object) group with a sample, by its first row; the others stay inf.
+        held = np.flatnonzero(self.counts.ravel() > 0)
+        starts = np.r_[0, np.cumsum(self.counts.ravel())[:-1]][held]
         d2 = np.empty((n, C))
-        # Every instance has a sample, so no array is empty.
-        widest = max(s.shape[0] for s in self.samples)
-        step = max(1, _BLOCK // (C * widest * len(self.samples)))
-        products = np.empty((min(step, n), C * widest), np.float32)
-        sums = np.empty_like(products)
+        step = max(1, _BLOCK // len(self.rows))
+        products = np.empty((min(step, n), len(self.rows)), np.float32)
         for a in range(0, n, step):
-            z = Z[a : a + step].astype(np.float32)
-            m, zz = len(z), np.einsum("nd,nd->n", z, z)
-            low = np.full((m, C), np.inf, np.float32)
-            for v, twice, sq in zip(self.ids, self._twice, self.sq):
-                F = twice.shape[0]
-                g = np.matmul(z, twice.reshape(C * F, -1).T, out=products[:m, : C * F])
-                # (|z|^2 + |f|^2) - 2 z.f
-                D = np.subtract(np.add(zz[:, None], sq.reshape(1, -1), out=sums[:m, : C * F]), g, out=g)
-                near = D.reshape(m, F, C).min(axis=1)
-                near[exclude[a : a + m] == v] = np.inf
-                np.minimum(low, near, out=low)
+            z = np.ones((len(Z[a : a + step]), Z.shape[1] + 1), np.float32)
+            z[:, :-1] = Z[a : a + step]
+            m = len(z)
+            g = np.matmul(z, self.rows.T, out=products[:m])
+            groups = np.full((m, V * C), np.inf, np.float32)
+            groups[:, held] = np.minimum.reduceat(g, starts, axis=1)
+            groups = groups.reshape(m, V, C)
+            for j, v in enumerate(self.ids):
+                groups[exclude[a : a + m] == v, j] = np.inf
+            low = groups.min(axis=1) + np.einsum("nd,nd->n", z[:, :-1], z[:, :-1])[:, None]
             d2[a : a + m] = np.maximum(low, 0.0)
         return d2, count
 
