@@ -244,7 +244,7 @@ def test_forecast_rows_do_not_depend_on_which_objects_rows_are_scored_together(f
     together = model.forecast_table(samples=3)
     # One object's rows per call: the finest grouping.
     monkeypatch.setattr(place_module, "_CHUNK", 1)
-    monkeypatch.setattr(place_module, "_HELD_OUT", 1)
+    monkeypatch.setattr(place_module, "_FORECAST", 1)
     alone = model.forecast_table(samples=3)
     for (a, wa), (b, wb) in zip(zip(*together), zip(*alone)):
         np.testing.assert_array_equal(a.classes, b.classes)

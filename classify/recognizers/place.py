@@ -71,6 +71,8 @@ _ROWS = 1 << 14
 _CHUNK = 1 << 10
 #: Bytes of each (held-out touches, objects) array the fit's choice of parameters holds at once.
 _HELD_OUT = 1 << 25
+#: Bytes of each (touches, objects) array the forecast table holds at once (it holds several).
+_FORECAST = 1 << 23
 
 
 def describe_touches(X, copy: bool = True) -> np.ndarray:
@@ -604,8 +606,8 @@ class PlaceAware(ClassifierMixin, BaseEstimator):
             rows_e, rows_s = np.nonzero(used)
             picked.append((used, rows_e, rows_s, take[rows_e, rows_s]))
         # Many objects' rows are scored together: under each object, the rows that shortlist it come in one
-        # call, not one per object whose rows they are.  A group's (rows, C) arrays stay near _HELD_OUT bytes.
-        most = max(_CHUNK, _HELD_OUT // (8 * C))
+        # call, not one per object whose rows they are.  A group's (rows, C) arrays stay near _FORECAST bytes.
+        most = max(_CHUNK, _FORECAST // (8 * C))
         posteriors, weights = [], []
         j = 0
         while j < C:
