@@ -620,7 +620,10 @@ class PlaceAware(ClassifierMixin, BaseEstimator):
             Z = np.concatenate([bank.samples[e, k] for bank, e, _, k in banks])
             G = np.concatenate([bank.signatures[e] for bank, e, _, _ in banks])
             ex = np.concatenate([bank.instances[e, k] for bank, e, _, k in banks])
-            place, free, member = self._log_terms(Z, G, ex, [self.bandwidth_], chunk=max(len(Z), 1))
+            # Past the shortlist an object scores only the rows that shortlist it, so a whole group is one chunk;
+            # up to it every object scores every row of a chunk.
+            chunk = max(len(Z), 1) if C > self.shortlist else _CHUNK
+            place, free, member = self._log_terms(Z, G, ex, [self.bandwidth_], chunk=chunk)
             w = self.mixture_
             ll = np.logaddexp(np.log1p(-w) + place[0], np.log(w) + free[0]) / self.temperature_
             post = np.exp(ll - lse(ll, axis=1, keepdims=True))
