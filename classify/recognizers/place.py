@@ -525,9 +525,14 @@ class PlaceAware(ClassifierMixin, BaseEstimator):
             G = np.asarray(G, np.float64)
             G = G.reshape(len(Z), -1) if G.ndim <= 2 else G
         ex = np.full(len(Z), -1, np.int64) if exclude is None else np.asarray(exclude, np.int64)
-        place, free, _ = self._log_terms(Z, G, ex, [self.bandwidth_])
+        return self._mixed(Z, G, ex)[0]
+
+    def _mixed(self, Z, G, exclude, chunk: int = _CHUNK):
+        """The fitted mixture of place and place-free terms of standardized touches Z, (n, C), and
+        ``_log_terms``' shortlist (n, C) bool or None."""
+        place, free, member = self._log_terms(Z, G, exclude, [self.bandwidth_], chunk=chunk)
         w = self.mixture_
-        return np.logaddexp(np.log1p(-w) + place[0], np.log(w) + free[0])
+        return np.logaddexp(np.log1p(-w) + place[0], np.log(w) + free[0]), member
 
     def predict_proba(self, X, signatures) -> np.ndarray:
         """(n, C) single-touch posteriors: each touch's tempered likelihoods, normalized.
@@ -608,24 +613,23 @@ class PlaceAware(ClassifierMixin, BaseEstimator):
         # Many objects' rows are scored together: under each object, the rows that shortlist it come in one
         # call, not one per object whose rows they are.  A group's (rows, C) arrays stay near _FORECAST bytes.
         most = max(_CHUNK, _FORECAST // (8 * C))
+        sizes = [len(rows_e) for _, rows_e, _, _ in picked]
         posteriors, weights = [], []
-        j = 0
-        while j < C:
-            group, n = [j], len(picked[j][1])
-            while group[-1] + 1 < C and n + len(picked[group[-1] + 1][1]) <= most:
-                group.append(group[-1] + 1)
-                n += len(picked[group[-1]][1])
-            j = group[-1] + 1
+        first = 0
+        while first < C:
+            last, n = first + 1, sizes[first]
+            while last < C and n + sizes[last] <= most:
+                n += sizes[last]
+                last += 1
+            group, first = range(first, last), last
             banks = [(self.banks_[g], *picked[g][1:]) for g in group]
             Z = np.concatenate([bank.samples[e, k] for bank, e, _, k in banks])
             G = np.concatenate([bank.signatures[e] for bank, e, _, _ in banks])
             ex = np.concatenate([bank.instances[e, k] for bank, e, _, k in banks])
             # Past the shortlist an object scores only the rows that shortlist it, so a whole group is one chunk;
             # up to it every object scores every row of a chunk.
-            chunk = max(len(Z), 1) if C > self.shortlist else _CHUNK
-            place, free, member = self._log_terms(Z, G, ex, [self.bandwidth_], chunk=chunk)
-            w = self.mixture_
-            ll = np.logaddexp(np.log1p(-w) + place[0], np.log(w) + free[0]) / self.temperature_
+            ll, member = self._mixed(Z, G, ex, chunk=max(len(Z), 1) if C > self.shortlist else _CHUNK)
+            ll /= self.temperature_
             post = np.exp(ll - lse(ll, axis=1, keepdims=True))
             if member is None:
                 values, classes, rest = post, np.tile(np.arange(T), (len(post), 1)), np.full(len(post), 1.0 / C)

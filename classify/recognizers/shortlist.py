@@ -98,9 +98,9 @@ class FreeStack:
         step = max(1, _BLOCK // len(self.rows))
         products = np.empty((min(step, n), len(self.rows)), np.float32)
         for a in range(0, n, step):
-            z = np.ones((len(Z[a : a + step]), Z.shape[1] + 1), np.float32)
-            z[:, :-1] = Z[a : a + step]
-            m = len(z)
+            m = len(Z[a : a + step])
+            z = np.ones((m, Z.shape[1] + 1), np.float32)
+            z[:, :-1] = Z[a : a + m]
             g = np.matmul(z, self.rows.T, out=products[:m])
             groups = np.full((m, V * C), np.inf, np.float32)
             groups[:, held] = np.minimum.reduceat(g, starts, axis=1)
