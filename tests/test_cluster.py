@@ -1,7 +1,9 @@
 """classify.runtime.cluster: a LocalCluster listens on 127.0.0.1 only (dashboard off unless asked), on TLS when
 given certificates; a tls:// address without certificates and mixed-up options are clear errors."""
 
+import platform
 import shutil
+import sys
 
 import numpy as np
 import psutil
@@ -105,6 +107,34 @@ def test_a_task_runs_on_one_thread_wherever_it_runs():
         assert list(pool.map(_threads, range(2))) == [(1, 1)] * 2
 
 
+def _mapped_blocks(dask_worker=None) -> tuple:
+    """The nanny's MALLOC_TRIM_THRESHOLD_, and how many blocks glibc maps apart from its heap for a 1 MB and a
+    64 MB allocation (``mallinfo2().hblks`` while each is held)."""
+    import ctypes
+    import os
+
+    class Info(ctypes.Structure):
+        _fields_ = [(name, ctypes.c_size_t) for name in ("arena", "ordblks", "smblks", "hblks", "hblkhd", "usmblks")]
+
+    libc = ctypes.CDLL("libc.so.6")
+    libc.mallinfo2.restype, libc.malloc.restype = Info, ctypes.c_void_p
+    mapped = []
+    for size in (1 << 20, 64 << 20):
+        before = libc.mallinfo2().hblks
+        block = libc.malloc(size)
+        mapped.append(libc.mallinfo2().hblks - before)
+        libc.free(ctypes.c_void_p(block))
+    return os.environ.get("MALLOC_TRIM_THRESHOLD_"), tuple(mapped)
+
+
+@pytest.mark.skipif(sys.platform != "linux" or platform.libc_ver()[0] != "glibc", reason="glibc's malloc only")
+def test_dask_workers_keep_arrays_up_to_32_mb_on_the_heap_whatever_the_nanny_sets():
+    """Dask's nanny starts workers with MALLOC_TRIM_THRESHOLD_=65536, which maps every block above 128 KB anew;
+    the worker plugin gives the worker glibc's own thresholds back."""
+    with open_executor(workers=2) as executor:
+        assert list(executor.client.run(_mapped_blocks).values()) == [("65536", (0, 1))] * 2
+
+
 def test_dask_workers_load_pymeshlab_on_their_main_thread_before_any_task(dask_cluster):
     # Loaded first in a task's thread, PyMeshLab's GnuTLS aborts the worker process as it exits.
     from distributed import Client
@@ -113,7 +143,7 @@ def test_dask_workers_load_pymeshlab_on_their_main_thread_before_any_task(dask_c
         """Whether the worker holds the plugin that loads PyMeshLab on its main thread, and PyMeshLab is loaded."""
         import sys
 
-        return "visuotactile-main-thread-imports" in dask_worker.plugins and "pymeshlab" in sys.modules
+        return "visuotactile-worker-setup" in dask_worker.plugins and "pymeshlab" in sys.modules
 
     with open_executor(workers=2) as executor:
         assert list(executor.client.run(_imported_at_start).values()) == [True, True]

@@ -403,7 +403,28 @@ def test_mirror_correlation_is_its_definition_on_a_patch_on_black(where):
         b[:] = rng.normal(size=b.shape)
     else:
         b[patch] = rng.normal(size=b[patch].shape)
-    for got, want in zip(_mirror_correlation(b), _correlation_by_definition(b)):
+    for got, want in zip(_mirror_correlation(b[None]), _correlation_by_definition(b)):
+        got = got[0]
         np.testing.assert_allclose(got, want, atol=2e-5)
         # Off the columns between the patch's first and last, no pair has two non-zero partners.
         assert not got[:, ~b.any(axis=0)].any() or where == "whole"
+
+
+def test_mirror_correlation_of_a_stack_is_each_map_s_alone_bit_for_bit():
+    """Maps whose patches lie in different places share one crop (the union of their boxes) and one call."""
+    _mirror_correlation = importlib.import_module("meshsal.attention.symmetry")._mirror_correlation
+    rng = np.random.default_rng(5)
+    b = np.zeros((4, 60, 70), np.float32)
+    for k, (rows, cols) in enumerate(
+        [
+            (slice(20, 35), slice(25, 50)),
+            (slice(0, 12), slice(58, 70)),
+            (slice(40, 60), slice(0, 9)),
+            (slice(0, 0), slice(0, 0)),
+        ]
+    ):
+        b[k][rows, cols] = rng.normal(size=b[k][rows, cols].shape)
+    stacked = _mirror_correlation(b)
+    for k in range(len(b)):
+        for got, alone in zip(stacked, _mirror_correlation(b[k : k + 1])):
+            assert np.array_equal(got[k], alone[0])

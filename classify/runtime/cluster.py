@@ -36,7 +36,8 @@ cluster pick their kernels by CPU unless started pinned, e.g.
 ``python -m meshsal.util.reproducible dask worker ADDRESS``, for the same
 numbers as everywhere else.  Every Dask worker that :func:`open_executor` reaches loads PyMeshLab and
 the thread pools on its main thread as it starts (a worker plugin): loaded first inside a task, PyMeshLab
-aborts the worker as it exits.
+aborts the worker as it exits.  The plugin also gives glibc's malloc back the thresholds that Dask's nanny
+takes from it (:data:`MALLOC_THRESHOLDS`).
 """
 
 from __future__ import annotations
@@ -156,9 +157,31 @@ def _die_with_parent() -> None:
             os._exit(1)
 
 
-def _main_thread_imports():
-    """A Dask worker plugin that loads the thread pools (:func:`_load_thread_pools`) as the worker starts, on its
-    main thread (a plugin's ``setup`` runs on the worker's event loop), not in a task's thread.
+#: glibc's malloc thresholds for a Dask worker (bytes): arrays up to 32 MB come from the heap and are reused, and
+#: the heap's free top goes back to the system past 64 MB.  Dask's nanny starts its workers with
+#: ``MALLOC_TRIM_THRESHOLD_=65536``, which hands memory back at once and turns off glibc's sliding thresholds:
+#: every array above 128 KB is mapped anew and its pages zeroed, and a corpus mesh's attention, hundreds of
+#: temporary maps of 64 KB to a few MB, takes 40 % more CPU (0.65 against 0.46 s).  These are the values
+#: glibc's sliding thresholds reach by themselves.
+MALLOC_THRESHOLDS = {"mmap": 32 << 20, "trim": 64 << 20}
+
+
+def _set_malloc_thresholds() -> bool:
+    """Set :data:`MALLOC_THRESHOLDS` in this process with ``mallopt`` (glibc on Linux); whether they were set."""
+    import ctypes
+    import platform
+
+    if sys.platform != "linux" or platform.libc_ver()[0] != "glibc":
+        return False
+    mallopt = ctypes.CDLL("libc.so.6").mallopt
+    # glibc's M_MMAP_THRESHOLD and M_TRIM_THRESHOLD; mallopt returns 1 on success.
+    return mallopt(-3, MALLOC_THRESHOLDS["mmap"]) == 1 and mallopt(-1, MALLOC_THRESHOLDS["trim"]) == 1
+
+
+def _worker_setup():
+    """A Dask worker plugin run as each worker starts, on its main thread (a plugin's ``setup`` runs on the
+    worker's event loop): loads the thread pools (:func:`_load_thread_pools`) and sets glibc's malloc
+    thresholds (:data:`MALLOC_THRESHOLDS`), whatever started the worker.
 
     With PyMeshLab first loaded in a task's thread, the worker aborts as the
     process exits, after every result is in ("malloc_consolidate(): unaligned
@@ -168,13 +191,14 @@ def _main_thread_imports():
     """
     from distributed.diagnostics.plugin import WorkerPlugin
 
-    class MainThreadImports(WorkerPlugin):
-        name = "visuotactile-main-thread-imports"
+    class WorkerSetup(WorkerPlugin):
+        name = "visuotactile-worker-setup"
 
         def setup(self, worker):
+            _set_malloc_thresholds()
             _load_thread_pools()
 
-    return MainThreadImports()
+    return WorkerSetup()
 
 
 def _start_worker(preload=()):
@@ -409,7 +433,7 @@ def open_executor(
         except OSError as exc:
             raise OSError(f"cannot reach the Dask scheduler at {scheduler}: {exc}") from None
         with client:
-            client.register_plugin(_main_thread_imports())
+            client.register_plugin(_worker_setup())
             yield client.get_executor()
         return
     if int(workers) < 1:
@@ -437,7 +461,7 @@ def open_executor(
         ) as cluster,
         Client(cluster, security=security) as client,
     ):
-        client.register_plugin(_main_thread_imports())
+        client.register_plugin(_worker_setup())
         if dashboard is not None:
             print(f"dashboard: {client.dashboard_link}", file=sys.stderr)
         yield OnThisMachine(client)

@@ -44,6 +44,8 @@ orientations would double the cost of a view.
 
 from __future__ import annotations
 
+import functools
+
 import cv2
 import numpy as np
 from numpy.lib.stride_tricks import as_strided
@@ -83,16 +85,18 @@ def _pair_weights():
 # Built once: the channel runs these on four small images per view.
 _K_ON, _K_BETWEEN = _pair_weights()
 _R = _K_ON.size
-# The same weights as filters of b**2 (the pairs' energy) and as (r, 1, 1) factors of the products.
+# The same weights as filters of b**2 (the pairs' energy) and as (r, 1, 1, 1) factors of the products.
 _KER_ON = (0.5 * np.concatenate([_K_ON[::-1], [0.0], _K_ON]))[None].astype(np.float32)
 _KER_BETWEEN = (0.5 * np.concatenate([_K_BETWEEN[::-1], _K_BETWEEN]))[None].astype(np.float32)
-_K_ON32 = _K_ON.astype(np.float32)[:, None, None]
-_K_BETWEEN32 = _K_BETWEEN.astype(np.float32)[:, None, None]
+_K_ON32 = _K_ON.astype(np.float32)[:, None, None, None]
+_K_BETWEEN32 = _K_BETWEEN.astype(np.float32)[:, None, None, None]
 # Fraction of a window's weight present, by the number of partners on the image (0..r).
 _PRESENT_ON = np.concatenate([[0.0], np.cumsum(_K_ON)])
 _PRESENT_BETWEEN = np.concatenate([[0.0], np.cumsum(_K_BETWEEN)])
 _ALONG_KERNEL = cv2.getGaussianKernel(2 * max(1, int(np.ceil(2.5 * _ALONG))) + 1, _ALONG, cv2.CV_32F)
 _ONE = np.ones(1, np.float32)
+# Maps measured in one call: the views of a stack at 64 x 64 (their products stay in cache; larger maps go a few at a time).
+_CHUNK_PIXELS = 80_000
 
 
 def _sum_in_numpy_order(terms) -> np.ndarray:
@@ -120,46 +124,71 @@ def _sum_in_numpy_order(terms) -> np.ndarray:
 
 
 def _columns(padded: np.ndarray, first: int, step: int, w: int) -> np.ndarray:
-    """(r, h, w) view: plane j is ``padded[:, first + step * j : ... + w]`` (no copy)."""
-    s0, s1 = padded.strides
-    return as_strided(padded[:, first:], shape=(_R, padded.shape[0], w), strides=(step * s1, s0, s1), writeable=False)
+    """(r, n, h, w) view of maps (n, h, W): plane j is ``padded[:, :, first + step * j : ... + w]`` (no copy)."""
+    s0, s1, s2 = padded.strides
+    return as_strided(
+        padded[:, :, first:], shape=(_R, *padded.shape[:2], w), strides=(step * s2, s0, s1, s2), writeable=False
+    )
+
+
+@functools.lru_cache(maxsize=8)
+def _present_along(h: int) -> np.ndarray:
+    """(h, 1) float32: the fraction of the weight along a line that lies on an image ``h`` rows high."""
+    present = cv2.sepFilter2D(np.ones((h, 1), np.float32), -1, _ONE, _ALONG_KERNEL, borderType=cv2.BORDER_CONSTANT)
+    present.setflags(write=False)
+    return present
+
+
+def _along(maps: np.ndarray) -> np.ndarray:
+    """Sums along vertical lines (the weights ``_ALONG_KERNEL``) of maps (n, h, c) float32, zero off the maps.
+
+    The maps lie side by side in one image of ``n * c`` columns: the sums
+    run down each column, so each map gets the bits a call on it alone gives
+    (with the pinned kernels: OpenCV's baseline code treats every column alike).
+    """
+    n, h, c = maps.shape
+    side = np.ascontiguousarray(maps.transpose(1, 0, 2)).reshape(h, n * c)
+    sums = cv2.sepFilter2D(side, -1, _ONE, _ALONG_KERNEL, borderType=cv2.BORDER_CONSTANT)
+    return sums.reshape(h, n, c).transpose(1, 0, 2)
 
 
 def _mirror_correlation(b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Correlation of each window of ``b`` with its mirror image about a vertical line.
+    """Correlation of each window of band-passed maps ``b`` (n, h, w) with its mirror image about a vertical line.
 
     Returns ``(on, between)``: the line through pixel column ``c``, and the
-    line half-way between columns ``c`` and ``c + 1``; both (h, w) float32
+    line half-way between columns ``c`` and ``c + 1``; both (n, h, w) float32
     in [-1, 1].  Pairs whose partner falls outside the image are missing,
     and the correlation is scaled down by the square of the fraction of the
     window's weight that is present: a window cut by the border has fewer
     pairs and a noisier correlation.
 
     A line has a non-zero product of partners only between the first and the
-    last non-zero column of ``b`` (a view's background is black): the
-    products and the sums along the lines are taken on those columns, the
-    pairs' energy on the non-zero rows.  Elsewhere the correlation is zero,
-    as over the whole image, up to the sign of a zero, which the channel's
-    evidence (a 4th power) drops: the channel keeps its bits.
+    last non-zero column of its map (a view's background is black): the
+    products and the sums along the lines are taken on the columns and rows
+    where some map of the stack is non-zero, as one array for the stack.
+    Elsewhere the correlation is zero, as over the whole image, up to the sign
+    of a zero, which the channel's evidence (a 4th power) drops: each map
+    keeps the bits it gets alone.
     """
-    h, w = b.shape
+    n, h, w = b.shape
     r = _R
-    on, between = np.zeros((h, w), np.float32), np.zeros((h, w), np.float32)
-    rows, cols = np.flatnonzero(b.any(axis=1)), np.flatnonzero(b.any(axis=0))
+    on, between = np.zeros((n, h, w), np.float32), np.zeros((n, h, w), np.float32)
+    rows, cols = np.flatnonzero(b.any(axis=(0, 2))), np.flatnonzero(b.any(axis=(0, 1)))
     if not rows.size:
         return on, between
     (r0, r1), (c0, c1) = (rows[0], rows[-1] + 1), (cols[0], cols[-1] + 1)
-    part = b[r0:r1]
-    # Column c + j of the padded rows holds b[:, c + j - r], zero off the image.
-    padded = np.pad(part, ((0, 0), (r, r)))
+    part = b[:, r0:r1]
+    # Column c + j of the padded rows holds b[..., c + j - r], zero off the image.
+    padded = np.pad(part, ((0, 0), (0, 0), (r, r)))
     # Plane m - 1 holds the partners at distance m: c - m and c + m (on), c + 1 - m and c + m (between).
     right = _columns(padded, r + 1 + c0, 1, c1 - c0)
     products = (
         _sum_in_numpy_order(_columns(padded, r - 1 + c0, -1, c1 - c0) * right * _K_ON32),
         _sum_in_numpy_order(_columns(padded, r + c0, -1, c1 - c0) * right * _K_BETWEEN32),
     )
-    # The energy of the same pairs, (b(p)**2 + b(p')**2) / 2, is a plain filter of b**2, row by row.
-    energy = part * part
+    # The energy of the same pairs, (b(p)**2 + b(p')**2) / 2, is a plain filter of b**2, row by row:
+    # the stack's rows are one image's.
+    energy = (part * part).reshape(-1, w)
     energies = (
         cv2.filter2D(energy, -1, _KER_ON, borderType=cv2.BORDER_CONSTANT),
         cv2.filter2D(energy, -1, _KER_BETWEEN, anchor=(r - 1, 0), borderType=cv2.BORDER_CONSTANT),
@@ -167,10 +196,7 @@ def _mirror_correlation(b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     c = np.arange(c0, c1)
     present_on = _PRESENT_ON[np.clip(np.minimum(c, w - 1 - c), 0, r)]
     present_between = _PRESENT_BETWEEN[np.clip(np.minimum(c + 1, w - 1 - c), 0, r)]
-    present_along = cv2.sepFilter2D(
-        np.ones((h, 1), np.float32), -1, _ONE, _ALONG_KERNEL, borderType=cv2.BORDER_CONSTANT
-    )
-    column = np.zeros((h, c1 - c0), np.float32)
+    column = np.zeros((n, h, c1 - c0), np.float32)
     for out, num, den, present in (
         (on, products[0], energies[0], present_on),
         (between, products[1], energies[1], present_between),
@@ -178,31 +204,31 @@ def _mirror_correlation(b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         # A ratio of window sums, not a mean of per-row ratios: rows with
         # little texture must not weigh as much as the rest.  The sums run
         # down each column, over the zero rows too.
-        column[r0:r1] = num
-        num = cv2.sepFilter2D(column, -1, _ONE, _ALONG_KERNEL, borderType=cv2.BORDER_CONSTANT)
-        column[r0:r1] = den[:, c0:c1]
-        den = cv2.sepFilter2D(column, -1, _ONE, _ALONG_KERNEL, borderType=cv2.BORDER_CONSTANT)
-        coverage = present.astype(np.float32)[None, :] * present_along
-        out[:, c0:c1] = num / (den + np.float32(_FLOOR)) * coverage * coverage
+        column[:, r0:r1] = num
+        num = _along(column)
+        column[:, r0:r1] = den.reshape(n, -1, w)[:, :, c0:c1]
+        den = _along(column)
+        coverage = present.astype(np.float32)[None, :] * _present_along(h)
+        out[:, :, c0:c1] = num / (den + np.float32(_FLOOR)) * coverage * coverage
     return on, between
 
 
 def _beside(a: np.ndarray) -> np.ndarray:
-    """Mean of ``max(a, 0)`` one column to the left and one to the right (edge columns repeated)."""
+    """Mean of ``max(a, 0)`` one column to the left and one to the right (edge columns repeated), maps (..., w)."""
     pos = np.maximum(a, 0.0)
-    left = np.concatenate([pos[:, :1], pos[:, :-1]], axis=1)
-    right = np.concatenate([pos[:, 1:], pos[:, -1:]], axis=1)
+    left = np.concatenate([pos[..., :1], pos[..., :-1]], axis=-1)
+    right = np.concatenate([pos[..., 1:], pos[..., -1:]], axis=-1)
     return 0.5 * (left + right)
 
 
 def _axis_evidence(b: np.ndarray) -> np.ndarray:
-    """(h, w) float32 in [0, 1]: evidence for a vertical mirror axis through (or next to) each pixel."""
+    """(n, h, w) float32 in [0, 1]: evidence for a vertical mirror axis through (or next to) each pixel of maps b."""
     on, between = _mirror_correlation(b)
     # An axis is a ridge of the correlation, not a plateau (see the module notes).
     on = on - _beside(on)
     between = between - _beside(between)
     # A pixel is next to the lines half a pixel to its left and to its right.
-    between_left = np.concatenate([between[:, :1], between[:, :-1]], axis=1)
+    between_left = np.concatenate([between[..., :1], between[..., :-1]], axis=-1)
     return np.clip(np.maximum(on, np.maximum(between, between_left)), 0.0, 1.0)
 
 
@@ -215,12 +241,14 @@ def _mirror_features(grays: np.ndarray) -> np.ndarray:
     for level in _LEVELS:
         if level >= len(pyramid):
             break
-        evidence = np.empty(pyramid[level].shape, np.float32)
-        for g, out in zip(pyramid[level], evidence):
-            b = g - cv2.GaussianBlur(g, (0, 0), _BAND, borderType=cv2.BORDER_REFLECT)
-            vertical = _axis_evidence(b)
-            horizontal = _axis_evidence(np.ascontiguousarray(b.T)).T
-            out[:] = np.maximum(vertical, horizontal) ** _POWER
+        b = np.stack([g - cv2.GaussianBlur(g, (0, 0), _BAND, borderType=cv2.BORDER_REFLECT) for g in pyramid[level]])
+        evidence = np.empty(b.shape, np.float32)
+        step = max(1, _CHUNK_PIXELS // (b.shape[1] * b.shape[2]))
+        for k in range(0, n, step):
+            chunk = b[k : k + step]
+            vertical = _axis_evidence(chunk)
+            horizontal = _axis_evidence(np.ascontiguousarray(chunk.transpose(0, 2, 1))).transpose(0, 2, 1)
+            evidence[k : k + step] = np.maximum(vertical, horizontal) ** _POWER
         # Image by image: the full-size maximum stays in cache.
         for up, out in zip(evidence, feature):
             np.maximum(out, upsample(up, 2**level, (h, w)), out=out)
