@@ -8,6 +8,8 @@ neighbourhood) and the most entropic / most contrasted place is 1.
 
 from __future__ import annotations
 
+import functools
+
 import cv2
 import numpy as np
 
@@ -60,12 +62,18 @@ def local_entropy(gray: np.ndarray, size: int = 9, bins: int = 16) -> np.ndarray
     q = np.minimum((np.asarray(gray, np.float32) * bins).astype(np.int32), bins - 1)
     # Every window of bin 0 alone (a view's black background, its darkest pixels) has one entropy: the
     # windows are counted on the window_crop of the other bins only.
-    out = np.full(q.shape, _window_entropy(np.zeros((size, size), np.int32), size, bins)[0, 0], np.float32)
+    out = np.full(q.shape, _flat_entropy(size, bins), np.float32)
     box = window_crop(q, size // 2)
     if box is not None:
         read, changed, inner = box
         out[changed] = _window_entropy(np.ascontiguousarray(q[read]), size, bins)[inner]
     return out
+
+
+@functools.lru_cache(maxsize=16)
+def _flat_entropy(size: int, bins: int) -> np.float32:
+    """:func:`local_entropy` of a window whose pixels all fall in one bin."""
+    return _window_entropy(np.zeros((size, size), np.int32), size, bins)[0, 0]
 
 
 def _window_entropy(q: np.ndarray, size: int, bins: int) -> np.ndarray:

@@ -95,7 +95,8 @@ _PRESENT_ON = np.concatenate([[0.0], np.cumsum(_K_ON)])
 _PRESENT_BETWEEN = np.concatenate([[0.0], np.cumsum(_K_BETWEEN)])
 _ALONG_KERNEL = cv2.getGaussianKernel(2 * max(1, int(np.ceil(2.5 * _ALONG))) + 1, _ALONG, cv2.CV_32F)
 _ONE = np.ones(1, np.float32)
-# Maps measured in one call: the views of a stack at 64 x 64 (their products stay in cache; larger maps go a few at a time).
+# Maps measured in one call: a stack's views at 64 x 64 at once (their products stay in cache),
+# larger maps a few at a time.
 _CHUNK_PIXELS = 80_000
 
 
@@ -187,7 +188,7 @@ def _mirror_correlation(b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         _sum_in_numpy_order(_columns(padded, r + c0, -1, c1 - c0) * right * _K_BETWEEN32),
     )
     # The energy of the same pairs, (b(p)**2 + b(p')**2) / 2, is a plain filter of b**2, row by row:
-    # the stack's rows are one image's.
+    # the maps' rows, one map under the other, make one image.
     energy = (part * part).reshape(-1, w)
     energies = (
         cv2.filter2D(energy, -1, _KER_ON, borderType=cv2.BORDER_CONSTANT),
@@ -295,7 +296,8 @@ def symmetry(img: np.ndarray) -> np.ndarray:
 
 
 def symmetry_stack(imgs) -> np.ndarray:
-    """:func:`symmetry` of each image of a stack (n, H, W, 3) or :class:`ImageStack`, bit for bit: (n, H, W) float32."""
+    """:func:`symmetry` of each image of a stack (n, H, W, 3) or :class:`ImageStack`, bit for bit with the pinned
+    kernels (``meshsal.util.reproducible``): (n, H, W) float32."""
     features = _mirror_features(ImageStack.of(imgs, "symmetry").luma)
     out = np.zeros(features.shape, np.float32)
     tops = features.reshape(len(features), -1).max(axis=1)
