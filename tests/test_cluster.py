@@ -107,14 +107,17 @@ def test_a_task_runs_on_one_thread_wherever_it_runs():
         assert list(pool.map(_threads, range(2))) == [(1, 1)] * 2
 
 
-def _mapped_blocks(dask_worker=None) -> tuple:
+def _mapped_blocks() -> tuple:
     """The nanny's MALLOC_TRIM_THRESHOLD_, and how many blocks glibc maps apart from its heap for a 1 MB and a
     64 MB allocation (``mallinfo2().hblks`` while each is held)."""
     import ctypes
     import os
 
+    # glibc's struct mallinfo2, every field: it is returned by value.
+    fields = "arena ordblks smblks hblks hblkhd usmblks fsmblks uordblks fordblks keepcost".split()
+
     class Info(ctypes.Structure):
-        _fields_ = [(name, ctypes.c_size_t) for name in ("arena", "ordblks", "smblks", "hblks", "hblkhd", "usmblks")]
+        _fields_ = [(name, ctypes.c_size_t) for name in fields]
 
     libc = ctypes.CDLL("libc.so.6")
     libc.mallinfo2.restype, libc.malloc.restype = Info, ctypes.c_void_p
