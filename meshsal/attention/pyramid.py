@@ -186,8 +186,10 @@ def _separable_upsample(m: np.ndarray, factor: int, shape: tuple[int, int]) -> n
     weights = np.arange(factor, dtype=np.float32) / np.float32(factor)
     d = _step_differences(m, axis=-1)
     rows = np.empty((*lead, h, w, factor), np.float32)
-    np.multiply(d[..., None], weights, out=rows)
-    rows += m[..., None]
+    # Weight by weight: a pass along whole rows, not along the factor's few entries.
+    for j, weight in enumerate(weights):
+        np.multiply(d, weight, out=rows[..., j])
+        rows[..., j] += m
     rows = rows.reshape(*lead, h, w * factor)[..., : shape[1]]
     out = np.empty((*lead, h, factor, rows.shape[-1]), np.float32)
     np.multiply(_step_differences(rows, axis=-2)[..., :, None, :], weights[:, None], out=out)
