@@ -51,7 +51,7 @@ import numpy as np
 from numpy.lib.stride_tricks import as_strided
 
 from meshsal.attention.images import ImageStack
-from meshsal.attention.pyramid import conspicuity_maps, gaussian_pyramid_stack, upsample
+from meshsal.attention.pyramid import conspicuity_maps, gaussian_pyramid_stack, upsample_stack
 
 __all__ = ["symmetry", "symmetry_stack"]
 
@@ -250,9 +250,7 @@ def _mirror_features(grays: np.ndarray) -> np.ndarray:
             vertical = _axis_evidence(chunk)
             horizontal = _axis_evidence(np.ascontiguousarray(chunk.transpose(0, 2, 1))).transpose(0, 2, 1)
             evidence[k : k + step] = np.maximum(vertical, horizontal) ** _POWER
-        # Image by image: the full-size maximum stays in cache.
-        for up, out in zip(evidence, feature):
-            np.maximum(out, upsample(up, 2**level, (h, w)), out=out)
+        np.maximum(feature, upsample_stack(evidence, 2**level, (h, w)), out=feature)
     return feature
 
 
