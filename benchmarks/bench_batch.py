@@ -13,9 +13,11 @@ it needed: CPU time per mesh does.  Two workers that spend no more CPU per
 mesh than one would run 2 x (CPU per mesh on 1) / (CPU per mesh on 2) times
 as fast as one on two free cores: the "speed-up the CPU time allows",
 printed beside the one measured.  Then the median time of each stage per
-mesh, for the corpus and for the ten embedded YCB scans (15,728 faces), and
-with ``--all`` the whole corpus through ``visuotactile batch --workers 2``,
-timed from the command to its exit.  Tables go to ``docs/benchmarks/bench_batch.md``.
+mesh: for the corpus on one worker and the same meshes in this process (what
+a Dask worker adds to a task shows as the ratio of their CPU per mesh), and
+for the ten embedded YCB scans (15,728 faces); and with ``--all`` the whole
+corpus through ``visuotactile batch --workers 2``, timed from the command to
+its exit.  Tables go to ``docs/benchmarks/bench_batch.md``.
 
     .venv/bin/python benchmarks/bench_batch.py [--meshes 120] [--repeats 3] [--corpus DIR] [--all]
 """
@@ -91,6 +93,16 @@ def _run(folder: Path, workers: int, store: Path) -> dict:
     }
 
 
+def _in_process(folder: Path, store: Path) -> dict:
+    """Stage medians and the tasks' CPU per mesh of the meshes under ``folder``, one after another in this process."""
+    results = [process_mesh(path, name, store, SETTINGS) for name, path in find_meshes(folder)]
+    done = [r for r in results if r["status"] == "done"]
+    return {
+        "stages": {k: float(np.median([r["timings"][k] for r in done])) for k in STAGES},
+        "cpu_per_mesh": sum(r["cpu_s"] for r in done) / len(done),
+    }
+
+
 def _ycb_stages(scratch: Path) -> dict:
     from meshsal.objects import ycb
 
@@ -145,7 +157,7 @@ def main() -> int:
                 runs[workers].append(_run(folder, workers, scratch / f"store-{workers}-{repeat}"))
                 shutil.rmtree(scratch / f"store-{workers}-{repeat}")
         body = _throughput(args.meshes, args.repeats, runs)
-        body += _stages(runs[1], _ycb_stages(scratch))
+        body += _stages(runs[1], _in_process(folder, scratch / "here"), _ycb_stages(scratch))
         if args.all:
             body += "\n" + _whole_corpus(args.corpus, scratch)
         print(body)
@@ -179,14 +191,24 @@ def _throughput(meshes: int, repeats: int, runs: dict) -> str:
     )
 
 
-def _stages(one_worker: list[dict], ycb: dict) -> str:
+def _stages(one_worker: list[dict], here: dict, ycb: dict) -> str:
     lines = [
-        "| stage, median per mesh | corpus (~470 faces, 1 worker) | YCB scan (15,728 faces, in process) |",
-        "|---|---:|---:|",
+        "| stage, median per mesh | corpus (~470 faces, 1 worker) | the same meshes, in this process "
+        "| YCB scan (15,728 faces, in process) |",
+        "|---|---:|---:|---:|",
     ]
     stages = one_worker[0]["stages"]
-    lines += [f"| {k} | {1000 * stages.get(k, float('nan')):.1f} ms | {1000 * ycb[k]:.1f} ms |" for k in STAGES]
-    return "\n".join(lines) + f"\n\nA YCB-sized object takes {sum(ycb.values()):.2f} s in one process.\n"
+    lines += [
+        f"| {k} | {1000 * stages.get(k, float('nan')):.1f} ms | {1000 * here['stages'][k]:.1f} ms "
+        f"| {1000 * ycb[k]:.1f} ms |"
+        for k in STAGES
+    ]
+    worker = statistics.median(r["tasks"] / r["done"] for r in one_worker)
+    return "\n".join(lines) + (
+        f"\n\nThe tasks' CPU per corpus mesh: {1000 * worker:.0f} ms on one worker, "
+        f"{1000 * here['cpu_per_mesh']:.0f} ms in this process ({worker / here['cpu_per_mesh']:.2f}x: what a "
+        f"Dask worker adds to a task). A YCB-sized object takes {sum(ycb.values()):.2f} s in one process.\n"
+    )
 
 
 if __name__ == "__main__":

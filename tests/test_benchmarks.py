@@ -30,3 +30,15 @@ def test_bench_batch_counts_the_meshes_and_the_cpu_time_of_every_process(bench_b
     assert run["cpu"] >= run["tasks"] > 0
     assert run["wall"] > 0 and run["peak_mb"] > 0
     assert set(run["stages"]) == set(bench_batch.STAGES)
+
+
+def test_bench_batch_measures_the_same_meshes_in_its_own_process(bench_batch, tmp_path):
+    folder = tmp_path / "meshes"
+    folder.mkdir()
+    for i in range(2):
+        shapes.write_obj(folder / f"m{i}.obj", shapes.icosphere(radius=1.0 + i, subdivisions=2))
+    here = bench_batch._in_process(folder, tmp_path / "store")
+    assert set(here["stages"]) == set(bench_batch.STAGES) and here["cpu_per_mesh"] > 0
+    one = [{"stages": here["stages"], "tasks": 2 * here["cpu_per_mesh"], "done": 2}]
+    ycb = dict.fromkeys(bench_batch.STAGES, 0.001)
+    assert "(1.00x: what a Dask worker adds to a task)" in bench_batch._stages(one, here, ycb)
