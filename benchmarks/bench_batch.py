@@ -13,8 +13,9 @@ it needed: CPU time per mesh does.  Two workers that spend no more CPU per
 mesh than one would run 2 x (CPU per mesh on 1) / (CPU per mesh on 2) times
 as fast as one on two free cores: the "speed-up the CPU time allows",
 printed beside the one measured.  Then the median time of each stage per
-mesh: for the corpus on one worker and the same meshes in this process (what
-a Dask worker adds to a task shows as the ratio of their CPU per mesh), and
+mesh: for the corpus on one worker and the same meshes in this process, run
+in turn with the cluster's runs (what a Dask worker adds to a task shows as
+the ratio of their CPU per mesh), and
 for the ten embedded YCB scans (15,728 faces); and with ``--all`` the whole
 corpus through ``visuotactile batch --workers 2``, timed from the command to
 its exit.  Tables go to ``docs/benchmarks/bench_batch.md``.
@@ -151,13 +152,16 @@ def main() -> int:
     scratch = Path(tempfile.mkdtemp(prefix="bench_batch_"))
     try:
         folder = _subset(args.corpus, args.meshes, scratch / "meshes")
-        runs = {1: [], 2: []}
+        runs, here = {1: [], 2: []}, []
+        # The three in turn, each repeat: a drift of the machine's speed moves them alike.
         for repeat in range(args.repeats):
             for workers in (1, 2):
                 runs[workers].append(_run(folder, workers, scratch / f"store-{workers}-{repeat}"))
                 shutil.rmtree(scratch / f"store-{workers}-{repeat}")
+            here.append(_in_process(folder, scratch / f"here-{repeat}"))
+            shutil.rmtree(scratch / f"here-{repeat}")
         body = _throughput(args.meshes, args.repeats, runs)
-        body += _stages(runs[1], _in_process(folder, scratch / "here"), _ycb_stages(scratch))
+        body += _stages(runs[1], here, _ycb_stages(scratch))
         if args.all:
             body += "\n" + _whole_corpus(args.corpus, scratch)
         print(body)
@@ -191,22 +195,22 @@ def _throughput(meshes: int, repeats: int, runs: dict) -> str:
     )
 
 
-def _stages(one_worker: list[dict], here: dict, ycb: dict) -> str:
+def _stages(one_worker: list[dict], here: list[dict], ycb: dict) -> str:
     lines = [
         "| stage, median per mesh | corpus (~470 faces, 1 worker) | the same meshes, in this process "
         "| YCB scan (15,728 faces, in process) |",
         "|---|---:|---:|---:|",
     ]
-    stages = one_worker[0]["stages"]
+    stages, mine = one_worker[0]["stages"], here[0]["stages"]
     lines += [
-        f"| {k} | {1000 * stages.get(k, float('nan')):.1f} ms | {1000 * here['stages'][k]:.1f} ms "
-        f"| {1000 * ycb[k]:.1f} ms |"
+        f"| {k} | {1000 * stages.get(k, float('nan')):.1f} ms | {1000 * mine[k]:.1f} ms | {1000 * ycb[k]:.1f} ms |"
         for k in STAGES
     ]
     worker = statistics.median(r["tasks"] / r["done"] for r in one_worker)
+    alone = statistics.median(r["cpu_per_mesh"] for r in here)
     return "\n".join(lines) + (
         f"\n\nThe tasks' CPU per corpus mesh: {1000 * worker:.0f} ms on one worker, "
-        f"{1000 * here['cpu_per_mesh']:.0f} ms in this process ({worker / here['cpu_per_mesh']:.2f}x: what a "
+        f"{1000 * alone:.0f} ms in this process (medians of runs in turn; {worker / alone:.2f}x: what a "
         f"Dask worker adds to a task). A YCB-sized object takes {sum(ycb.values()):.2f} s in one process.\n"
     )
 

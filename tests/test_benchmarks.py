@@ -41,4 +41,4 @@ def test_bench_batch_measures_the_same_meshes_in_its_own_process(bench_batch, tm
     assert set(here["stages"]) == set(bench_batch.STAGES) and here["cpu_per_mesh"] > 0
     one = [{"stages": here["stages"], "tasks": 2 * here["cpu_per_mesh"], "done": 2}]
     ycb = dict.fromkeys(bench_batch.STAGES, 0.001)
-    assert "(1.00x: what a Dask worker adds to a task)" in bench_batch._stages(one, here, ycb)
+    assert "1.00x: what a Dask worker adds to a task" in bench_batch._stages(one, [here], ycb)
