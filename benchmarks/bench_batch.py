@@ -15,10 +15,9 @@ as fast as one on two free cores: the "speed-up the CPU time allows",
 printed beside the one measured.  Then the median time of each stage per
 mesh: for the corpus on one worker and the same meshes in this process, run
 in turn with the cluster's runs (what a Dask worker adds to a task shows as
-the ratio of their CPU per mesh), and
-for the ten embedded YCB scans (15,728 faces); and with ``--all`` the whole
-corpus through ``visuotactile batch --workers 2``, timed from the command to
-its exit.  Tables go to ``docs/benchmarks/bench_batch.md``.
+the ratio of their CPU per mesh), and for the ten embedded YCB scans (15,728
+faces); and with ``--all`` the whole corpus through ``visuotactile batch
+--workers 2``, timed from the command to its exit.  Tables go to ``docs/benchmarks/bench_batch.md``.
 
     .venv/bin/python benchmarks/bench_batch.py [--meshes 120] [--repeats 3] [--corpus DIR] [--all]
 """
@@ -94,9 +93,10 @@ def _run(folder: Path, workers: int, store: Path) -> dict:
     }
 
 
-def _in_process(folder: Path, store: Path) -> dict:
-    """Stage medians and the tasks' CPU per mesh of the meshes under ``folder``, one after another in this process."""
-    results = [process_mesh(path, name, store, SETTINGS) for name, path in find_meshes(folder)]
+def _in_process(meshes, store: Path) -> dict:
+    """Stage medians and the tasks' CPU per mesh of ``meshes`` ((name, path) pairs), one after another in this
+    process."""
+    results = [process_mesh(path, name, store, SETTINGS) for name, path in meshes]
     done = [r for r in results if r["status"] == "done"]
     return {
         "stages": {k: float(np.median([r["timings"][k] for r in done])) for k in STAGES},
@@ -107,12 +107,7 @@ def _in_process(folder: Path, store: Path) -> dict:
 def _ycb_stages(scratch: Path) -> dict:
     from meshsal.objects import ycb
 
-    times = {k: [] for k in STAGES}
-    for name in ycb.NAMES:
-        result = process_mesh(ycb.path(name), name, scratch / "ycb", SETTINGS)
-        for k in STAGES:
-            times[k].append(result["timings"][k])
-    return {k: float(np.median(v)) for k, v in times.items()}
+    return _in_process([(name, ycb.path(name)) for name in ycb.NAMES], scratch / "ycb")["stages"]
 
 
 def _whole_corpus(corpus: Path, scratch: Path) -> str:
@@ -158,7 +153,7 @@ def main() -> int:
             for workers in (1, 2):
                 runs[workers].append(_run(folder, workers, scratch / f"store-{workers}-{repeat}"))
                 shutil.rmtree(scratch / f"store-{workers}-{repeat}")
-            here.append(_in_process(folder, scratch / f"here-{repeat}"))
+            here.append(_in_process(find_meshes(folder), scratch / f"here-{repeat}"))
             shutil.rmtree(scratch / f"here-{repeat}")
         body = _throughput(args.meshes, args.repeats, runs)
         body += _stages(runs[1], here, _ycb_stages(scratch))

@@ -257,8 +257,9 @@ def test_forecast_rows_do_not_depend_on_which_objects_rows_are_scored_together(f
     # A row is its touch's own posterior: scored alone, with its instance left out.
     bank = model.banks_[4]
     e, s = 5, int(np.flatnonzero(bank.instances[5] >= 0)[-1])
-    ll = model._mixed(bank.samples[e, s][None], bank.signatures[e][None], bank.instances[e, s][None])[0][0]
-    post = np.exp(ll / model.temperature_ - np.logaddexp.reduce(ll / model.temperature_))
+    mixed = model._mixed(bank.samples[e, s][None], bank.signatures[e][None], bank.instances[e, s][None])[0][0]
+    ll = mixed / model.temperature_
+    post = np.exp(ll - np.logaddexp.reduce(ll))
     last = min(3, int((bank.instances[e] >= 0).sum())) - 1  # the entry's last pick is its last valid sample
     row = together[0][4][e, last]
     np.testing.assert_allclose(row.values, post[row.classes], rtol=1e-6)

@@ -166,16 +166,17 @@ def _die_with_parent() -> None:
 MALLOC_THRESHOLDS = {"mmap": 32 << 20, "trim": 64 << 20}
 
 
-def _set_malloc_thresholds() -> bool:
-    """Set :data:`MALLOC_THRESHOLDS` in this process with ``mallopt`` (glibc on Linux); whether they were set."""
+def _set_malloc_thresholds() -> None:
+    """Set :data:`MALLOC_THRESHOLDS` in this process with ``mallopt`` (glibc on Linux; elsewhere nothing)."""
     import ctypes
     import platform
 
     if sys.platform != "linux" or platform.libc_ver()[0] != "glibc":
-        return False
+        return
     mallopt = ctypes.CDLL("libc.so.6").mallopt
-    # glibc's M_MMAP_THRESHOLD and M_TRIM_THRESHOLD; mallopt returns 1 on success.
-    return mallopt(-3, MALLOC_THRESHOLDS["mmap"]) == 1 and mallopt(-1, MALLOC_THRESHOLDS["trim"]) == 1
+    # glibc's M_MMAP_THRESHOLD and M_TRIM_THRESHOLD.
+    mallopt(-3, MALLOC_THRESHOLDS["mmap"])
+    mallopt(-1, MALLOC_THRESHOLDS["trim"])
 
 
 def _worker_setup():

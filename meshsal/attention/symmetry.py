@@ -82,7 +82,7 @@ def _pair_weights():
     return k_on / k_on.sum(), k_between / k_between.sum()
 
 
-# Built once: the channel runs these on four small images per view.
+# Built once: the channel runs these for every level and axis of every stack.
 _K_ON, _K_BETWEEN = _pair_weights()
 _R = _K_ON.size
 # The same weights as filters of b**2 (the pairs' energy) and as (r, 1, 1, 1) factors of the products.
