@@ -107,3 +107,31 @@ def test_an_instance_of_the_experiment_has_one_robust_scene_and_one_rendering(co
     scenes.clear(), renders.clear()
     instance_samples(dataclasses.replace(task, methods=("uniform",), survey=False, places=False))
     assert renders == {} and scenes == {(True, faces): 1}
+
+
+def test_the_learned_pass_takes_the_survey_s_mesh_saliency_and_chooses_the_same_points(monkeypatch):
+    from models import one_feature_model
+
+    from meshsal.mesh import curvature
+
+    settings = dataclasses.replace(SMALL, view_size=32)
+    nominal = meshsal.objects.toys.make("cup")
+    plain = instance_samples(SampleTask(nominal, "cup", ("uniform",), settings, 0, 1, survey=True, threads=1))
+    survey = plain.survey
+    assert survey.vertex_saliency.shape == (nominal.n_vertices,)
+    round_trip = type(survey).from_arrays(survey.to_arrays())
+    np.testing.assert_array_equal(round_trip.vertex_saliency, survey.vertex_saliency)
+    learned = SampleTask(
+        nominal, "cup", ("learned",), settings, 0, 1, model=one_feature_model("votes"), surveyed=survey, threads=1
+    )
+    without = instance_samples(dataclasses.replace(learned, surveyed=dataclasses.replace(survey, vertex_saliency=None)))
+
+    def refused(*args, **kwargs):
+        raise AssertionError("mesh saliency computed again")
+
+    monkeypatch.setattr(curvature, "mesh_saliency", refused)
+    taken = instance_samples(learned)
+    for name in ("positions", "normals", "imprints"):
+        np.testing.assert_array_equal(
+            getattr(taken.by_method["learned"], name), getattr(without.by_method["learned"], name)
+        )

@@ -393,11 +393,14 @@ def instance_samples(task: SampleTask) -> InstanceSamples:
     built = []
 
     def instance():
-        """The instance's workpiece (mesh, Embree scene, mesh saliency, views), built on first need."""
+        """The instance's workpiece (mesh, Embree scene, mesh saliency, views), built on first need; its mesh
+        saliency is the survey's when the survey holds it."""
         from meshsal.points.workpiece import Workpiece
 
         if not built:
-            built.append(Workpiece(instance_mesh(task), settings.view_size or PointOptions.size, task.threads))
+            known = None if task.surveyed is None else task.surveyed.vertex_saliency
+            size = settings.view_size or PointOptions.size
+            built.append(Workpiece.of(instance_mesh(task), vertex_saliency=known, view_size=size, threads=task.threads))
         return built[0]
 
     if missing or want_survey or want_places:
@@ -417,7 +420,9 @@ def instance_samples(task: SampleTask) -> InstanceSamples:
                 if task.index >= 1
                 else None
             )
-            survey = touch_survey(piece.mesh, pool, features[: pool.size], settings, piece.scene, rng)
+            survey = touch_survey(
+                piece.mesh, pool, features[: pool.size], settings, piece.scene, rng, piece.vertex_saliency
+            )
             cache_mod.store(task.cache_dir, survey_key, survey.to_arrays())
         if want_places:
             at = candidate_places_at(piece, ids, features, settings)

@@ -27,25 +27,32 @@ class Survey:
     ``features`` (P, len(meshsal.points.learned.FEATURES)) float64, what vision
     sees at each; ``descriptors`` (P, d) float32, the roll-invariant polar
     descriptors of one touch of each, on a training instance only (None on
-    the test instance, which is never touched here).
+    the test instance, which is never touched here); ``vertex_saliency``
+    (n_vertices,) float64, the instance's mesh saliency, which the learned
+    methods' fill reads, so that choosing from the survey needs no mesh
+    saliency computed again (None: computed when needed).
     """
 
     pool: np.ndarray
     features: np.ndarray
     descriptors: np.ndarray | None = None
+    vertex_saliency: np.ndarray | None = None
 
     def to_arrays(self) -> dict:
         arrays = {"pool": self.pool, "features": self.features}
-        if self.descriptors is not None:
-            arrays["descriptors"] = self.descriptors
+        for name in ("descriptors", "vertex_saliency"):
+            if getattr(self, name) is not None:
+                arrays[name] = getattr(self, name)
         return arrays
 
     @staticmethod
     def from_arrays(arrays: dict) -> Survey:
-        return Survey(arrays["pool"], arrays["features"], arrays.get("descriptors"))
+        return Survey(arrays["pool"], arrays["features"], arrays.get("descriptors"), arrays.get("vertex_saliency"))
 
 
-def touch_survey(mesh, pool, features, settings, scene, rng: np.random.Generator | None = None) -> Survey:
+def touch_survey(
+    mesh, pool, features, settings, scene, rng: np.random.Generator | None = None, vertex_saliency=None
+) -> Survey:
     """One instance's candidate pool and their visual features; with ``rng``, one touch of each.
 
     Parameters
@@ -68,12 +75,13 @@ def touch_survey(mesh, pool, features, settings, scene, rng: np.random.Generator
     pool = np.asarray(pool, np.int64)
     features = np.asarray(features, np.float64)
     if rng is None:
-        return Survey(pool, features)
+        return Survey(pool, features, vertex_saliency=vertex_saliency)
     vn = vertex_normals(mesh.vertices, mesh.faces)
     images = tactile.acquire(
         mesh, mesh.vertices[pool], vn[pool], settings.sensor, settings.perturbation, rng, scene=scene
     )
-    return Survey(pool, features, describe(np.asarray(images, np.float32), "polar").astype(np.float32))
+    descriptors = describe(np.asarray(images, np.float32), "polar").astype(np.float32)
+    return Survey(pool, features, descriptors, vertex_saliency)
 
 
 def distinctiveness(

@@ -116,8 +116,14 @@ def gaussian_pyramid_stack(maps: np.ndarray, levels: int = _LEVELS) -> list[np.n
 
 
 def _pyr_down_each(maps: np.ndarray) -> np.ndarray:
-    """``cv2.pyrDown`` of each map of a stack."""
-    return np.stack([cv2.pyrDown(m) for m in maps])
+    """``cv2.pyrDown`` of each map of a stack, written into the stack it returns (no list of maps to join)."""
+    n, h, w = maps.shape[:3]
+    out = np.empty((n, (h + 1) // 2, (w + 1) // 2, *maps.shape[3:]), np.float32)
+    for m, level in zip(maps, out):
+        done = cv2.pyrDown(m, dst=level)
+        if done is not level:  # OpenCV allocates anew when it cannot use ``dst``
+            level[...] = done
+    return out
 
 
 def _gaussian(m: np.ndarray, sigma: float) -> np.ndarray:
