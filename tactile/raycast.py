@@ -106,11 +106,13 @@ def _cast_chunk(scene, poses: Poses, sensor: Sensor, xs: np.ndarray, ys: np.ndar
     f32 = np.float32
     normals = poses.normals.astype(f32)
     start = (poses.centers + sensor.reach_mm * poses.normals).astype(f32)
-    origins = (
-        start[:, None, None, :]
-        + ys.astype(f32)[None, :, None, None] * poses.ups.astype(f32)[:, None, None, :]
-        + xs.astype(f32)[None, None, :, None] * poses.rights.astype(f32)[:, None, None, :]
-    )
+    # (start + y * up) + x * right in float32: each row's start and each column's offset first, then their
+    # sums a component at a time, whose loops run along a row of samples instead of over three components.
+    rows = start[:, :, None] + ys.astype(f32)[None, None, :] * poses.ups.astype(f32)[:, :, None]
+    cols = xs.astype(f32)[None, None, :] * poses.rights.astype(f32)[:, :, None]
+    origins = np.empty((k, H, W, 3), f32)
+    for c in range(3):
+        np.add(rows[:, c, :, None], cols[:, c, None, :], out=origins[..., c])
     # First contact is no farther than any front-facing hit of the pad's own
     # rays, and hits deeper than depth_mm beyond contact are dropped: so one
     # probe ray per pad bounds how far all its rays need to travel, which
