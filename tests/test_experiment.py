@@ -373,7 +373,7 @@ def test_a_mismatch_arm_changes_the_test_instances_only():
     from classify.experiment.samples import SampleTask, instance_samples, nominal_mesh
 
     ball = nominal_mesh(shapes.sphere(radius=50.0, n=24).replace(name="ball"), SMALL)
-    arm = Settings(n_points=6, train_instances=2, train_sessions=1, mismatch=("subdivided", "noise_double"))
+    arm = dataclasses.replace(SMALL, mismatch=("subdivided", "noise_double"))
 
     def sample(settings, index):
         return instance_samples(SampleTask(ball, "ball", ("uniform",), settings, 0, index, places=True))
