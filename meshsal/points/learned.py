@@ -67,15 +67,17 @@ def _channel_means(mesh: Mesh, views, results, ids: np.ndarray) -> tuple[np.ndar
     pixels = np.zeros(k)
     seen = np.zeros(k)
     for view, result in zip(views, results):
-        hit = view.mask
-        corners = slot[mesh.faces[view.face_id[hit]]].ravel()
-        near = corners >= 0
+        hit = np.flatnonzero(view.mask)
+        corners = slot[mesh.faces[view.face_id.reshape(-1)[hit]]].ravel()
+        near = np.flatnonzero(corners >= 0)
         corners = corners[near]
         counts = np.bincount(corners, minlength=k)
         pixels += counts
         seen += counts > 0
+        # The pixel of each corner kept (three corners a pixel): each channel is read there only.
+        at = hit[near // 3]
         for c, name in enumerate(CHANNELS):
-            values = np.repeat(result.channels[name][hit].astype(np.float64), 3)[near]
+            values = result.channels[name].reshape(-1)[at].astype(np.float64)
             sums[c] += np.bincount(corners, weights=values, minlength=k)
     return (sums / np.maximum(pixels, 1.0))[:, back], seen[back]
 
