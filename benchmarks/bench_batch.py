@@ -35,11 +35,10 @@ import tempfile
 import time
 from pathlib import Path
 
-import numpy as np
 import psutil
 from benchlib import run
 
-from classify.batch import STAGES, BatchSettings, find_meshes, process_mesh, run_batch
+from classify.batch import STAGES, BatchSettings, find_meshes, run_batch
 from classify.runtime.cluster import open_executor
 
 SHARED = Path(__file__).resolve().parents[2] / "shared" / "corpus" / "random-objects"
@@ -93,21 +92,18 @@ def _run(folder: Path, workers: int, store: Path) -> dict:
     }
 
 
-def _in_process(meshes, store: Path) -> dict:
-    """Stage medians and the tasks' CPU per mesh of ``meshes`` ((name, path) pairs), one after another in this
-    process."""
-    results = [process_mesh(path, name, store, SETTINGS) for name, path in meshes]
-    done = [r for r in results if r["status"] == "done"]
-    return {
-        "stages": {k: float(np.median([r["timings"][k] for r in done])) for k in STAGES},
-        "cpu_per_mesh": sum(r["cpu_s"] for r in done) / len(done),
-    }
+def _in_process(folder: Path, store: Path) -> dict:
+    """Stage medians and the tasks' CPU per mesh of the meshes under ``folder``, batched in this process (as a
+    worker's figures count them: the reading pass included)."""
+    summary = run_batch(folder, store, SETTINGS, quiet=True)
+    return {"stages": summary.stage_median_s, "cpu_per_mesh": summary.cpu_s / summary.done}
 
 
 def _ycb_stages(scratch: Path) -> dict:
     from meshsal.objects import ycb
 
-    return _in_process([(name, ycb.path(name)) for name in ycb.NAMES], scratch / "ycb")["stages"]
+    # The embedded scans' folder holds them and nothing else.
+    return _in_process(Path(ycb.path(ycb.NAMES[0])).parent, scratch / "ycb")["stages"]
 
 
 def _whole_corpus(corpus: Path, scratch: Path) -> str:
@@ -153,7 +149,7 @@ def main() -> int:
             for workers in (1, 2):
                 runs[workers].append(_run(folder, workers, scratch / f"store-{workers}-{repeat}"))
                 shutil.rmtree(scratch / f"store-{workers}-{repeat}")
-            here.append(_in_process(find_meshes(folder), scratch / f"here-{repeat}"))
+            here.append(_in_process(folder, scratch / f"here-{repeat}"))
             shutil.rmtree(scratch / f"here-{repeat}")
         body = _throughput(args.meshes, args.repeats, runs)
         body += _stages(runs[1], here, _ycb_stages(scratch))

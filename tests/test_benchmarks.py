@@ -37,7 +37,7 @@ def test_bench_batch_measures_the_same_meshes_in_its_own_process(bench_batch, tm
     folder.mkdir()
     for i in range(2):
         shapes.write_obj(folder / f"m{i}.obj", shapes.icosphere(radius=1.0 + i, subdivisions=2))
-    here = bench_batch._in_process(bench_batch.find_meshes(folder), tmp_path / "store")
+    here = bench_batch._in_process(folder, tmp_path / "store")
     assert set(here["stages"]) == set(bench_batch.STAGES) and here["cpu_per_mesh"] > 0
     # A worker whose tasks took 1.5 times the CPU: the ratio is the worker's over this process's.
     one = [{"stages": here["stages"], "tasks": 3 * here["cpu_per_mesh"], "done": 2}]

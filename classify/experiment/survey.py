@@ -39,11 +39,13 @@ class Survey:
     vertex_saliency: np.ndarray | None = None
 
     def to_arrays(self) -> dict:
-        arrays = {"pool": self.pool, "features": self.features}
-        for name in ("descriptors", "vertex_saliency"):
-            if getattr(self, name) is not None:
-                arrays[name] = getattr(self, name)
-        return arrays
+        arrays = {
+            "pool": self.pool,
+            "features": self.features,
+            "descriptors": self.descriptors,
+            "vertex_saliency": self.vertex_saliency,
+        }
+        return {name: a for name, a in arrays.items() if a is not None}
 
     @staticmethod
     def from_arrays(arrays: dict) -> Survey:
