@@ -68,13 +68,54 @@ def test_a_measured_stage_counts_its_cpu_time():
     assert usage.cpu_s >= 0.3 and usage.wall_s >= 0.3
 
 
+def test_a_measured_stage_counts_a_worker_it_starts_after_the_sampler_looked():
+    def work():
+        time.sleep(0.2)  # the sampler has looked for processes by now, and found none below this one
+        child = _child("import sys\nheld = bytearray(256 * 2**20)\nheld[::4096] = b'x' * len(held[::4096])")
+        try:
+            assert child.stdout.readline().strip() == "ready"
+            time.sleep(0.5)  # a few refreshes
+        finally:
+            child.communicate("")
+
+    before = resident_mb()
+    _, usage = measured(work, interval=0.02, refresh=0.1)
+    assert usage.peak_mb - before > 250
+
+
+def test_the_sampler_looks_for_processes_once_a_refresh_whatever_its_interval(monkeypatch):
+    import threading
+
+    import psutil
+
+    searches, samples = [], []
+    children, memory_info = psutil.Process.children, psutil.Process.memory_info
+
+    def counted(calls, method):
+        def call(self, *args, **kwargs):
+            if threading.current_thread().name == "stage-memory":
+                calls.append(1)
+            return method(self, *args, **kwargs)
+
+        return call
+
+    monkeypatch.setattr(psutil.Process, "children", counted(searches, children))
+    monkeypatch.setattr(psutil.Process, "memory_info", counted(samples, memory_info))
+    # A search reads every process of the machine; a sample only the few it found.
+    measured(lambda: time.sleep(0.5), interval=0.01, refresh=60.0)
+    assert len(samples) >= 10
+    assert len(searches) == 1
+
+
 def test_the_costs_of_stages_in_turn_add_their_times_and_keep_the_larger_peak():
     assert StageUsage(1.0, 2.0, 300.0) + StageUsage(0.5, 0.25, 200.0) == StageUsage(1.5, 2.25, 300.0)
 
 
-def test_a_stage_is_measured_only_with_a_positive_interval():
+def test_a_stage_is_measured_only_with_a_positive_interval_and_a_refresh_not_below_zero():
     with pytest.raises(ValueError, match="interval must be positive"):
         measured(lambda: None, interval=0)
+    with pytest.raises(ValueError, match="refresh must be >= 0"):
+        measured(lambda: None, refresh=-1.0)
 
 
 def test_a_failing_stage_stops_its_sampler_and_raises():

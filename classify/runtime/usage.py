@@ -8,6 +8,7 @@ the cluster's, not counted here.
 
 from __future__ import annotations
 
+import math
 import threading
 import time
 from dataclasses import dataclass
@@ -47,19 +48,40 @@ def resident_mb() -> float:
     holds its memory map's lock.  Elsewhere the shared pages are not
     reported, and each process's whole resident set is summed.
     """
-    import psutil
+    return _ProcessTree(refresh=0.0).resident_mb()
 
-    me = psutil.Process()
-    private, shared = 0, 0
-    for process in [me, *me.children(recursive=True)]:
-        try:
-            memory = process.memory_info()
-        except psutil.Error:  # ended meanwhile: it holds nothing now
-            continue
-        mapped = getattr(memory, "shared", 0)
-        private += memory.rss - mapped
-        shared = max(shared, mapped)
-    return (private + shared) / 2**20
+
+class _ProcessTree:
+    """This process and the processes below it, looked for anew at most every ``refresh`` seconds.
+
+    Finding the processes below this one reads every process of the machine
+    (psutil walks ``/proc``), so its cost grows with the machine's process
+    count, not the run's, and each of its reads makes the threads doing the
+    work give up Python's lock.  Between two searches a sample reads only
+    the processes already found: a few counters each.
+    """
+
+    def __init__(self, refresh: float):
+        import psutil
+
+        self._me, self._refresh, self._found, self._below = psutil.Process(), refresh, -math.inf, []
+
+    def resident_mb(self) -> float:
+        import psutil
+
+        now = time.monotonic()
+        if now - self._found >= self._refresh:
+            self._below, self._found = self._me.children(recursive=True), now
+        private, shared = 0, 0
+        for process in [self._me, *self._below]:
+            try:
+                memory = process.memory_info()
+            except psutil.Error:  # ended meanwhile: it holds nothing now
+                continue
+            mapped = getattr(memory, "shared", 0)
+            private += memory.rss - mapped
+            shared = max(shared, mapped)
+        return (private + shared) / 2**20
 
 
 @dataclass(frozen=True)
@@ -82,12 +104,14 @@ class StageUsage:
         return StageUsage(self.wall_s + other.wall_s, self.cpu_s + other.cpu_s, max(self.peak_mb, other.peak_mb))
 
 
-def measured(work, interval: float = 0.1):
+def measured(work, interval: float = 0.1, refresh: float = 1.0):
     """``work()`` and its :class:`StageUsage`: ``(result, usage)``.
 
     The memory is sampled every ``interval`` seconds by a thread that
     only reads ``/proc``, and once before and once after the work, so a
-    peak shorter than ``interval`` between two samples can be missed.
+    peak shorter than ``interval`` between two samples can be missed.  The
+    sampler looks for the processes below this one every ``refresh``
+    seconds, so a worker started meanwhile counts from then on.
 
     Examples
     --------
@@ -97,12 +121,15 @@ def measured(work, interval: float = 0.1):
     """
     if not interval > 0:
         raise ValueError(f"interval must be positive, got {interval}")
+    if not refresh >= 0:
+        raise ValueError(f"refresh must be >= 0, got {refresh}")
     peak = [resident_mb()]
     done = threading.Event()
 
     def sample():
+        tree = _ProcessTree(refresh)
         while not done.wait(interval):
-            peak[0] = max(peak[0], resident_mb())
+            peak[0] = max(peak[0], tree.resident_mb())
 
     sampler = threading.Thread(target=sample, name="stage-memory", daemon=True)
     started, cpu_started = time.perf_counter(), cpu_seconds()
