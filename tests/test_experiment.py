@@ -275,6 +275,36 @@ def test_a_pool_builds_the_toys_alone_and_spawned_workers_build_the_same_meshes(
         _same_meshes(load_objects(names, Settings(), pool), here)
 
 
+def test_the_command_line_s_local_workers_build_the_toys_and_a_cluster_s_do_not(monkeypatch):
+    import classify.experiment.run as run_mod
+    from classify.runtime.cluster import Inline, open_executor
+
+    given = []
+
+    class Loaded(Exception):
+        pass
+
+    def loading(objects, settings, pool=None, skip_bad=False):
+        given.append(pool)
+        raise Loaded
+
+    monkeypatch.setattr(run_mod, "load_objects", loading)
+    # What `visuotactile experiment` passes: the executor of open_executor, here local processes.
+    with open_executor(n_jobs=2) as executor, pytest.raises(Loaded):
+        run_mod.run_experiment(["cup", "plane"], QUICK, executor=executor, cache_dir=None, quiet=True)
+    assert given == [executor]
+
+    class ByAddress:  # a cluster's executor: its workers need not run with this process's pin
+        def map(self, fn, *iterables):
+            return map(fn, *iterables)
+
+    with pytest.raises(Loaded):
+        run_mod.run_experiment(["cup", "plane"], QUICK, executor=ByAddress(), cache_dir=None, quiet=True)
+    with pytest.raises(Loaded):
+        run_mod.run_experiment(["cup", "plane"], QUICK, n_jobs=1, cache_dir=None, quiet=True)
+    assert given[1] is None and isinstance(given[2], Inline)
+
+
 def test_touch_policies_run_paired_with_the_fixed_plans_and_write_their_rows(tmp_path):
     config = QUICK.replace(
         methods=("uniform", "mesh_saliency"),
