@@ -17,10 +17,10 @@ attention points from nothing (everything above, mesh saliency, touch checks).
 
 Then why Embree stays at SSE2 when AVX is there: each Embree setting traces
 the same seeded rays at the cup toy, once as it is and once with every face
-twice, the copy turned the other way on vertices of its own (as a
-double-sided file stores it before the loader merges them, or as coincident
-faces of two parts are), and the rays whose face or distance differ from
-the SSE2 kernels' are counted.
+twice, the copy turned the other way on vertices of its own, so that a ray
+meets two faces at exactly the same distance (as it meets coincident faces
+of two parts on one plane; the loader drops exact twins, not those), and
+the rays whose face or distance differ from the SSE2 kernels' are counted.
 
     python benchmarks/bench_kernels.py [--repeats 7]
 """
