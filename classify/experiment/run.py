@@ -16,7 +16,6 @@ from __future__ import annotations
 import dataclasses
 import tempfile
 import time
-from concurrent.futures import ProcessPoolExecutor
 from contextlib import nullcontext
 from pathlib import Path
 
@@ -49,7 +48,7 @@ from classify.reporting.results import (
     write_outputs,
 )
 from classify.runtime import cache as cache_mod
-from classify.runtime.cluster import FilePool, Inline, shares_disk, worker_pool
+from classify.runtime.cluster import Inline, runs_pinned_here, shares_disk, worker_pool
 from classify.runtime.usage import StageUsage, cpu_seconds, measured, resident_mb
 from meshsal.points import METHODS, MODEL_METHODS
 
@@ -330,8 +329,8 @@ def run_experiment(
     paper_methods = [m for m in config.methods if m not in MODEL_METHODS]
     usage, measurements, models = {}, [], []
     workers = nullcontext(executor) if executor is not None else worker_pool(n_jobs, preload=WORKER_MODULES)
-    # Local worker processes run with this process's kernel pin, so the toys they build are this process's.
-    local = executor is None or isinstance(executor, ProcessPoolExecutor | FilePool)
+    # Workers with this process's kernel pin build the toys this process would.
+    local = runs_pinned_here(executor)
     # The instances' places wait for their jobs on this machine's disk when the workers share it.
     on_disk = shares_disk(executor)
     places_dir = tempfile.TemporaryDirectory(prefix="visuotactile-places-") if on_disk else nullcontext()

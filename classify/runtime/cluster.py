@@ -61,6 +61,7 @@ __all__ = [
     "worker_pool",
     "OnThisMachine",
     "open_executor",
+    "runs_pinned_here",
     "shares_disk",
     "tls_security",
     "worker_env",
@@ -97,6 +98,19 @@ class OnThisMachine:
 
     def map(self, fn, *iterables):
         return self.executor.map(fn, *iterables)
+
+
+def runs_pinned_here(executor) -> bool:
+    """Whether ``executor``'s workers are processes this one spawns with its own environment, so with its kernel
+    pin (:func:`meshsal.util.reproducible.pin_kernels`): local worker processes (``None``, a
+    ``ProcessPoolExecutor``, :class:`FilePool`).  A cluster's workers, even a LocalCluster's, start elsewhere.
+
+    Examples
+    --------
+    >>> runs_pinned_here(None), runs_pinned_here(Inline())
+    (True, False)
+    """
+    return executor is None or isinstance(executor, ProcessPoolExecutor | FilePool)
 
 
 def shares_disk(executor) -> bool:
