@@ -14,16 +14,16 @@ import sys
 import threading
 import warnings
 
+from meshsal.util.arguments import HelpFormatter, Subcommands, defer_options
+
 
 def register(subparsers) -> None:
-    """Add the recognition subcommands (``experiment``, ``batch``)."""
-    from classify.experiment import DEFAULT_REPLICATES, FULL_REPLICATES, REPLICATES_AT_ONCE
-    from classify.experiment.config import CONTROLS, MISMATCHES
-    from classify.experiment.protocols import PROTOCOL_REGISTRY, PROTOCOLS
-    from classify.policies import POLICIES
-    from classify.recognizers.classifiers import CLASSIFIERS
-    from meshsal.points import POINT_METHODS
+    """Add the recognition subcommands (``experiment``, ``batch``).
 
+    Their options name the registries' entries, which import the classifiers
+    and scikit-learn: they are added when the subcommand is chosen
+    (``meshsal.util.arguments.defer_options``).
+    """
     p = subparsers.add_parser(
         "experiment",
         help="recognition experiment: interest points -> imprints -> five classifiers (Table 1)",
@@ -42,6 +42,36 @@ def register(subparsers) -> None:
             "on a saved ImprintSet (the paper's Table 2 layout) instead."
         ),
     )
+    p.set_defaults(func=_experiment)
+    defer_options(subparsers, p, _experiment_options)
+
+    b = subparsers.add_parser(
+        "batch",
+        help="points and imprints for every mesh of a folder, on a Dask cluster, into a resumable store",
+        description=(
+            "Compute interest points (per --methods) and their simulated imprints for every mesh file "
+            "(.obj .ply .off .stl) under DIR, one task per mesh on a Dask cluster: a LocalCluster of "
+            "--workers processes (default: one per core), or an existing cluster at --scheduler. Each "
+            "mesh's entry is written atomically to STORE/meshes/<name>.npz; a rerun skips the meshes "
+            "already there. Every mesh is read first: meshes that cannot be read are listed and nothing is computed "
+            "unless --skip-bad; a mesh identical to another (as loaded) is stored once and listed in "
+            "STORE/duplicates.jsonl; a mesh that fails later goes to STORE/failures.jsonl and does not stop the "
+            "batch, and what loading repaired goes to STORE/repairs.jsonl. "
+            "Load the store with classify.batch.load_store(STORE)."
+        ),
+    )
+    b.set_defaults(func=_batch)
+    defer_options(subparsers, b, _batch_options)
+
+
+def _experiment_options(p) -> None:
+    from classify.experiment import DEFAULT_REPLICATES, FULL_REPLICATES, REPLICATES_AT_ONCE
+    from classify.experiment.config import CONTROLS, MISMATCHES
+    from classify.experiment.protocols import PROTOCOL_REGISTRY, PROTOCOLS
+    from classify.policies import POLICIES
+    from classify.recognizers.classifiers import CLASSIFIERS
+    from meshsal.points import POINT_METHODS
+
     p.add_argument(
         "--objects",
         nargs="+",
@@ -176,23 +206,11 @@ def register(subparsers) -> None:
         help="a saved tactile.ImprintSet (e.g. from 'visuotactile export'): report recognition on it",
     )
     _add_cluster_options(p, default_workers=None)
-    p.set_defaults(func=_experiment)
 
-    b = subparsers.add_parser(
-        "batch",
-        help="points and imprints for every mesh of a folder, on a Dask cluster, into a resumable store",
-        description=(
-            "Compute interest points (per --methods) and their simulated imprints for every mesh file "
-            "(.obj .ply .off .stl) under DIR, one task per mesh on a Dask cluster: a LocalCluster of "
-            "--workers processes (default: one per core), or an existing cluster at --scheduler. Each "
-            "mesh's entry is written atomically to STORE/meshes/<name>.npz; a rerun skips the meshes "
-            "already there. Every mesh is read first: meshes that cannot be read are listed and nothing is computed "
-            "unless --skip-bad; a mesh identical to another (as loaded) is stored once and listed in "
-            "STORE/duplicates.jsonl; a mesh that fails later goes to STORE/failures.jsonl and does not stop the "
-            "batch, and what loading repaired goes to STORE/repairs.jsonl. "
-            "Load the store with classify.batch.load_store(STORE)."
-        ),
-    )
+
+def _batch_options(b) -> None:
+    from meshsal.points import POINT_METHODS
+
     b.add_argument("directory", metavar="DIR", help="folder of meshes (searched recursively)")
     b.add_argument("--out", required=True, metavar="STORE", help="the store folder (created or resumed)")
     b.add_argument(
@@ -212,7 +230,6 @@ def register(subparsers) -> None:
     )
     b.add_argument("--quiet", action="store_true", help="no progress bar")
     _add_cluster_options(b, default_workers=0)
-    b.set_defaults(func=_batch)
 
 
 def _add_cluster_options(p, default_workers):
@@ -369,23 +386,30 @@ def _experiment(args) -> int:
     return 0
 
 
-def build_parser() -> argparse.ArgumentParser:
+def build_parser(deferred: bool = False) -> argparse.ArgumentParser:
+    """The ``visuotactile`` parser, every subcommand's options included.
+
+    With ``deferred``, a subcommand whose options take heavy imports gets
+    them only when the command line chooses it (``--help`` alone then starts
+    in a fraction of a second): parse one command line with such a parser.
+    """
     from hw import cli as hw_cli
     from meshsal import cli as meshsal_cli
-    from meshsal.util.arguments import HelpFormatter
     from tactile import cli as tactile_cli
 
     parser = argparse.ArgumentParser(
         prog="visuotactile",
         description="Recognize an object by touch, touching only where vision says it is worth touching.",
     )
-    sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True, action=Subcommands)
     meshsal_cli.register(sub)
     tactile_cli.register(sub)
     register(sub)
     hw_cli.register(sub)
     for command in sub.choices.values():  # every subcommand's --help shows its defaults
         command.formatter_class = HelpFormatter
+    if not deferred:
+        sub.complete()
     return parser
 
 
@@ -394,7 +418,7 @@ def main(argv: list[str] | None = None) -> int:
     from meshsal.util.reproducible import pin_kernels
 
     pin_kernels()
-    args = build_parser().parse_args(argv)
+    args = build_parser(deferred=True).parse_args(argv)
     with warnings.catch_warnings(), _terminate_cleanly():
         # A user reads what was repaired in which file, not the line of our code that said so.
         warnings.showwarning = _warning_printer(args.command)

@@ -84,6 +84,37 @@ def test_help_of_every_subcommand(capsys):
     assert "--out" in capsys.readouterr().out
 
 
+@pytest.mark.parametrize("argv", [["--help"], ["toys", "--help"], ["render", "--help"], ["capture", "--help"]])
+def test_help_and_light_subcommands_start_without_the_classifiers(argv):
+    import subprocess
+    import sys
+
+    # A fresh interpreter: this one has imported scikit-learn already.
+    code = (
+        "import sys\n"
+        "from classify.cli import main\n"
+        "try:\n"
+        f"    main({argv!r})\n"
+        "except SystemExit as exit:\n"
+        "    assert exit.code == 0, exit.code\n"
+        "print(sorted(m for m in ('sklearn', 'classify.experiment', 'classify.recognizers') if m in sys.modules))\n"
+    )
+    run = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert run.stdout.strip().splitlines()[-1] == "[]"
+
+
+def test_a_chosen_subcommand_gets_its_deferred_options(capsys):
+    from classify.cli import build_parser
+
+    args = build_parser(deferred=True).parse_args(["experiment", "--objects", "cup", "--codebook-draws", "3"])
+    assert args.objects == ["cup"] and args.codebook_draws == 3 and args.command == "experiment"
+    args = build_parser(deferred=True).parse_args(["batch", "meshes", "--out", "store"])
+    assert args.directory == "meshes" and args.methods == ("attention", "uniform")
+    with pytest.raises(SystemExit):
+        build_parser(deferred=True).parse_args(["experiment", "--no-such-option"])
+    assert "unrecognized arguments: --no-such-option" in capsys.readouterr().err
+
+
 def test_every_subcommand_takes_quiet_names_ycb_objects_and_shows_its_defaults():
     import argparse
 

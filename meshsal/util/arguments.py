@@ -4,7 +4,8 @@ Each package registers its own subcommands (``meshsal.cli``, ``tactile.cli``,
 ``hw.cli``, ``classify.cli``); they use :class:`HelpFormatter`, and an option
 renamed so that one concept has one name everywhere keeps its old spelling
 for one release with a warning (:func:`add_renamed`), as scikit-learn
-deprecates a parameter.
+deprecates a parameter.  A subcommand whose options need heavy imports to
+describe them adds them only when it is chosen (:func:`defer_options`).
 """
 
 from __future__ import annotations
@@ -12,7 +13,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-__all__ = ["HelpFormatter", "add_renamed", "REMOVED_IN"]
+__all__ = ["HelpFormatter", "Subcommands", "add_renamed", "defer_options", "REMOVED_IN"]
 
 #: The release that drops the old spellings.
 REMOVED_IN = "0.3"
@@ -86,3 +87,60 @@ def add_renamed(parser: argparse.ArgumentParser, old: str, new: argparse.Action)
         new_option=new.option_strings[-1],
         help=argparse.SUPPRESS,
     )
+
+
+class Subcommands(argparse._SubParsersAction):
+    """``add_subparsers(action=Subcommands)``: subcommands that get their options when they are chosen.
+
+    Describing some options takes heavy imports (the classifiers' registry
+    imports scikit-learn: a second).  A subcommand registered through
+    :func:`defer_options` gets its options when the command line chooses it,
+    or when :meth:`complete` adds every subcommand's (for documentation);
+    ``--help`` alone and the other subcommands import none of it.
+
+    Examples
+    --------
+    >>> p = argparse.ArgumentParser(prog="x")
+    >>> sub = p.add_subparsers(dest="command", action=Subcommands)
+    >>> added = []
+    >>> defer_options(sub, sub.add_parser("heavy"), lambda q: added.append(q.add_argument("--n", type=int)))
+    >>> _ = sub.add_parser("light")
+    >>> p.parse_args(["light"]).command, added
+    ('light', [])
+    >>> p.parse_args(["heavy", "--n", "3"]).n, len(added)
+    (3, 1)
+    """
+
+    def __init__(self, *args, **kwargs):
+        super().__init__(*args, **kwargs)
+        self._pending = {}
+
+    def defer(self, parser: argparse.ArgumentParser, add_options) -> None:
+        """Call ``add_options(parser)`` when ``parser``'s subcommand is chosen, or by :meth:`complete`."""
+        self._pending[parser] = add_options
+
+    def complete(self) -> None:
+        """Add every deferred subcommand's options now."""
+        while self._pending:
+            parser, add_options = self._pending.popitem()
+            add_options(parser)
+
+    def __call__(self, parser, namespace, values, option_string=None):
+        chosen = self._name_parser_map.get(values[0])
+        add_options = self._pending.pop(chosen, None)
+        if add_options is not None:
+            add_options(chosen)
+        super().__call__(parser, namespace, values, option_string)
+
+
+def defer_options(subparsers, parser: argparse.ArgumentParser, add_options) -> None:
+    """Add a subcommand's options with ``add_options(parser)`` when it is chosen, where ``subparsers`` defers.
+
+    ``subparsers`` is what ``add_subparsers`` returned and ``parser`` one of
+    its subcommands.  Subparsers made with ``action=Subcommands`` wait;
+    any others get the options now.
+    """
+    if isinstance(subparsers, Subcommands):
+        subparsers.defer(parser, add_options)
+    else:
+        add_options(parser)
