@@ -278,9 +278,10 @@ def _cluster(args) -> dict:
 def _batch(args) -> int:
     import os
 
-    from classify.batch import BatchSettings, run_batch
+    from classify.batch import BatchSettings, find_meshes, run_batch
     from classify.runtime.cluster import open_executor
 
+    find_meshes(args.directory)  # a wrong folder stops the command before a cluster starts
     settings = BatchSettings(
         methods=args.methods, n_points=args.n_points, size_mm=args.size_mm, view_size=args.view_size, seed=args.seed
     )

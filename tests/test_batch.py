@@ -344,6 +344,22 @@ def _tree(folder: Path) -> dict:
     return {p: (p.read_bytes(), p.stat().st_mtime_ns) for p in sorted(folder.rglob("*")) if p.is_file()}
 
 
+@pytest.mark.parametrize("folder", ["missing", "no_meshes"])
+def test_a_folder_without_meshes_stops_the_batch_before_a_cluster_or_a_store(tmp_path, capsys, monkeypatch, folder):
+    (tmp_path / "no_meshes").mkdir()
+    (tmp_path / "no_meshes" / "notes.txt").write_text("a mistyped folder")
+    opened = []
+    monkeypatch.setattr("classify.runtime.cluster.open_executor", lambda **kwargs: opened.append(kwargs))
+    store = tmp_path / "store"
+    assert main(["batch", str(tmp_path / folder), "--out", str(store), "--workers", "2", "--quiet"]) == 1
+    problem = "not a folder of meshes" if folder == "missing" else "no mesh file (.obj, .off, .ply, .stl) under"
+    assert f"visuotactile batch: error: {tmp_path / folder}: {problem}" in capsys.readouterr().err
+    assert opened == [] and not store.exists()
+    with pytest.raises(ValueError, match=problem.replace("(", r"\(").replace(")", r"\)")):
+        batch.run_batch(tmp_path / folder, store, quiet=True)
+    assert not store.exists()
+
+
 def test_unreadable_meshes_are_listed_before_any_work_and_skipped_only_when_asked(tmp_path, capsys):
     corpus = _corpus(tmp_path / "corpus", 4)
     store = tmp_path / "store"
@@ -358,7 +374,7 @@ def test_unreadable_meshes_are_listed_before_any_work_and_skipped_only_when_aske
     assert main(_batch_argv(corpus, store, *options)) == 1
     err = capsys.readouterr().err
     assert f"{corpus}: 2 of 6 meshes cannot be read, so nothing was computed" in err and "--skip-bad" in err
-    assert f"{corpus / 'broken.obj'}: line 3: face vertex index 9 out of range" in err
+    assert f"{corpus / 'broken.obj'}: line 3: face vertex index 9 out of range (2 vertices defined)" in err
     assert f"{corpus / 'sub' / 'empty.stl'}" in err
     assert _tree(store) == before
     spy = _SpyExecutor()

@@ -92,15 +92,19 @@ def find_meshes(directory) -> list[tuple[str, Path]]:
     """``(name, path)`` of every mesh file under ``directory``, sorted by name.
 
     The name is the path under ``directory`` without its suffix (``a/b`` for
-    ``a/b.obj``); two files differing only by suffix are refused.
+    ``a/b.obj``); two files differing only by suffix are refused, and so is
+    a folder that holds no mesh file (a mistyped path, most likely).
     """
     root = Path(directory)
     if not root.is_dir():
         raise ValueError(f"{root}: not a folder of meshes")
-    from meshsal.mesh.io import mesh_files
+    from meshsal.mesh.io import SUPPORTED_EXTENSIONS, mesh_files
 
+    files = mesh_files(root)
+    if not files:
+        raise ValueError(f"{root}: no mesh file ({', '.join(SUPPORTED_EXTENSIONS)}) under this folder")
     found = {}
-    for path in mesh_files(root):
+    for path in files:
         name = path.relative_to(root).with_suffix("").as_posix()
         if name in found:
             raise ValueError(f"{root}: {found[name].name} and {path.name} would share the entry {name!r}")

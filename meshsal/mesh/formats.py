@@ -105,6 +105,9 @@ def _all_numbers(tokens) -> bool:
 # OBJ
 
 
+_PLURALS = {"vertex": "vertices"}
+
+
 def _obj_indices(path, tokens: list, sizes: list, lines: list, defined, what: str) -> None:
     """Check OBJ face indices (1-based, negative: relative) against ``defined`` elements, per face."""
     first = np.cumsum(sizes) - sizes
@@ -120,7 +123,8 @@ def _obj_indices(path, tokens: list, sizes: list, lines: list, defined, what: st
     if bad.size:
         j = bad[0]
         face = np.searchsorted(first, j, side="right") - 1
-        fail(path, f"line {lines[face]}: face {what} index {index[j]} out of range ({count[j]} {what}s defined)")
+        noun = what if count[j] == 1 else _PLURALS.get(what, f"{what}s")
+        fail(path, f"line {lines[face]}: face {what} index {index[j]} out of range ({count[j]} {noun} defined)")
 
 
 def _check_obj(path: Path, data: bytes) -> Declared:
