@@ -333,6 +333,8 @@ def _experiment(args) -> int:
         raise ValueError("give --full or --replicates, not both")
     if args.replicates_at_once < 1:
         raise ValueError(f"--replicates-at-once must be at least 1, got {args.replicates_at_once}")
+    if args.jobs < 1:
+        raise ValueError(f"--jobs must be at least 1, got {args.jobs}")
     sensor = tactile.Sensor() if args.mode is None else tactile.Sensor(mode=args.mode)
     settings = Settings(
         n_points=args.n_points,
@@ -355,7 +357,9 @@ def _experiment(args) -> int:
         features=args.features,
         baseline=args.baseline,
         policies=args.policies,
-        replicates=FULL_REPLICATES if args.full else (args.replicates or DEFAULT_REPLICATES),
+        replicates=FULL_REPLICATES
+        if args.full
+        else (DEFAULT_REPLICATES if args.replicates is None else args.replicates),
         control=args.control,
     )
     if args.real:

@@ -7,6 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
+from meshsal.points.rules import MIN_VIEW_SIZE
 from meshsal.util.arguments import HelpFormatter, add_renamed
 
 #: Rendered view size in pixels of every subcommand that renders (``PointOptions.size``).
@@ -125,8 +126,8 @@ def _cmd_render(args) -> int:
     from meshsal.views.overlay import tile
     from meshsal.views.render import render_views
 
-    if args.view_size < 16:
-        raise ValueError(f"--view-size must be at least 16 pixels, got {args.view_size}")
+    if args.view_size < MIN_VIEW_SIZE:
+        raise ValueError(f"--view-size must be at least {MIN_VIEW_SIZE} pixels, got {args.view_size}")
     with naming(args.mesh):
         mesh = load_object(args.mesh)
         cameras = [c for s in view_rig() for c in s]
@@ -235,8 +236,8 @@ def _cmd_points(args) -> int:
     from meshsal.util.errors import naming
     from meshsal.views import overlay
 
-    if args.view_size < 16:
-        raise ValueError(f"--view-size must be at least 16 pixels, got {args.view_size}")
+    if args.view_size < MIN_VIEW_SIZE:
+        raise ValueError(f"--view-size must be at least {MIN_VIEW_SIZE} pixels, got {args.view_size}")
     if args.combination != "equal":
         method = next(m for m, c in ATTENTION_METHODS.items() if c == args.combination)
         print(

@@ -360,6 +360,13 @@ def test_a_folder_without_meshes_stops_the_batch_before_a_cluster_or_a_store(tmp
     assert not store.exists()
 
 
+def test_a_negative_seed_is_refused_before_the_store_is_made(tmp_path, capsys):
+    corpus = _corpus(tmp_path / "corpus", 1)
+    assert main(_batch_argv(corpus, tmp_path / "store", "--seed", "-1")) == 1
+    assert "visuotactile batch: error: seed must be a non-negative integer, got -1" in capsys.readouterr().err
+    assert not (tmp_path / "store").exists()
+
+
 def test_unreadable_meshes_are_listed_before_any_work_and_skipped_only_when_asked(tmp_path, capsys):
     corpus = _corpus(tmp_path / "corpus", 4)
     store = tmp_path / "store"

@@ -177,6 +177,27 @@ def test_unknown_object_method_or_baseline_is_refused_by_name(capsys):
     assert "--replicates-at-once must be at least 1, got 0" in capsys.readouterr().err
 
 
+@pytest.mark.parametrize(
+    "option, value, message",
+    [
+        ("--replicates", "0", "replicates must be at least 1, got 0"),
+        ("--repeats", "0", "repeats must be at least 1, got 0"),
+        ("--folds", "1", "folds must be at least 2, got 1"),
+        ("--jobs", "0", "--jobs must be at least 1, got 0"),
+        ("--view-size", "0", "view_size must be an integer of at least 16 pixels, got 0"),
+        ("--view-size", "8", "view_size must be an integer of at least 16 pixels, got 8"),
+        ("--seed", "-1", "seed must be a non-negative integer, got -1"),
+    ],
+)
+def test_a_count_out_of_range_is_refused_by_name_before_any_work(tmp_path, capsys, option, value, message):
+    # None of these may fall back to a default (0 is no "unset") or fail later, mid-run.
+    out = tmp_path / "o"
+    argv = ["experiment", "--objects", "cow,cup", option, value, "--out", str(out), "--cache-dir", "none", "--quiet"]
+    assert main(argv) == 1
+    assert f"visuotactile experiment: error: {message}" in capsys.readouterr().err
+    assert not out.exists()
+
+
 def test_real_imprint_set_gives_table_2_with_folds_grouped_by_point(tmp_path, capsys):
     rng = np.random.default_rng(4)
     labels = np.repeat(np.arange(3), 10)

@@ -1,10 +1,11 @@
 """`visuotactile points`: every file in the source frame, baselines, progress, fewer points than asked, none, an
-open bowl facing inward, a mesh that cannot be read."""
+open bowl facing inward, a mesh that cannot be read, a negative seed."""
 
 import dataclasses
 import json
 
 import numpy as np
+import pytest
 import shapes
 from planted import distance_to_surface, planted_sphere
 
@@ -149,3 +150,13 @@ def test_cli_bad_mesh_fails_with_the_loader_message(tmp_path, capsys):
     err = capsys.readouterr().err
     assert "points" in err and "broken.obj" in err
     assert not (tmp_path / "o" / "points.json").exists()
+
+
+@pytest.mark.parametrize("method", ["uniform", "random"])
+def test_a_negative_seed_is_refused_whether_the_method_draws_or_not(tmp_path, capsys, method):
+    from classify.cli import main
+
+    out = tmp_path / "pts"
+    assert main(["points", "cup", "--method", method, "--seed", "-1", "--quiet", "--out", str(out)]) == 1
+    assert "visuotactile points: error: cup: seed must be a non-negative integer, got -1" in capsys.readouterr().err
+    assert not out.exists()

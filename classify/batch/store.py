@@ -57,9 +57,13 @@ class BatchSettings:
             )
         if int(self.n_points) != self.n_points or self.n_points < 1:
             raise ValueError(f"n_points must be a positive integer, got {self.n_points!r}")
-        if not self.size_mm > 0 or self.view_size < 16:
+        if int(self.seed) != self.seed or self.seed < 0:
+            raise ValueError(f"seed must be a non-negative integer, got {self.seed!r}")
+        from meshsal.points.rules import MIN_VIEW_SIZE
+
+        if not self.size_mm > 0 or self.view_size < MIN_VIEW_SIZE:
             raise ValueError(
-                f"size_mm must be positive and view_size at least 16, got {self.size_mm}, {self.view_size}"
+                f"size_mm must be positive and view_size at least {MIN_VIEW_SIZE}, got {self.size_mm}, {self.view_size}"
             )
         object.__setattr__(self, "methods", methods)
 

@@ -95,8 +95,14 @@ class Settings:
     mismatch: tuple = ()
 
     def __post_init__(self):
+        from meshsal.points.rules import MIN_VIEW_SIZE
+
         if int(self.n_points) != self.n_points or self.n_points < 1:
             raise ValueError(f"n_points must be a positive integer, got {self.n_points!r}")
+        if self.view_size is not None and (int(self.view_size) != self.view_size or self.view_size < MIN_VIEW_SIZE):
+            raise ValueError(f"view_size must be an integer of at least {MIN_VIEW_SIZE} pixels, got {self.view_size!r}")
+        if int(self.seed) != self.seed or self.seed < 0:
+            raise ValueError(f"seed must be a non-negative integer, got {self.seed!r}")
         if self.train_instances < 2:
             raise ValueError(
                 f"train_instances must be at least 2 (calibration holds one out), got {self.train_instances}"
@@ -251,8 +257,11 @@ class ExperimentConfig:
 
         methods, protocols = POINT_METHODS.check(self.methods), PROTOCOL_REGISTRY.check(self.protocols)
         classifiers = CLASSIFIERS.check(self.classifiers)
-        if self.folds < 2 or self.repeats < 1 or self.replicates < 1 or self.touch_sets_per_object < 1:
-            raise ValueError("folds must be >= 2 and repeats, replicates, touch_sets_per_object >= 1")
+        if self.folds < 2:
+            raise ValueError(f"folds must be at least 2, got {self.folds}")
+        for name in ("repeats", "replicates", "touch_sets_per_object"):
+            if getattr(self, name) < 1:
+                raise ValueError(f"{name} must be at least 1, got {getattr(self, name)}")
         baseline = self.baseline
         if baseline is None:
             baseline = "uniform" if "uniform" in methods else methods[0]

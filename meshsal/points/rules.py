@@ -18,6 +18,7 @@ whose size disagrees with the pad's (one in metres, loaded as it is) gets a
 from __future__ import annotations
 
 import dataclasses
+import numbers
 from dataclasses import dataclass
 
 import numpy as np
@@ -26,11 +27,13 @@ from meshsal.mesh import Mesh
 from meshsal.mesh.transform import check_pad_size
 from meshsal.points.touch import PAD_WIDTH
 
-__all__ = ["COMBINATIONS", "PointOptions", "Rules", "default_min_spacing"]
+__all__ = ["COMBINATIONS", "MIN_VIEW_SIZE", "PointOptions", "Rules", "default_min_spacing"]
 
 #: How the attention channels are combined: the paper's equal weights, Itti's N(.) on each, or
 #: weights learned from touches (``meshsal.points.learned``; given as ``weights``).
 COMBINATIONS = ("equal", "itti", "learned")
+#: The smallest rendered view (pixels) that the commands, the batch and the experiment take.
+MIN_VIEW_SIZE = 16
 
 
 def default_min_spacing(pad_width: float | None = None) -> float:
@@ -129,6 +132,8 @@ class PointOptions:
             raise ValueError(f"n must be a positive integer, got {n!r}")
         if mesh.n_faces == 0:
             raise ValueError(f"mesh {mesh.name!r} has no faces: no surface to put points on")
+        if isinstance(self.seed, numbers.Integral) and self.seed < 0:
+            raise ValueError(f"seed must be a non-negative integer, got {self.seed}")
         if not 0.0 <= self.threshold < 1.0:
             raise ValueError(f"threshold must lie in [0, 1), got {self.threshold}")
         if self.combination not in COMBINATIONS:
