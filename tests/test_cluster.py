@@ -224,7 +224,11 @@ def test_mixed_up_cluster_options_are_clear_errors(certificates, tmp_path):
 
 
 def test_the_command_line_refuses_tls_without_certificates(tmp_path, capsys, certificates):
-    args = ["batch", str(tmp_path), "--out", str(tmp_path / "store")]
+    (tmp_path / "meshes").mkdir()
+    (tmp_path / "meshes" / "tet.obj").write_text(
+        "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nf 1 3 2\nf 1 2 4\nf 1 4 3\nf 2 3 4\n"
+    )
+    args = ["batch", str(tmp_path / "meshes"), "--out", str(tmp_path / "store")]
     assert main([*args, "--scheduler", "tls://127.0.0.1:8786"]) == 1
     assert (
         "tls://127.0.0.1:8786: a tls:// scheduler needs a CA file and a client certificate (--tls-ca-file, "

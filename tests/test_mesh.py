@@ -113,3 +113,26 @@ def test_surface_distance_of_a_square_and_a_sphere_has_the_known_answers():
     got = surface_distance(ball.vertices, ball.faces, 1.5 * directions)
     assert np.all((got >= 0.5 - 1e-12) & (got <= 0.51))
     assert surface_distance(ball.vertices, ball.faces, np.zeros((0, 3))).shape == (0,)
+
+
+@pytest.mark.parametrize(
+    "faces, nan_at, message",
+    [
+        ([[0, 1, 7]], None, "mesh 'tri': face index out of range (0..7 for 3 vertices)"),
+        ([[0, -1, 2]], None, "mesh 'tri': face index out of range (-1..2 for 3 vertices)"),
+        ([[0, 1, 2]], 2, "mesh 'tri': vertex 2 has non-finite coordinates"),
+    ],
+)
+def test_a_mesh_record_refuses_what_no_stage_could_take(faces, nan_at, message):
+    from meshsal.mesh import Mesh, MeshError
+
+    V = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0]], float)
+    if nan_at is not None:
+        V[nan_at, 1] = np.nan
+    with pytest.raises(MeshError) as caught:
+        Mesh(vertices=V, faces=faces, name="tri")
+    assert str(caught.value) == message
+    good = Mesh(vertices=np.nan_to_num(V), faces=[[0, 1, 2]], name="tri")
+    with pytest.raises(MeshError, match="non-finite"):
+        good.replace(vertices=V * np.inf)  # replace checks as the constructor does
+    assert Mesh(vertices=np.zeros((0, 3)), faces=np.zeros((0, 3), int)).n_faces == 0  # empty is still a record

@@ -93,9 +93,9 @@ class Mesh:
 
     Parameters
     ----------
-    vertices : (n, 3) float64
+    vertices : (n, 3) float64, finite
     faces : (m, 3) int32
-        Vertex indices, counter-clockwise seen from outside.
+        Vertex indices in ``[0, n)``, counter-clockwise seen from outside.
     vertex_colors : (n, 3) float32 in [0, 1], optional
     uv : (m, 3, 2) float32, optional
         Texture coordinates of each face corner, origin at the image's bottom left.
@@ -105,6 +105,13 @@ class Mesh:
     transform : Similarity
         Maps ``vertices`` back to the source file's frame and units
         (identity for a mesh made in memory).
+
+    Raises
+    ------
+    MeshError
+        An array of the wrong shape, a face index out of range or a
+        non-finite vertex: every stage would fail on it, or read memory it
+        does not own.
 
     Examples
     --------
@@ -129,6 +136,12 @@ class Mesh:
             raise MeshError(f"{label}: vertices must have shape (n, 3), got {V.shape}")
         if F.ndim != 2 or F.shape[1] != 3:
             raise MeshError(f"{label}: faces must have shape (m, 3), got {F.shape}")
+        # Every stage indexes vertices by faces and hands them to Embree, which reads out of range unchecked.
+        if F.size and (F.min() < 0 or F.max() >= len(V)):
+            raise MeshError(f"{label}: face index out of range ({F.min()}..{F.max()} for {len(V)} vertices)")
+        finite = np.isfinite(V).all(axis=1)
+        if not finite.all():
+            raise MeshError(f"{label}: vertex {int(np.argmin(finite))} has non-finite coordinates")
         object.__setattr__(self, "vertices", V)
         object.__setattr__(self, "faces", F)
         if self.vertex_colors is not None:
