@@ -1,4 +1,5 @@
-"""The five classifiers: separable data, the evolutionary SVM against SVC, the estimator contract."""
+"""The five classifiers: separable data, the evolutionary SVM against SVC, the estimator contract (scikit-learn's
+estimator checks included)."""
 
 import numpy as np
 import pytest
@@ -6,9 +7,12 @@ from sklearn.base import clone
 from sklearn.datasets import load_digits
 from sklearn.model_selection import train_test_split
 from sklearn.svm import SVC
+from sklearn.utils.estimator_checks import parametrize_with_checks
 
 import classify
+from classify.recognizers.classifiers import KNN, DecisionTree, DeepNet, NaiveBayes
 from classify.recognizers.evolution_strategy import solve_dual, solve_duals
+from classify.recognizers.evolutionary_svm import EvolutionarySVM
 
 
 def _separable_imprints(n_per_class=30, n_classes=4, seed=0):
@@ -46,6 +50,12 @@ def test_estimator_contract_clone_and_params(name):
     a = clone(model).fit(X, y).predict(X)
     b = clone(model).fit(X, y).predict(X)
     np.testing.assert_array_equal(a, b)  # seeded: same input, same output
+
+
+# Each with its class defaults, as check_estimator asks (the network trains for fewer epochs).
+@parametrize_with_checks([KNN(), NaiveBayes(), DecisionTree(), EvolutionarySVM(), DeepNet(max_iter=100)])
+def test_each_classifier_passes_scikit_learn_s_estimator_checks(estimator, check):
+    check(estimator)
 
 
 def test_make_rejects_unknown_names_and_parameters():

@@ -38,7 +38,7 @@ from sklearn.tree import DecisionTreeClassifier
 from sklearn.utils.validation import check_is_fitted
 
 from classify.recognizers.distances import Rows, block_rows, class_distances, distances_to, on_grid, ranked
-from classify.recognizers.evolutionary_svm import EvolutionarySVM, as_matrix
+from classify.recognizers.evolutionary_svm import EvolutionarySVM, as_labels, as_matrix, check_n_features
 from classify.recognizers.folds import GroupFolds
 from classify.recognizers.place import PlaceAware
 from meshsal.util.registry import Registry
@@ -59,6 +59,13 @@ __all__ = [
 
 class _Flatten:
     """Mixin: flatten (N, rows, cols) inputs before the wrapped estimator sees them."""
+
+    def __sklearn_tags__(self):
+        # as_matrix refuses sparse input and NaN, which some wrapped estimators take.
+        tags = super().__sklearn_tags__()
+        tags.input_tags.sparse = False
+        tags.input_tags.allow_nan = False
+        return tags
 
     def fit(self, X, y, **kwargs):
         return super().fit(as_matrix(X), y, **kwargs)
@@ -263,9 +270,7 @@ class KNN(ClassifierMixin, BaseEstimator):
         if not (self.cv_rows == "auto" or (isinstance(self.cv_rows, numbers.Integral) and self.cv_rows >= 1)):
             raise ValueError(f"KNN: cv_rows must be a positive integer or 'auto', got {self.cv_rows!r}")
         X = as_matrix(X)
-        y = np.asarray(y)
-        if y.shape != (len(X),):
-            raise ValueError(f"KNN: y must have shape ({len(X)},), got {y.shape}")
+        y = as_labels(y, len(X), "KNN")
         if groups is not None and np.shape(groups) != (len(X),):
             raise ValueError(f"KNN: groups must have shape ({len(X)},), got {np.shape(groups)}")
         return X, y, None if groups is None else np.asarray(groups)
@@ -317,8 +322,7 @@ class KNN(ClassifierMixin, BaseEstimator):
         """Votes of the k neighbours softened by distance (see Notes; columns follow ``classes_``)."""
         check_is_fitted(self, "X_")
         X = as_matrix(X)
-        if X.shape[1] != self.n_features_in_:
-            raise ValueError(f"KNN: X has {X.shape[1]} features, the model was fitted with {self.n_features_in_}")
+        check_n_features(self, X)
         out = np.empty((len(X), len(self.classes_)))
         rows = self.grid_rows_ if self.grid_rows_ is not None and on_grid(X) else self.float_rows_
         step = block_rows(len(self.X_))
@@ -331,7 +335,8 @@ class KNN(ClassifierMixin, BaseEstimator):
         return out
 
     def predict(self, X):
-        return self.classes_[np.argmax(self.predict_proba(X), axis=1)]
+        proba = self.predict_proba(X)  # first: it tells an unfitted model by name
+        return self.classes_[np.argmax(proba, axis=1)]
 
 
 _SOFT = 0.5  # weight of the distance term: under one vote, so it never overturns a majority

@@ -21,33 +21,56 @@ import numbers
 import numpy as np
 from sklearn.base import BaseEstimator, ClassifierMixin, clone
 from sklearn.metrics.pairwise import rbf_kernel
+from sklearn.utils import check_array, column_or_1d
+from sklearn.utils.multiclass import check_classification_targets
 from sklearn.utils.validation import check_is_fitted
 
 from classify.recognizers.evolution_strategy import Strategy, solve_dual, solve_duals
 
-__all__ = ["EvolutionarySVM", "Strategy", "solve_dual", "solve_duals", "as_matrix"]
+__all__ = ["EvolutionarySVM", "Strategy", "solve_dual", "solve_duals", "as_labels", "as_matrix", "check_n_features"]
 
 
 def as_matrix(X, name="X"):
     """Imprints as rows of a float64 matrix: (N, d) stays, (N, rows, cols) is flattened row-major.
 
     Every classifier of this package accepts either shape, so an
-    ``ImprintSet.imprints`` array can be passed as it is.
+    ``ImprintSet.imprints`` array can be passed as it is.  Input is checked
+    as scikit-learn checks it (:func:`sklearn.utils.check_array`, with its
+    messages): no sparse or complex data, no NaN or infinity, no sample or
+    feature missing, and one sample is ``(1, d)``, not ``(d,)``.
 
     Examples
     --------
     >>> as_matrix(np.zeros((2, 16, 16))).shape
     (2, 256)
     """
-    X = np.asarray(X, dtype=np.float64)
-    if X.ndim < 2:
-        raise ValueError(f"{name} must have shape (N, features) or (N, rows, cols), got {X.shape}")
+    X = check_array(X, dtype=np.float64, allow_nd=True, input_name=name)
     X = X.reshape(len(X), -1)
-    if X.shape[0] == 0 or X.shape[1] == 0:
-        raise ValueError(f"{name} is empty: shape {X.shape}")
-    if not np.all(np.isfinite(X)):
-        raise ValueError(f"{name} contains NaN or infinite values")
+    if X.shape[1] == 0:
+        raise ValueError(f"Found array with 0 feature(s) (shape={X.shape}) while a minimum of 1 is required.")
     return X
+
+
+def as_labels(y, n_samples: int, estimator: str):
+    """Class labels of ``n_samples`` rows as a (n_samples,) array; a column ``(n, 1)`` is raveled with a warning.
+
+    Raises ValueError for another length and for targets that are no class
+    labels (continuous values: "Unknown label type"), as scikit-learn does.
+    """
+    y = column_or_1d(y, warn=True)
+    if y.shape != (n_samples,):
+        raise ValueError(f"{estimator}: y must have shape ({n_samples},), got {y.shape}")
+    check_classification_targets(y)
+    return y
+
+
+def check_n_features(estimator, X) -> None:
+    """Refuse ``X`` (N, d) whose d is not the ``n_features_in_`` the estimator was fitted with."""
+    if X.shape[1] != estimator.n_features_in_:
+        raise ValueError(
+            f"X has {X.shape[1]} features, but {type(estimator).__name__} is expecting "
+            f"{estimator.n_features_in_} features as input"
+        )
 
 
 class EvolutionarySVM(ClassifierMixin, BaseEstimator):
@@ -152,12 +175,10 @@ class EvolutionarySVM(ClassifierMixin, BaseEstimator):
     def _problem(self, X, y):
         """Checked ``X``, its kernel matrix and the one-vs-rest labels; sets ``classes_``."""
         X = as_matrix(X)
-        y = np.asarray(y)
-        if y.shape != (len(X),):
-            raise ValueError(f"EvolutionarySVM: y must have shape ({len(X)},), got {y.shape}")
+        y = as_labels(y, len(X), "EvolutionarySVM")
         self.classes_, codes = np.unique(y, return_inverse=True)
         if len(self.classes_) < 2:
-            raise ValueError("EvolutionarySVM: needs samples of at least two classes")
+            raise ValueError(f"EvolutionarySVM: needs samples of at least two classes, got {len(self.classes_)} class")
         if self.gamma == "scale":
             var = X.var()
             self._gamma = 1.0 / (X.shape[1] * var) if var > 0 else 1.0
@@ -185,10 +206,7 @@ class EvolutionarySVM(ClassifierMixin, BaseEstimator):
         """(N,) for two classes (positive means ``classes_[1]``), else (N, n_classes)."""
         check_is_fitted(self, "dual_coef_")
         X = as_matrix(X)
-        if X.shape[1] != self.n_features_in_:
-            raise ValueError(
-                f"EvolutionarySVM: X has {X.shape[1]} features, the model was fitted with {self.n_features_in_}"
-            )
+        check_n_features(self, X)
         if len(self.support_vectors_):
             f = rbf_kernel(X, self.support_vectors_, gamma=self._gamma) @ self.dual_coef_.T + self.intercept_
         else:
