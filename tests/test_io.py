@@ -115,6 +115,26 @@ def test_ply_binary_big_endian_mixed_polygons(tmp_path):
     assert face_areas(m.vertices, m.faces).sum() == pytest.approx(1 + 4 * 0.5 * np.sqrt(1.25))
 
 
+@pytest.mark.parametrize("order", [">", "<"])
+@pytest.mark.parametrize("kind", ["float", "double"])
+def test_ply_binary_coordinates_read_the_same_in_either_byte_order(tmp_path, order, kind):
+    # Coordinates that float32 does not hold exactly: a double must come back to the bit.
+    V = np.array([[0.1, 0.0, 0.0], [1.0, 0.3, 0.0], [0.0, 1.0, 0.7], [0.0, 0.0, 1.0]]) * [7.0, 9.0, 11.0]
+    code = {"float": "f4", "double": "f8"}[kind]
+    endian = {">": "big", "<": "little"}[order]
+    header = (
+        f"ply\nformat binary_{endian}_endian 1.0\nelement vertex 4\nproperty {kind} x\nproperty {kind} y\n"
+        f"property {kind} z\nelement face 4\nproperty list uchar int vertex_indices\nend_header\n"
+    )
+    body = V.astype(order + code).tobytes() + b"".join(
+        bytes([3]) + np.array(f, order + "i4").tobytes() for f in TETRA_F
+    )
+    (tmp_path / "tet.ply").write_bytes(header.encode() + body)
+    m = load_clean(tmp_path / "tet.ply")
+    np.testing.assert_array_equal(m.faces, TETRA_F)
+    np.testing.assert_array_equal(m.vertices, V.astype(code).astype(np.float64))
+
+
 def test_off_and_coff(tmp_path):
     m = load_clean(write(tmp_path / "sq.off", "OFF\n# a comment\n4 1 0\n0 0 0\n1 0 0\n1 1 0\n0 1 0\n4 0 1 2 3\n"))
     assert m.n_faces == 2 and m.vertex_colors is None

@@ -22,6 +22,12 @@ measured:
 * binary bytes in an ASCII STL, which pymeshlab would take for a binary
   STL of whatever facet count its bytes 80-84 say.
 
+One thing it misreads is not refused but read here: a big-endian binary
+PLY's double coordinates, which pymeshlab swaps wrong (1.0 becomes 3e-319,
+and every face degenerate).  :func:`check` reads them
+(``Declared.coordinates``) and :mod:`meshsal.mesh.io` takes them instead of
+pymeshlab's; big-endian floats and little-endian doubles it reads right.
+
 pymeshlab also decodes an OBJ's texture images whatever their size (a
 424 kB PNG of 20000 x 20000 pixels: 496 MB), so it is given the OBJ
 without its material library, and :mod:`meshsal.mesh.texture` reads the
@@ -61,6 +67,7 @@ class Declared:
     n_faces: int
     has_colors: bool = False
     vertex_properties: tuple = ()  # PLY: the vertex element's property names
+    coordinates: object = None  # PLY: (n, 3) float64 vertex coordinates read here, where pymeshlab misreads them
     textures: list = field(default_factory=list)  # OBJ: texture images the faces use
     libraries: bool = False  # OBJ: it names a material library
     notes: list = field(default_factory=list)  # warnings about the file itself
@@ -316,8 +323,8 @@ def _ply_ascii_element(path, tokens, pos, el: _PlyElement):
     return {k: (v if el.props[i][2] else np.array(v)) for i, (k, v) in enumerate(out.items())}, pos
 
 
-def _read_ply(path, data: bytes) -> dict:
-    """Every element's values: {element: {property: values}}."""
+def _read_ply(path, data: bytes) -> tuple[str, list, dict]:
+    """The format, the header's elements and every element's values: {element: {property: values}}."""
     fmt, elements, offset = _ply_header(path, data)
     out = {}
     if fmt == "ascii":
@@ -328,16 +335,20 @@ def _read_ply(path, data: bytes) -> dict:
     else:
         for el in elements:
             out[el.name], offset = _ply_binary_element(path, data, offset, el, _PLY_FORMATS[fmt])
-    return out
+    return fmt, elements, out
 
 
 def _check_ply(path: Path, data: bytes) -> Declared:
-    ply = _read_ply(path, data)
+    fmt, elements, ply = _read_ply(path, data)
     vertex = ply.get("vertex", {})
     n_vertices = len(next(iter(vertex.values()), ()))
+    coordinates = None
     if all(c in vertex for c in "xyz"):
         xyz = np.column_stack([np.asarray(vertex[c], dtype=np.float64) for c in "xyz"])
         _finite_coordinates(path, xyz, lambda i: "PLY vertex data")
+        kinds = {name: kind for el in elements if el.name == "vertex" for name, kind, _ in el.props}
+        if fmt == "binary_big_endian" and any(kinds[c] == "f8" for c in "xyz"):
+            coordinates = xyz  # pymeshlab 2025.7 reads big-endian doubles byte-swapped wrong (1.0 as 3e-319)
     face = ply.get("face", {})
     indices = face.get("vertex_indices", face.get("vertex_index"))
     if indices is not None and len(indices):
@@ -349,7 +360,8 @@ def _check_ply(path: Path, data: bytes) -> Declared:
         if len(bad):
             fail(path, f"face {bad[0]} has a vertex index out of range (the file has {n_vertices} vertices)")
     colors = any(c in vertex for c in ("red", "diffuse_red"))
-    return Declared(n_vertices, len(indices) if indices is not None else 0, colors, tuple(vertex))
+    n_faces = len(indices) if indices is not None else 0
+    return Declared(n_vertices, n_faces, colors, tuple(vertex), coordinates=coordinates)
 
 
 # ---------------------------------------------------------------------------

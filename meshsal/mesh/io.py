@@ -164,7 +164,8 @@ def _read_arrays(path: Path, data: bytes, notes: list, max_texture_pixels: int |
     pm = ms.current_mesh()
     if pm.face_number() == 0:
         _no_faces(path, pm.vertex_number(), declared.n_faces)
-    V = np.asarray(pm.vertex_matrix(), dtype=np.float64)
+    # pymeshlab keeps a PLY's vertices in the file's order (the count is checked): coordinates it misreads are replaced.
+    V = np.asarray(pm.vertex_matrix() if declared.coordinates is None else declared.coordinates, dtype=np.float64)
     F = np.asarray(pm.face_matrix(), dtype=np.int64)
     C = None
     if declared.has_colors and pm.has_vertex_color():
