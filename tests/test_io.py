@@ -135,6 +135,22 @@ def test_ply_binary_coordinates_read_the_same_in_either_byte_order(tmp_path, ord
     np.testing.assert_array_equal(m.vertices, V.astype(code).astype(np.float64))
 
 
+@pytest.mark.parametrize("suffix", [".obj", ".ply", ".off"])
+def test_a_byte_order_mark_before_a_text_mesh_changes_nothing(tmp_path, suffix):
+    colors = np.array([[255, 0, 0], [0, 255, 0], [0, 0, 255], [10, 20, 30]])
+    off = "COFF\n4 4 0\n" + "".join(
+        f"{' '.join(map(str, v))} {' '.join(map(str, c))} 255\n" for v, c in zip(TETRA_V, colors)
+    )
+    off += "".join(f"3 {' '.join(map(str, f))}\n" for f in TETRA_F)
+    text = {".obj": obj_text(TETRA_V, TETRA_F, colors / 255), ".ply": ply_ascii(TETRA_V, TETRA_F, colors), ".off": off}
+    plain = load_clean(write(tmp_path / f"plain{suffix}", text[suffix]))
+    (tmp_path / f"marked{suffix}").write_bytes(b"\xef\xbb\xbf" + text[suffix].encode())
+    marked = load_clean(tmp_path / f"marked{suffix}")  # an editor's UTF-8 mark: pymeshlab lost the first vertex
+    for field in ("vertices", "faces", "vertex_colors"):
+        np.testing.assert_array_equal(getattr(marked, field), getattr(plain, field))
+    np.testing.assert_array_equal(plain.vertices, TETRA_V)
+
+
 def test_off_and_coff(tmp_path):
     m = load_clean(write(tmp_path / "sq.off", "OFF\n# a comment\n4 1 0\n0 0 0\n1 0 0\n1 1 0\n0 1 0\n4 0 1 2 3\n"))
     assert m.n_faces == 2 and m.vertex_colors is None

@@ -95,23 +95,42 @@ def _read_checked(path: Path, max_bytes: int | None) -> bytes:
     return data
 
 
+_UTF8_BOM = b"\xef\xbb\xbf"
+
+
+def _without_bom(path: Path, data: bytes) -> bytes | None:
+    """A text mesh file's bytes without the UTF-8 byte order mark some editors write first, or None if it has none.
+
+    pymeshlab takes the mark for part of the first line: an OBJ loses its
+    first vertex (and every face on the last one points past the others),
+    and a PLY has no header.
+    """
+    if path.suffix.lower() in (".obj", ".off", ".ply") and data.startswith(_UTF8_BOM):
+        return data[len(_UTF8_BOM) :]
+    return None
+
+
 @contextlib.contextmanager
-def _without_materials(path: Path, declared: Declared):
-    """The path pymeshlab reads: for an OBJ naming a material library, a link to it alone in a new folder.
+def _readable(path: Path, declared: Declared, content: bytes | None):
+    """The path pymeshlab reads: the file, or in a new folder the file's ``content`` (when given) or a link to the
+    file alone (for an OBJ naming a material library).
 
     pymeshlab decodes the texture images a material library names, whatever
     their size; without the library beside it, it reads the geometry and the
     texture coordinates only, and :func:`_load_texture` reads the image within its cap.
     """
-    if not declared.libraries:
+    if content is None and not declared.libraries:
         yield path
         return
-    with tempfile.TemporaryDirectory(prefix="visuotactile-obj-") as folder:
+    with tempfile.TemporaryDirectory(prefix="visuotactile-mesh-") as folder:
         alone = Path(folder) / path.name
-        try:
-            os.symlink(path.resolve(), alone)
-        except OSError:  # no symbolic links here (Windows without the privilege): a copy
-            shutil.copyfile(path, alone)
+        if content is not None:
+            alone.write_bytes(content)
+        else:
+            try:
+                os.symlink(path.resolve(), alone)
+            except OSError:  # no symbolic links here (Windows without the privilege): a copy
+                shutil.copyfile(path, alone)
         yield alone
 
 
@@ -119,13 +138,14 @@ def _without_materials(path: Path, declared: Declared):
 _TRUNCATED = ("Unexpected EOF", "Unexpected end of file")
 
 
-def _pymeshlab_load(path: Path, declared: Declared):
+def _pymeshlab_load(path: Path, declared: Declared, content: bytes | None = None):
+    """pymeshlab's reading of the file ``path``, or of ``content`` in its place."""
     from meshsal.util.meshlab import import_pymeshlab
 
     pymeshlab = import_pymeshlab()
     ms = pymeshlab.MeshSet()
     params = {"unify_vertices": False} if path.suffix.lower() == ".stl" else {}
-    with _without_materials(path, declared) as readable:
+    with _readable(path, declared, content) as readable:
         try:
             ms.load_new_mesh(str(readable), **params)
         except pymeshlab.PyMeshLabException as e:
@@ -154,13 +174,15 @@ def _no_faces(path: Path, n_vertices: int, n_faces: int):
 
 def _read_arrays(path: Path, data: bytes, notes: list, max_texture_pixels: int | None):
     """Vertices, triangles, vertex colours, per-corner uv and texture of the file, as read."""
+    content = _without_bom(path, data)
+    data = data if content is None else content
     if path.suffix.lower() == ".off":
         V, F, C, n_faces = read_off(path, data)
         if len(F) == 0:
             _no_faces(path, len(V), n_faces)
         return V, F, C, None, None
     declared = check(path, data)
-    ms = _pymeshlab_load(path, declared)
+    ms = _pymeshlab_load(path, declared, content)
     pm = ms.current_mesh()
     if pm.face_number() == 0:
         _no_faces(path, pm.vertex_number(), declared.n_faces)
@@ -344,8 +366,9 @@ def load_vertex_quality(path) -> np.ndarray:
     data = _read_checked(path, MAX_MESH_BYTES)
     if path.suffix.lower() != ".ply":
         fail(path, "vertex quality is only stored in PLY files")
-    declared = check(path, data)
+    content = _without_bom(path, data)
+    declared = check(path, data if content is None else content)
     if "quality" not in declared.vertex_properties:
         fail(path, "has no per-vertex 'quality' property")
-    ms = _pymeshlab_load(path, declared)
+    ms = _pymeshlab_load(path, declared, content)
     return np.asarray(ms.current_mesh().vertex_scalar_array(), dtype=np.float64).reshape(-1)
