@@ -335,6 +335,8 @@ def _experiment(args) -> int:
         raise ValueError(f"--replicates-at-once must be at least 1, got {args.replicates_at_once}")
     if args.jobs < 1:
         raise ValueError(f"--jobs must be at least 1, got {args.jobs}")
+    # 0 is a count to refuse, not "unset".
+    replicates = DEFAULT_REPLICATES if args.replicates is None else args.replicates
     sensor = tactile.Sensor() if args.mode is None else tactile.Sensor(mode=args.mode)
     settings = Settings(
         n_points=args.n_points,
@@ -357,9 +359,7 @@ def _experiment(args) -> int:
         features=args.features,
         baseline=args.baseline,
         policies=args.policies,
-        replicates=FULL_REPLICATES
-        if args.full
-        else (DEFAULT_REPLICATES if args.replicates is None else args.replicates),
+        replicates=FULL_REPLICATES if args.full else replicates,
         control=args.control,
     )
     if args.real:
