@@ -13,6 +13,7 @@ import signal
 import sys
 import threading
 import warnings
+from concurrent.futures import BrokenExecutor
 
 from meshsal.util.arguments import HelpFormatter, Subcommands, defer_options
 
@@ -478,6 +479,20 @@ def _run(args) -> int:
         problem = "out of memory" if isinstance(exc, MemoryError) else "recursion too deep"
         detail = f": {exc}" if str(exc) else ""
         print(f"visuotactile {args.command}: error: {problem} ({type(exc).__name__}{detail})", file=sys.stderr)
+        return 1
+    except BrokenExecutor:
+        # A local worker process ended abruptly: the system's out-of-memory killer, a crash or a kill.
+        cache = getattr(args, "cache_dir", None)
+        after = (
+            "nothing was cached (--cache-dir none): running the command again starts over"
+            if str(cache).lower() == "none"
+            else "what finished is cached: run the same command again to resume"
+        )
+        print(
+            f"visuotactile {args.command}: error: a worker process ended abruptly (killed, e.g. by the system when "
+            f"memory runs out, or crashed); {after}",
+            file=sys.stderr,
+        )
         return 1
     except KeyboardInterrupt:
         print(f"visuotactile {args.command}: interrupted", file=sys.stderr)

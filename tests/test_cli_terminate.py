@@ -1,5 +1,5 @@
-"""SIGTERM (a batch scheduler's time limit) and Ctrl-C end `visuotactile experiment` with its temporary folders
-removed."""
+"""SIGTERM (a batch scheduler's time limit), Ctrl-C and a worker killed (out of memory) end `visuotactile
+experiment` with its temporary folders removed."""
 
 import os
 import signal
@@ -47,4 +47,35 @@ def test_a_signal_during_an_experiment_removes_its_temporary_folders_and_exits_w
             run.kill()
     assert run.returncode == status, err
     assert f"visuotactile experiment: {said}" in err
+    assert not list(temp.glob("visuotactile-*"))
+
+
+@pytest.mark.skipif(sys.platform == "win32", reason="POSIX signals")
+def test_a_worker_killed_mid_experiment_ends_it_with_a_message_and_no_temporary_folder(tmp_path):
+    import psutil
+
+    temp = tmp_path / "tmp"
+    temp.mkdir()
+    env = {**os.environ, "TMPDIR": str(temp)}
+    command = [sys.executable, "-m", "classify.cli", "experiment", "--objects", "cow,cup,hand", "--methods"]
+    command += ["uniform", "--classifiers", "knn", "--protocols", "instance", "--n-points", "4", "--view-size"]
+    command += ["64", "--replicates", "4", "--jobs", "2", "--out", str(tmp_path / "out"), "--quiet"]
+    command += ["--cache-dir", str(tmp_path / "cache")]
+    run = subprocess.Popen(command, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    try:
+        deadline = time.monotonic() + 240
+        while not list(temp.glob("visuotactile-*")) and run.poll() is None and time.monotonic() < deadline:
+            time.sleep(0.05)
+        time.sleep(1.0)  # the workers at work
+        children = psutil.Process(run.pid).children()
+        workers = [c for c in children if "spawn_main" in " ".join(c.cmdline())]  # not the resource tracker
+        assert run.poll() is None and workers, "the run ended before its workers started"
+        workers[0].kill()  # as the system's out-of-memory killer would
+        _, err = run.communicate(timeout=120)
+    finally:
+        if run.poll() is None:
+            run.kill()
+    assert run.returncode == 1, err
+    assert "visuotactile experiment: error: a worker process ended abruptly" in err and "to resume" in err
+    assert "Traceback" not in err
     assert not list(temp.glob("visuotactile-*"))
