@@ -15,7 +15,7 @@ import threading
 import warnings
 from concurrent.futures import BrokenExecutor
 
-from meshsal.util.arguments import HelpFormatter, Subcommands, defer_options
+from meshsal.util.arguments import HelpFormatter, Subcommands, defer_options, output_folder
 
 
 def register(subparsers) -> None:
@@ -153,10 +153,11 @@ def _experiment_options(p) -> None:
         default=None,
         help="imprint mode of the simulated sensor (default: tactile.Sensor's)",
     )
-    p.add_argument("--out", default="results", help="output directory (default ./results)")
+    p.add_argument("--out", default="results", type=output_folder, help="output directory (default ./results)")
     p.add_argument(
         "--cache-dir",
         default=None,
+        type=_cache_folder,
         help="cache of points, imprints and rates (default $XDG_CACHE_HOME/visuotactile or "
         "./.cache/visuotactile); 'none' disables it",
     )
@@ -213,7 +214,9 @@ def _batch_options(b) -> None:
     from meshsal.points import POINT_METHODS
 
     b.add_argument("directory", metavar="DIR", help="folder of meshes (searched recursively)")
-    b.add_argument("--out", required=True, metavar="STORE", help="the store folder (created or resumed)")
+    b.add_argument(
+        "--out", required=True, type=output_folder, metavar="STORE", help="the store folder (created or resumed)"
+    )
     b.add_argument(
         "--methods",
         type=_csv_list,
@@ -306,6 +309,11 @@ def _batch(args) -> int:
     if summary.failed:
         print(f"{summary.failed} mesh(es) failed: see {args.out}/failures.jsonl", file=sys.stderr)
     return 0
+
+
+def _cache_folder(text: str) -> str:
+    """``--cache-dir``: 'none', or a folder that can be written (checked before any work)."""
+    return text if text.lower() == "none" else str(output_folder(text))
 
 
 def _csv_list(text: str) -> tuple:

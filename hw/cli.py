@@ -10,7 +10,7 @@ def register(subparsers) -> None:
     from hw import capture
     from meshsal.cli import QUIET_HELP, add_model, mesh_help
     from meshsal.points import POINT_METHODS
-    from meshsal.util.arguments import HelpFormatter, add_renamed
+    from meshsal.util.arguments import HelpFormatter, add_renamed, output_file
 
     p = subparsers.add_parser(
         "capture",
@@ -31,7 +31,7 @@ def register(subparsers) -> None:
         "names, imprints resampled to ROWS x COLS by area averaging and scaled to [0, 1].",
     )
     p.add_argument("session", help="session file (.sqlite)")
-    p.add_argument("--out", required=True, help="imprint set to write (.npz)")
+    p.add_argument("--out", required=True, type=output_file, help="imprint set to write (.npz)")
     p.add_argument(
         "--full-scale",
         default="session",
@@ -52,7 +52,7 @@ def register(subparsers) -> None:
         "mesh file's frame and units, plus the sensor's dimensions; JSON and a CSV beside it.",
     )
     p.add_argument("mesh", help=mesh_help())
-    p.add_argument("--out", required=True, help="plan to write (.json; the .csv goes beside it)")
+    p.add_argument("--out", required=True, type=output_file, help="plan to write (.json; the .csv goes beside it)")
     p.add_argument(
         "--size-mm",
         type=float,

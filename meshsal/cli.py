@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 
 from meshsal.points.rules import MIN_VIEW_SIZE
-from meshsal.util.arguments import HelpFormatter, add_renamed
+from meshsal.util.arguments import HelpFormatter, add_renamed, output_folder
 
 #: Rendered view size in pixels of every subcommand that renders (``PointOptions.size``).
 VIEW_SIZE = 128
@@ -69,7 +69,7 @@ def _add_toys(subparsers) -> None:
         description="Write the six procedural toys (cow, glasses, cup, hand, plane, dromedary) "
         "as binary PLY files with vertex colors, in millimetres.",
     )
-    p.add_argument("--out", required=True, type=Path, help="output folder")
+    p.add_argument("--out", required=True, type=output_folder, help="output folder")
     p.add_argument("--seed", type=int, default=0, help="seed of the toys' random details")
     p.add_argument("--quiet", action="store_true", help=QUIET_HELP)
     p.set_defaults(func=_cmd_toys)
@@ -94,7 +94,7 @@ def _mesh_subcommand(subparsers, name: str, summary: str, description: str):
     """A subcommand that reads one MESH and writes into the folder --out."""
     p = subparsers.add_parser(name, help=summary, description=description, formatter_class=HelpFormatter)
     p.add_argument("mesh", type=Path, help=mesh_help())
-    p.add_argument("--out", required=True, type=Path, help="output folder")
+    p.add_argument("--out", required=True, type=output_folder, help="output folder")
     return p
 
 

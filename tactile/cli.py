@@ -8,7 +8,7 @@ from pathlib import Path
 def register(subparsers) -> None:
     """Add this package's subcommands to the ``visuotactile`` parser."""
     from meshsal.cli import QUIET_HELP, mesh_help
-    from meshsal.util.arguments import HelpFormatter
+    from meshsal.util.arguments import HelpFormatter, output_file
     from tactile.sensor import SENSOR_MODES, SENSOR_PLANES, Sensor
 
     default = Sensor()
@@ -25,7 +25,7 @@ def register(subparsers) -> None:
     p.add_argument(
         "--points", type=Path, required=True, metavar="POINTS", help="points.json from 'visuotactile points'"
     )
-    p.add_argument("--out", type=Path, required=True, metavar="SET.npz", help="imprint set to write")
+    p.add_argument("--out", type=output_file, required=True, metavar="SET.npz", help="imprint set to write")
     p.add_argument(
         "--size-mm",
         type=float,

@@ -115,6 +115,37 @@ def test_a_chosen_subcommand_gets_its_deferred_options(capsys):
     assert "unrecognized arguments: --no-such-option" in capsys.readouterr().err
 
 
+@pytest.mark.parametrize(
+    "argv, option, kind",
+    [
+        (["toys", "--out", "{file}"], "--out", "file"),
+        (["render", "cup", "--out", "{file}/views"], "--out", "inside"),
+        (["points", "cup", "--out", "{file}"], "--out", "file"),
+        (["imprints", "cup", "--points", "p.json", "--out", "{folder}"], "--out", "folder"),
+        (["plan", "cup", "--out", "{folder}"], "--out", "folder"),
+        (["export", "s.sqlite", "--out", "{file}/set.npz"], "--out", "inside"),
+        (["experiment", "--objects", "cup,hand", "--out", "{file}"], "--out", "file"),
+        (["experiment", "--objects", "cup,hand", "--cache-dir", "{file}"], "--cache-dir", "file"),
+        (["batch", "{folder}", "--out", "{file}"], "--out", "file"),
+    ],
+)
+def test_an_output_that_cannot_be_written_is_refused_as_the_command_line_is_read(tmp_path, capsys, argv, option, kind):
+    file, folder = tmp_path / "notes.txt", tmp_path / "folder"
+    file.write_text("")
+    folder.mkdir()
+    argv = [a.format(file=file, folder=folder) for a in argv]
+    with pytest.raises(SystemExit) as exit_info:
+        main(argv + ["--quiet"])
+    assert exit_info.value.code == 2
+    problem = {
+        "file": f"{file}: exists and is a file, not a folder",
+        "folder": f"{folder}: exists and is a folder, not a file",
+        "inside": f"cannot be written: {file} is a file, not a folder",
+    }[kind]
+    err = " ".join(capsys.readouterr().err.split())  # argparse wraps long messages
+    assert f"visuotactile {argv[0]}: error: argument {option}: " in err and problem in err
+
+
 def test_every_subcommand_takes_quiet_names_ycb_objects_and_shows_its_defaults():
     import argparse
 

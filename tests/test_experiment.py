@@ -198,6 +198,15 @@ def test_a_count_out_of_range_is_refused_by_name_before_any_work(tmp_path, capsy
     assert not out.exists()
 
 
+def test_a_results_or_cache_folder_with_a_file_in_its_way_stops_run_experiment_before_any_work(tmp_path):
+    file = tmp_path / "notes.txt"
+    file.write_text("")
+    for where in ({"out_dir": file / "results", "cache_dir": tmp_path / "cache"}, {"cache_dir": file}):
+        with pytest.raises(ValueError, match=f"{file} is a file, not a folder|{file}: exists and is a file"):
+            experiment.run_experiment(["cow", "cup"], quiet=True, **where)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["notes.txt"]  # no cache, nothing loaded or written
+
+
 def test_real_imprint_set_gives_table_2_with_folds_grouped_by_point(tmp_path, capsys):
     rng = np.random.default_rng(4)
     labels = np.repeat(np.arange(3), 10)

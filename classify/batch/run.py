@@ -362,10 +362,11 @@ def run_batch(
         Another batch is writing to ``store``.
     """
     from classify.runtime.cluster import Inline
+    from meshsal.util.atomic import check_writable
     from meshsal.util.progress import progress
 
     settings = BatchSettings() if settings is None else settings
-    store = Path(store).resolve()
+    store = check_writable(store, folder=True).resolve()
     root = Path(directory).resolve()
     meshes = find_meshes(root)
     executor = Inline() if executor is None else executor

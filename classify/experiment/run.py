@@ -51,6 +51,7 @@ from classify.runtime import cache as cache_mod
 from classify.runtime.cluster import Inline, runs_pinned_here, shares_disk, worker_pool
 from classify.runtime.usage import StageUsage, cpu_seconds, measured, resident_mb
 from meshsal.points import METHODS, MODEL_METHODS
+from meshsal.util.atomic import check_writable
 
 __all__ = [
     "PROTOCOLS",
@@ -325,6 +326,10 @@ def run_experiment(
     settings = config.settings
     if cache_dir == "default":
         cache_dir = cache_mod.default_dir()
+    # A results or cache folder that cannot be written stops the run here, not after hours of work.
+    for folder in (out_dir, cache_dir):
+        if folder is not None:
+            check_writable(folder, folder=True)
     # A touch model needs training instances: the paper protocol has none.
     paper_methods = [m for m in config.methods if m not in MODEL_METHODS]
     usage, measurements, models = {}, [], []
@@ -409,6 +414,8 @@ def run_real(
 
     started = time.perf_counter()
     config = (config or ExperimentConfig()).replace(**changes).checked()
+    if out_dir is not None:
+        check_writable(out_dir, folder=True)
     if not isinstance(imprint_set, tactile.ImprintSet):
         imprint_set = tactile.ImprintSet.load(imprint_set)
     X = np.asarray(imprint_set.imprints, np.float32)

@@ -12,8 +12,11 @@ from __future__ import annotations
 
 import argparse
 import sys
+from pathlib import Path
 
-__all__ = ["HelpFormatter", "Subcommands", "add_renamed", "defer_options", "REMOVED_IN"]
+from meshsal.util.atomic import check_writable
+
+__all__ = ["HelpFormatter", "Subcommands", "add_renamed", "defer_options", "output_file", "output_folder", "REMOVED_IN"]
 
 #: The release that drops the old spellings.
 REMOVED_IN = "0.3"
@@ -144,3 +147,28 @@ def defer_options(subparsers, parser: argparse.ArgumentParser, add_options) -> N
         subparsers.defer(parser, add_options)
     else:
         add_options(parser)
+
+
+def output_folder(text: str) -> Path:
+    """``type=`` of an option naming a folder to write: refused as the command line is read, before any work,
+    when a file is in the way or the folder cannot be written (:func:`meshsal.util.atomic.check_writable`).
+
+    Examples
+    --------
+    >>> p = argparse.ArgumentParser(prog="x")
+    >>> _ = p.add_argument("--out", type=output_folder)
+    >>> p.parse_args(["--out", "results"]).out
+    PosixPath('results')
+    """
+    try:
+        return check_writable(text, folder=True)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+
+
+def output_file(text: str) -> Path:
+    """``type=`` of an option naming a file to write, checked as :func:`output_folder` checks a folder."""
+    try:
+        return check_writable(text, folder=False)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None

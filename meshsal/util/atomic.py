@@ -45,6 +45,50 @@ def atomic_path(path):
             tmp.unlink()
 
 
+def check_writable(path, folder: bool) -> Path:
+    """Refuse, before any work, an output that cannot be written: ``path`` itself, or on its way, a file where a
+    folder goes (or a folder where the file goes), or a folder that is not writable.  Nothing is created.
+
+    Parameters
+    ----------
+    path : path of the output
+    folder : bool, whether the output is a folder (else a file, in its parent folder)
+
+    Returns
+    -------
+    Path
+
+    Raises
+    ------
+    ValueError
+        Naming ``path`` and what is in the way.
+
+    Examples
+    --------
+    >>> import tempfile, pathlib
+    >>> root = pathlib.Path(tempfile.mkdtemp())
+    >>> _ = (root / "notes.txt").write_text("")
+    >>> check_writable(root / "new" / "results", folder=True) == root / "new" / "results"
+    True
+    >>> check_writable(root / "notes.txt" / "results", folder=True)  # doctest: +ELLIPSIS
+    Traceback (most recent call last):
+    ...
+    ValueError: .../notes.txt/results: cannot be written: .../notes.txt is a file, not a folder
+    """
+    path = Path(path)
+    if path.exists():
+        if path.is_dir() != folder:
+            raise ValueError(f"{path}: exists and is {'a file, not a folder' if folder else 'a folder, not a file'}")
+        target = path if folder else path.parent
+    else:
+        target = next(above for above in path.parents if above.exists())
+        if not target.is_dir():
+            raise ValueError(f"{path}: cannot be written: {target} is a file, not a folder")
+    if not os.access(target, os.W_OK | os.X_OK):
+        raise ValueError(f"{path}: cannot be written: the folder {target} is not writable")
+    return path
+
+
 def _fsync(path, flags) -> None:
     fd = os.open(path, flags)
     try:
