@@ -207,6 +207,31 @@ def test_a_results_or_cache_folder_with_a_file_in_its_way_stops_run_experiment_b
     assert sorted(p.name for p in tmp_path.iterdir()) == ["notes.txt"]  # no cache, nothing loaded or written
 
 
+def test_an_object_with_fewer_places_than_landmarks_is_refused_by_name_before_any_work(monkeypatch):
+    from classify.experiment import run
+
+    corners = [[0, 0, 0], [60, 0, 0], [0, 60, 0], [0, 0, 60]]
+    tet = meshsal.Mesh(vertices=corners, faces=[[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]], name="tet")
+    ball = shapes.sphere(radius=50.0, n=12).replace(name="ball")
+    for stage in ("_paper_measurements", "instance_stage"):
+        monkeypatch.setattr(run, stage, lambda *args, **kwargs: pytest.fail("work began"))
+    for config in ({}, {"classifiers": ("knn",), "policies": ("random",)}):
+        with pytest.raises(ValueError, match="locate a touch by 8 landmarks.*; tet has 4: give a finer mesh"):
+            experiment.run_experiment([tet, ball], quiet=True, cache_dir=None, n_jobs=1, **config)
+    monkeypatch.undo()
+    # The paper protocol folds the points themselves: its error names the object with too few.
+    with pytest.raises(ValueError, match="5-fold cross-validation needs at least 5 points per object; tet has 4 "):
+        experiment.run_experiment(
+            [tet, ball],
+            protocols=("paper",),
+            classifiers=("knn",),
+            settings=SMALL,
+            quiet=True,
+            cache_dir=None,
+            n_jobs=1,
+        )
+
+
 def test_real_imprint_set_gives_table_2_with_folds_grouped_by_point(tmp_path, capsys):
     rng = np.random.default_rng(4)
     labels = np.repeat(np.arange(3), 10)

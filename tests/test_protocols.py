@@ -42,9 +42,11 @@ def test_paper_splits_partition_each_repeat_keep_groups_whole_and_reshuffle():
     assert all(np.array_equal(a.test, b.test) for a, b in zip(splits, again))
 
 
-def test_paper_splits_refuse_too_few_points_per_object():
-    with pytest.raises(ValueError, match="at least 5 points per object"):
+def test_paper_splits_refuse_too_few_points_per_object_naming_them():
+    with pytest.raises(ValueError, match="at least 5 points per object; 0 has 3 "):
         protocols.paper_splits(np.repeat([0, 1], [3, 10]), folds=5)
+    with pytest.raises(ValueError, match="at least 5 points per object; cup has 3, tet has 4 "):
+        protocols.paper_splits(np.repeat([0, 1, 2], [3, 4, 10]), folds=5, names=["cup", "tet", "ball"])
 
 
 def test_paper_job_never_trains_or_selects_on_a_test_imprint(monkeypatch):

@@ -82,11 +82,13 @@ class Split:
     test: np.ndarray
 
 
-def paper_splits(labels, groups=None, folds=5, repeats=10, seed=0) -> list[Split]:
+def paper_splits(labels, groups=None, folds=5, repeats=10, seed=0, names=None) -> list[Split]:
     """``folds``-fold cross-validation grouped by ``groups``, stratified by ``labels``, ``repeats`` times.
 
     Repeat r shuffles with seed ``seed + r``.  Within a repeat the test folds
     partition the pool, and no group has members on both sides of a split.
+    ``names``, one per distinct label in sorted order, name the objects with
+    too few groups (points) for the folds in the error.
 
     Examples
     --------
@@ -96,11 +98,14 @@ def paper_splits(labels, groups=None, folds=5, repeats=10, seed=0) -> list[Split
     """
     labels = np.asarray(labels)
     groups = np.arange(len(labels)) if groups is None else np.asarray(groups)
-    per_class = [len(np.unique(groups[labels == c])) for c in np.unique(labels)]
+    classes = np.unique(labels)
+    per_class = [len(np.unique(groups[labels == c])) for c in classes]
     if min(per_class) < folds:
+        names = [str(c) for c in classes] if names is None else list(names)
+        short = ", ".join(f"{name} has {k}" for name, k in zip(names, per_class) if k < folds)
         raise ValueError(
-            f"paper protocol: {folds}-fold cross-validation needs at least {folds} points per "
-            f"object, the smallest object has {min(per_class)}"
+            f"paper protocol: {folds}-fold cross-validation needs at least {folds} points per object; {short} "
+            "(fewer --folds, or --protocols instance, which does not fold points)"
         )
     out = []
     for r in range(repeats):

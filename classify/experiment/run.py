@@ -30,6 +30,7 @@ from classify.experiment.stages import (
     InstanceStage,
     ObjectSet,
     Runtime,
+    check_landmarks,
     instance_recognition,
     instance_stage,
     join_replicates,
@@ -342,6 +343,8 @@ def run_experiment(
     with threadpool_limits(1), workers as pool, places_dir as folder:
         # Local workers start while the objects load, and build the toys; a bad file still stops the run before any work.
         objects = load_objects(objects, settings, pool if local else None, skip_bad=skip_bad)
+        if "instance" in config.protocols and ("place" in config.classifiers or config.policies):
+            check_landmarks(objects)
         # Workers render with one thread each; alone, the stage renders with every core.
         runtime = Runtime(pool, cache_dir, None if isinstance(pool, Inline) else 1, quiet, places_dir=folder)
         if "paper" in config.protocols and paper_methods:

@@ -148,6 +148,33 @@ def load_objects(objects, settings: Settings, pool=None, skip_bad: bool = False)
     return ObjectSet(names, tuple(nominal_mesh(m, settings, u) for m, u in zip(meshes, units)))
 
 
+def check_landmarks(objects: ObjectSet) -> None:
+    """Refuse, before any work, objects with fewer places a pad can press than the landmarks that locate a touch.
+
+    The place-aware recognizer and the touch policies locate each place by its
+    distances to an instance's first :data:`meshsal.points.places.LANDMARKS`
+    candidate places (vertices with a normal); a mesh with fewer has no such
+    signature.
+
+    Raises
+    ------
+    ValueError
+        Naming every such object and its count of places.
+    """
+    from meshsal.mesh.geometry import normal_defined
+    from meshsal.points.places import LANDMARKS
+
+    pressable = (np.count_nonzero(normal_defined(m.vertices, m.faces)) for m in objects.nominal)
+    few = {name: int(k) for name, k in zip(objects.names, pressable) if k < LANDMARKS}
+    if few:
+        raise ValueError(
+            f"the place-aware recognizer and the touch policies locate a touch by {LANDMARKS} landmarks, places a "
+            "pad can press (vertices with a normal); "
+            + ", ".join(f"{name} has {k}" for name, k in few.items())
+            + ": give a finer mesh (subdivided), or leave out --classifiers place and --policies"
+        )
+
+
 def _repaired(mesh):
     from meshsal.mesh.io import MeshRepairWarning
     from meshsal.mesh.repair import repair_mesh
@@ -440,7 +467,7 @@ def paper_recognition(
     back = np.argsort(order)
     groups = point_groups(y, points)
     seed = config.settings.seed
-    splits = paper_splits(y, groups, config.folds, config.repeats, seed)
+    splits = paper_splits(y, groups, config.folds, config.repeats, seed, [names[order[c]] for c in np.unique(y)])
     jobs = [(c, s, r) for c, s in _recognizers(config) for r in range(config.repeats)]
     # One job per classifier and repeat, with and without selection: a fold selection leaves whole is fitted once.
     shared = [(c, r) for c in config.classifiers if c != "place" for r in range(config.repeats)]
