@@ -17,6 +17,7 @@ import sys
 import threading
 import time
 from dataclasses import dataclass
+from pathlib import Path
 
 from hw.press import PressDetector
 from hw.protocol import FRAME_PROTOCOLS, FrameParser
@@ -319,30 +320,49 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--quiet", action="store_true", help="no status lines on stderr (errors are still printed)")
 
 
+def _discard_if_empty(path: Path) -> None:
+    """Delete the session file ``path`` (and SQLite's files beside it) if it exists and holds no press."""
+    if not path.exists():
+        return
+    with Session(path, create=False) as session:
+        empty = not session.presses()
+    if empty:
+        for leftover in (path, path.with_name(path.name + "-wal"), path.with_name(path.name + "-shm")):
+            leftover.unlink(missing_ok=True)
+
+
 def run(args) -> int:
     """Handler of the capture subcommand."""
     from hw.plan import load_plan
 
     plan = load_plan(args.points) if args.points else None
     detector = PressDetector(baseline_frames=args.baseline_frames, threshold=args.press_threshold)
-    with Session(args.session) as session:
-        result = capture(
-            args.port,
-            session,
-            args.object,
-            baud=args.baud,
-            protocol=args.protocol,
-            plan=plan,
-            first_point=args.first_point,
-            presses=args.presses,
-            garbage_timeout=args.garbage_timeout,
-            detector=detector,
-            quiet=args.quiet,
-        )
+    new = not Path(args.session).exists()
+    try:
+        with Session(args.session) as session:
+            result = capture(
+                args.port,
+                session,
+                args.object,
+                baud=args.baud,
+                protocol=args.protocol,
+                plan=plan,
+                first_point=args.first_point,
+                presses=args.presses,
+                garbage_timeout=args.garbage_timeout,
+                detector=detector,
+                quiet=args.quiet,
+            )
+    finally:
+        # A run that stored no press (a wrong port, an option refused, Ctrl-C at once) leaves no session it made.
+        if new:
+            _discard_if_empty(Path(args.session))
     if not args.quiet:
+        kept = Path(args.session).exists()
         print(
-            f"capture: {len(result.point_ids)} presses stored in {args.session} ({result.stopped}); "
-            f"{result.frames} frames, {result.crc_errors + result.bad_lines} corrupt, {result.gaps} missing",
+            f"capture: {len(result.point_ids)} presses stored in {args.session}{'' if kept else ' (not kept)'} "
+            f"({result.stopped}); {result.frames} frames, {result.crc_errors + result.bad_lines} corrupt, "
+            f"{result.gaps} missing",
             file=sys.stderr,
         )
     return 0

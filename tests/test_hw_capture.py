@@ -167,6 +167,7 @@ def test_missing_and_busy_ports(tmp_path, capsys):
     session = str(tmp_path / "s.sqlite")
     assert main(["--port", str(tmp_path / "ttyNOPE"), "--session", session, "--object", "x"]) == 1
     assert "no such serial port" in capsys.readouterr().err
+    assert list(tmp_path.iterdir()) == []  # no empty session left behind for export to trip on
     master, path = open_pty()
     holder = open_port(path)
     try:
@@ -175,6 +176,21 @@ def test_missing_and_busy_ports(tmp_path, capsys):
     finally:
         holder.close()
         os.close(master)
+
+
+def test_a_capture_that_stores_no_press_leaves_only_the_sessions_that_were_there(tmp_path, capsys):
+    kept = tmp_path / "kept.sqlite"
+    with Session(kept) as session:
+        session.ensure_sensor(16, 16)  # an existing session, even an empty one, is the user's: it stays
+    for path in (tmp_path / "new.sqlite", kept):
+        argv = ["--port", str(tmp_path / "ttyNOPE"), "--session", str(path), "--object", "x"]
+        assert main(argv) == 1 and main([*argv, "--presses", "0"]) == 1
+    assert "presses must be at least 1, got 0" in capsys.readouterr().err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["kept.sqlite"]
+    with sim_thread(blobs(1)) as (port, _):
+        assert main(["--port", port, "--session", str(tmp_path / "one.sqlite"), "--object", "x", "--presses", "1"]) == 0
+    with Session(tmp_path / "one.sqlite", create=False) as session:
+        assert len(session.presses("x")) == 1
 
 
 def test_only_garbage_times_out_suggesting_the_baud_rate(tmp_path):
