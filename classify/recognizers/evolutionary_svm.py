@@ -54,8 +54,14 @@ def as_matrix(X, name="X"):
 def as_labels(y, n_samples: int, estimator: str):
     """Class labels of ``n_samples`` rows as a (n_samples,) array; a column ``(n, 1)`` is raveled with a warning.
 
-    Raises ValueError for another length and for targets that are no class
-    labels (continuous values: "Unknown label type"), as scikit-learn does.
+    Raises ValueError, its message led by ``estimator`` (a name), for another
+    length, and for targets that are no class labels (continuous values:
+    "Unknown label type") as scikit-learn does.
+
+    Examples
+    --------
+    >>> as_labels(["cup", "cow"], 2, "KNN").tolist()
+    ['cup', 'cow']
     """
     y = column_or_1d(y, warn=True)
     if y.shape != (n_samples,):
