@@ -13,6 +13,7 @@ import argparse
 import dataclasses
 import errno
 import signal
+import sqlite3
 import sys
 import threading
 import time
@@ -321,11 +322,17 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def _discard_if_empty(path: Path) -> None:
-    """Delete the session file ``path`` (and SQLite's files beside it) if it exists and holds no press."""
+    """Delete the session file ``path`` (and SQLite's files beside it) if it exists and holds no press.
+
+    A file that cannot be read as a session stays: this runs on the way out of another error.
+    """
     if not path.exists():
         return
-    with Session(path, create=False) as session:
-        empty = not session.presses()
+    try:
+        with Session(path, create=False) as session:
+            empty = not session.presses()
+    except (ValueError, OSError, sqlite3.Error):
+        return
     if empty:
         for leftover in (path, path.with_name(path.name + "-wal"), path.with_name(path.name + "-shm")):
             leftover.unlink(missing_ok=True)

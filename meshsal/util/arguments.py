@@ -157,8 +157,8 @@ def output_folder(text: str) -> Path:
     --------
     >>> p = argparse.ArgumentParser(prog="x")
     >>> _ = p.add_argument("--out", type=output_folder)
-    >>> p.parse_args(["--out", "results"]).out
-    PosixPath('results')
+    >>> p.parse_args(["--out", "results"]).out.name
+    'results'
     """
     try:
         return check_writable(text, folder=True)
