@@ -8,7 +8,7 @@ import sys
 def register(subparsers) -> None:
     """Add this package's subcommands to the ``visuotactile`` parser."""
     from hw import capture
-    from meshsal.cli import QUIET_HELP, add_model, mesh_help
+    from meshsal.cli import QUIET_HELP, add_model, add_view_size, mesh_help
     from meshsal.points import POINT_METHODS
     from meshsal.util.arguments import HelpFormatter, add_renamed, output_file
 
@@ -67,6 +67,7 @@ def register(subparsers) -> None:
         help=f"interest point method: {POINT_METHODS.help_text()}",
     )
     add_model(p)
+    add_view_size(p)
     p.add_argument("--seed", type=int, default=0, help="seed of the random methods")
     p.add_argument("--quiet", action="store_true", help=QUIET_HELP)
     p.set_defaults(func=_cmd_plan)
@@ -101,6 +102,7 @@ def _cmd_plan(args) -> int:
         quiet=args.quiet,
         source=args.mesh,
         model=model,
+        view_size=args.view_size,
     )
     json_path, csv_path = save_plan(plan, args.out)
     if len(plan.points) < args.n_points:

@@ -152,6 +152,7 @@ def make_plan(
     quiet: bool = True,
     source: str = "",
     model=None,
+    view_size: int | None = None,
 ) -> Plan:
     """Plan one press per interest point of ``mesh``.
 
@@ -170,6 +171,9 @@ def make_plan(
         Mesh file or toy name recorded in the plan.
     model : meshsal.points.learned.TouchModel, optional
         Needed by the learned methods ("learned", "attention_learned").
+    view_size : int, optional
+        Rendered view size of the methods that look (default ``meshsal.PointOptions``'s; a touch model
+        is meant for the size it records).
 
     Returns
     -------
@@ -182,8 +186,9 @@ def make_plan(
 
     sensor = tactile.Sensor() if sensor is None else sensor
     scaled = scale_to_principal(mesh, size_mm)
+    sized = {} if view_size is None else {"size": int(view_size)}
     pts = meshsal.interest_points(
-        scaled, n=n, method=method, seed=seed, quiet=quiet, pad_width=sensor.width_mm, model=model
+        scaled, n=n, method=method, seed=seed, quiet=quiet, pad_width=sensor.width_mm, model=model, **sized
     )
     # The pad settles on the plane tactile fits over its footprint, with tactile's angle-0 image axes.
     poses = tactile.sensor_poses(scaled, pts.positions, pts.normals, sensor)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import argparse
 import sys
 from pathlib import Path
 
@@ -50,8 +51,17 @@ def touch_model(method: str, path):
 def add_view_size(p) -> None:
     """``--view-size``, and ``--size``, its deprecated spelling until 0.3."""
     add_renamed(
-        p, "--size", p.add_argument("--view-size", type=int, default=VIEW_SIZE, help="rendered view size in pixels")
+        p,
+        "--size",
+        p.add_argument("--view-size", type=_view_size, default=VIEW_SIZE, help="rendered view size in pixels"),
     )
+
+
+def _view_size(text: str) -> int:
+    size = int(text)
+    if size < MIN_VIEW_SIZE:
+        raise argparse.ArgumentTypeError(f"must be at least {MIN_VIEW_SIZE} pixels, got {size}")
+    return size
 
 
 def register(subparsers) -> None:
@@ -126,8 +136,6 @@ def _cmd_render(args) -> int:
     from meshsal.views.overlay import tile
     from meshsal.views.render import render_views
 
-    if args.view_size < MIN_VIEW_SIZE:
-        raise ValueError(f"--view-size must be at least {MIN_VIEW_SIZE} pixels, got {args.view_size}")
     with naming(args.mesh):
         mesh = load_object(args.mesh)
         cameras = [c for s in view_rig() for c in s]
@@ -236,8 +244,6 @@ def _cmd_points(args) -> int:
     from meshsal.util.errors import naming
     from meshsal.views import overlay
 
-    if args.view_size < MIN_VIEW_SIZE:
-        raise ValueError(f"--view-size must be at least {MIN_VIEW_SIZE} pixels, got {args.view_size}")
     if args.combination != "equal":
         method = next(m for m, c in ATTENTION_METHODS.items() if c == args.combination)
         print(
@@ -265,6 +271,7 @@ def _cmd_points(args) -> int:
             [args.method],
             n=args.n_points,
             seed=args.seed,
+            size=args.view_size,
             vertex_saliency=vertex_saliency,
             seen=seen,
             model=model,

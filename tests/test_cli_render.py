@@ -56,9 +56,13 @@ def test_render_of_a_bad_mesh_fails_with_the_loaders_message(tmp_path, capsys):
     assert not out.exists() or not any(out.iterdir())
 
 
-def test_render_rejects_a_tiny_size(sphere_file, tmp_path, capsys):
-    assert main(["render", str(sphere_file), "--out", str(tmp_path), "--view-size", "4", "--quiet"]) == 1
-    assert "--view-size" in capsys.readouterr().err
+@pytest.mark.parametrize("command", ["render", "points", "plan"])
+def test_a_tiny_view_size_is_refused_as_the_command_line_is_read(sphere_file, tmp_path, capsys, command):
+    out = str(tmp_path / ("plan.json" if command == "plan" else "out"))
+    with pytest.raises(SystemExit) as exit_info:
+        main([command, str(sphere_file), "--out", out, "--view-size", "4", "--quiet"])
+    assert exit_info.value.code == 2
+    assert "argument --view-size: must be at least 16 pixels, got 4" in capsys.readouterr().err
 
 
 def test_toys_writes_six_coloured_plys(tmp_path):

@@ -117,3 +117,18 @@ def test_cli_plan_with_a_learned_method_needs_and_takes_a_model(tmp_path, capsys
     assert main(argv + ["--quiet", "--out", str(out)]) == 0
     assert [p.id for p in load_plan(out).points] == [0, 1, 2, 3]
     assert capsys.readouterr().err == ""  # --quiet: no status line
+
+
+def test_cli_plan_renders_at_the_view_size_asked_and_warns_when_the_model_was_measured_at_another(tmp_path, capsys):
+    import dataclasses
+
+    from models import one_feature_model
+
+    from classify.cli import main
+
+    dataclasses.replace(one_feature_model("curvature"), view_size=48).save(tmp_path / "model.json")
+    argv = ["plan", "cup", "--method", "learned", "--model", str(tmp_path / "model.json"), "--n-points", "4", "--quiet"]
+    assert main(argv + ["--view-size", "48", "--out", str(tmp_path / "same.json")]) == 0
+    assert capsys.readouterr().err == ""
+    assert main(argv + ["--view-size", "32", "--out", str(tmp_path / "other.json")]) == 0
+    assert "measured on views of 48 pixels, these are 32" in capsys.readouterr().err

@@ -1,5 +1,6 @@
 """The learned touch saliency: features, the model, distinctiveness, and that no test instance trains it."""
 
+import dataclasses
 import json
 
 import numpy as np
@@ -68,14 +69,19 @@ def test_bad_training_data_is_refused(features, target, message):
 
 def test_model_file_round_trip_and_bad_files(tmp_path):
     rng = np.random.default_rng(3)
-    model = fit_touch_model(rng.random((60, len(FEATURES))), rng.random(60), trained_on=("cow/1", "cup/2"))
+    model = fit_touch_model(
+        rng.random((60, len(FEATURES))), rng.random(60), trained_on=("cow/1", "cup/2"), view_size=48
+    )
     path = tmp_path / "m.json"
     model.save(path)
     again = TouchModel.load(path)
     X = rng.random((7, len(FEATURES)))
     assert np.allclose(again.predict(X), model.predict(X)) and again.trained_on == model.trained_on
     assert again.channel_weights == pytest.approx(model.channel_weights)
+    assert again.view_size == 48
     document = json.loads(path.read_text())
+    (tmp_path / "unsized.json").write_text(json.dumps({k: v for k, v in document.items() if k != "view_size"}))
+    assert TouchModel.load(tmp_path / "unsized.json").view_size is None  # the size is optional in a file
     document["coef"] = document["coef"][:3]
     (tmp_path / "short.json").write_text(json.dumps(document))
     with pytest.raises(ValueError, match="short.json.*malformed"):
@@ -203,6 +209,7 @@ def test_the_instance_stage_trains_each_model_on_training_instances_only():
     assert len(models) == 2
     for model in models:
         assert sorted(model.trained_on) == ["cow/1", "cow/2", "cup/1", "cup/2"]
+        assert model.view_size == 48  # the size its surveys' views were rendered at
     assert models[0].coef.tolist() != models[1].coef.tolist()  # each replicate its own instances
     for r in range(2):
         for i in range(2):
@@ -255,6 +262,11 @@ def test_cli_learned_points_from_a_model_file(tmp_path, capsys):
     document = json.loads((tmp_path / "w" / "points.json").read_text())
     assert document["combination"] == "learned"
     assert document["settings"]["channel_weights"] == dict.fromkeys(CHANNELS, 1.0)
+    assert "warning" not in capsys.readouterr().err  # a model that records no size
+    dataclasses.replace(one_feature_model("curvature"), view_size=64).save(model_path)
+    assert points("s", "--method", "learned", "--model", str(model_path)) == 0
+    err = capsys.readouterr().err
+    assert "features were measured on views of 64 pixels, these are 32" in err and "--view-size 64" in err
 
 
 def test_a_learned_baseline_runs_both_protocols_and_compares_where_it_can():

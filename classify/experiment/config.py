@@ -121,6 +121,13 @@ class Settings:
             raise ValueError(f"mismatches {list(mismatch)} contradict each other: choose one of each pair")
         object.__setattr__(self, "mismatch", tuple(sorted(set(mismatch))))
 
+    @property
+    def views_px(self) -> int:
+        """The size the instances' views are rendered at: ``view_size``, or the point methods' default."""
+        from meshsal.points import PointOptions
+
+        return self.view_size or PointOptions.size
+
     def key(self) -> str:
         """A canonical text of every field but ``codebook_draws`` and ``mismatch``, for cache keys."""
         return repr(

@@ -192,7 +192,7 @@ def point_options(settings: Settings, seed: int, threads: int | None):
         n=settings.n_points,
         seed=seed,
         pad_width=settings.sensor.width_mm,
-        size=settings.view_size or PointOptions.size,
+        size=settings.views_px,
         threads=threads,
         quiet=True,
     )
@@ -360,7 +360,7 @@ def instance_samples(task: SampleTask) -> InstanceSamples:
     -------
     InstanceSamples
     """
-    from meshsal.points import MODEL_METHODS, PointOptions, method_points
+    from meshsal.points import MODEL_METHODS, method_points
 
     settings = task.settings
     methods = list(dict.fromkeys(task.methods))
@@ -399,8 +399,10 @@ def instance_samples(task: SampleTask) -> InstanceSamples:
 
         if not built:
             known = None if task.surveyed is None else task.surveyed.vertex_saliency
-            size = settings.view_size or PointOptions.size
-            built.append(Workpiece.of(instance_mesh(task), vertex_saliency=known, view_size=size, threads=task.threads))
+            views = settings.views_px
+            built.append(
+                Workpiece.of(instance_mesh(task), vertex_saliency=known, view_size=views, threads=task.threads)
+            )
         return built[0]
 
     if missing or want_survey or want_places:

@@ -247,9 +247,9 @@ def _instance_samples(task: SampleTask, folder=None):
     return dataclasses.replace(out, places=places if folder is None else stored(places, folder))
 
 
-def _fit_model(surveys: dict):
+def _fit_model(surveys: dict, view_size: int):
     with threadpool_limits(1):
-        return fit_replicate_model(surveys)
+        return fit_replicate_model(surveys, view_size=view_size)
 
 
 def paper_stage(objects: ObjectSet, methods, settings: Settings, runtime: Runtime) -> dict:
@@ -316,7 +316,7 @@ def instance_stage(
         return InstanceStage(samples, (), found, replicates)
     surveys = {(r, i, j): out.survey for (r, i, j), out in zip(where, done)}
     models = runtime.map(
-        _fit_model,
+        functools.partial(_fit_model, view_size=settings.views_px),
         [{(objects.names[i], j): surveys[r, i, j] for q, i, j in where if q == r} for r in replicates],
         "instances: touch models",
     )

@@ -136,7 +136,7 @@ def distinctiveness(
     return out
 
 
-def fit_replicate_model(surveys: dict, alpha: float = 1.0):
+def fit_replicate_model(surveys: dict, alpha: float = 1.0, view_size: int | None = None):
     """The touch model of one replicate, from its training instances' surveys.
 
     Parameters
@@ -145,6 +145,7 @@ def fit_replicate_model(surveys: dict, alpha: float = 1.0):
         As made by :func:`touch_survey`.  Instance 0 (the test instance) is
         ignored whatever it holds.
     alpha : ridge penalty (``meshsal.points.learned.fit_touch_model``)
+    view_size : the size the surveys' views were rendered at, recorded in the model
 
     Returns
     -------
@@ -165,4 +166,5 @@ def fit_replicate_model(surveys: dict, alpha: float = 1.0):
         labels.append(np.full(len(survey.features), label[name]))
         instances.append(np.full(len(survey.features), j))
     margin = distinctiveness(np.concatenate(descriptors), np.concatenate(labels), np.concatenate(instances))
-    return fit_touch_model(np.concatenate(features), margin, alpha, trained_on=tuple(f"{name}/{j}" for name, j in used))
+    trained_on = tuple(f"{name}/{j}" for name, j in used)
+    return fit_touch_model(np.concatenate(features), margin, alpha, trained_on=trained_on, view_size=view_size)

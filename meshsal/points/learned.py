@@ -144,6 +144,10 @@ class TouchModel:
         ``meshsal.attention.combine_maps`` (mean 1).
     trained_on : tuple of str
         What the training rows came from, as the caller labelled them.
+    view_size : int or None
+        The rendered view size (pixels) its features were measured at, when
+        known: the channel means change with it, so the model is meant for
+        views of that size.
     """
 
     mean: np.ndarray
@@ -152,6 +156,7 @@ class TouchModel:
     intercept: float
     channel_weights: dict
     trained_on: tuple = ()
+    view_size: int | None = None
 
     def predict(self, features: np.ndarray) -> np.ndarray:
         """(k,) predicted distinctiveness of (k, len(FEATURES)) features."""
@@ -188,6 +193,7 @@ class TouchModel:
             "intercept": self.intercept,
             "channel_weights": self.channel_weights,
             "trained_on": list(self.trained_on),
+            "view_size": self.view_size,
         }
         write_text(path, json.dumps(document, indent=1) + "\n")
 
@@ -208,6 +214,8 @@ class TouchModel:
             arrays = [np.asarray(document[k], dtype=np.float64) for k in ("mean", "scale", "coef")]
             weights = {str(k): float(v) for k, v in document["channel_weights"].items()}
             intercept = float(document["intercept"])
+            view_size = document.get("view_size")  # optional: a model file need not record it
+            view_size = None if view_size is None else int(view_size)
         except (KeyError, TypeError, ValueError, AttributeError) as error:
             raise ValueError(f"{path}: incomplete or malformed touch model ({error})") from None
         if (
@@ -219,10 +227,13 @@ class TouchModel:
                 f"{path}: malformed touch model (mean, scale, coef must be {len(FEATURES)} finite "
                 f"numbers, scale positive; channel_weights one per channel)"
             )
-        return TouchModel(*arrays, intercept, weights, tuple(str(t) for t in document.get("trained_on", ())))
+        trained_on = tuple(str(t) for t in document.get("trained_on", ()))
+        return TouchModel(*arrays, intercept, weights, trained_on, view_size)
 
 
-def fit_touch_model(features: np.ndarray, target: np.ndarray, alpha: float = 1.0, trained_on: tuple = ()) -> TouchModel:
+def fit_touch_model(
+    features: np.ndarray, target: np.ndarray, alpha: float = 1.0, trained_on: tuple = (), view_size: int | None = None
+) -> TouchModel:
     """Ridge regression of ``target`` on standardized ``features``; NNLS channel weights.
 
     Parameters
@@ -233,6 +244,8 @@ def fit_touch_model(features: np.ndarray, target: np.ndarray, alpha: float = 1.0
         Ridge penalty (per row: the penalty is ``alpha * m``).
     trained_on : tuple of str
         Recorded in the model.
+    view_size : int, optional
+        The view size the features were measured at, recorded in the model.
 
     Returns
     -------
@@ -275,6 +288,7 @@ def fit_touch_model(features: np.ndarray, target: np.ndarray, alpha: float = 1.0
         float(ridge.intercept_),
         dict(zip(CHANNELS, w.tolist())),
         tuple(trained_on),
+        None if view_size is None else int(view_size),
     )
 
 

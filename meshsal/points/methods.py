@@ -263,6 +263,13 @@ def points_by_method(
             raise ValueError(
                 "combination 'learned' needs channel weights (weights=, e.g. a TouchModel's channel_weights)"
             )
+    size = getattr(model, "view_size", None)
+    if size is not None and size != piece.view_size and any(method.needs_model for method in chosen.values()):
+        warnings.warn(
+            f"the touch model's features were measured on views of {size} pixels, these are {piece.view_size}: its "
+            f"channel means differ with the size (render at its size: --view-size {size}, or size={size})",
+            stacklevel=3,
+        )
     wanted = {
         _maps_key(*method.combination(m, options, model)): method.combination(m, options, model)
         for m, method in chosen.items()
