@@ -122,7 +122,7 @@ class Settings:
         object.__setattr__(self, "mismatch", tuple(sorted(set(mismatch))))
 
     @property
-    def views_px(self) -> int:
+    def rendered_view_size(self) -> int:
         """The size the instances' views are rendered at: ``view_size``, or the point methods' default."""
         from meshsal.points import PointOptions
 

@@ -192,7 +192,7 @@ def point_options(settings: Settings, seed: int, threads: int | None):
         n=settings.n_points,
         seed=seed,
         pad_width=settings.sensor.width_mm,
-        size=settings.views_px,
+        size=settings.rendered_view_size,
         threads=threads,
         quiet=True,
     )
@@ -399,10 +399,10 @@ def instance_samples(task: SampleTask) -> InstanceSamples:
 
         if not built:
             known = None if task.surveyed is None else task.surveyed.vertex_saliency
-            views = settings.views_px
-            built.append(
-                Workpiece.of(instance_mesh(task), vertex_saliency=known, view_size=views, threads=task.threads)
+            piece = Workpiece.of(
+                instance_mesh(task), vertex_saliency=known, view_size=settings.rendered_view_size, threads=task.threads
             )
+            built.append(piece)
         return built[0]
 
     if missing or want_survey or want_places:

@@ -316,7 +316,7 @@ def instance_stage(
         return InstanceStage(samples, (), found, replicates)
     surveys = {(r, i, j): out.survey for (r, i, j), out in zip(where, done)}
     models = runtime.map(
-        functools.partial(_fit_model, view_size=settings.views_px),
+        functools.partial(_fit_model, view_size=settings.rendered_view_size),
         [{(objects.names[i], j): surveys[r, i, j] for q, i, j in where if q == r} for r in replicates],
         "instances: touch models",
     )
