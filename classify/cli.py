@@ -156,7 +156,7 @@ def _experiment_options(p) -> None:
     p.add_argument("--out", default="results", type=output_folder, help="output directory (default ./results)")
     p.add_argument(
         "--cache-dir",
-        default=None,
+        default="default",
         type=_cache_folder,
         help="cache of points, imprints and rates (default $XDG_CACHE_HOME/visuotactile or "
         "./.cache/visuotactile); 'none' disables it",
@@ -311,9 +311,12 @@ def _batch(args) -> int:
     return 0
 
 
-def _cache_folder(text: str) -> str:
-    """``--cache-dir``: 'none', or a folder that can be written (checked before any work)."""
-    return text if text.lower() == "none" else str(output_folder(text))
+def _cache_folder(text: str) -> str | None:
+    """``--cache-dir`` as ``run_experiment`` takes it: None for 'none' (no cache), 'default', or a folder that can
+    be written (checked before any work)."""
+    if text.lower() == "none":
+        return None
+    return text if text == "default" else str(output_folder(text))
 
 
 def _csv_list(text: str) -> tuple:
@@ -375,7 +378,6 @@ def _experiment(args) -> int:
         result = run_real(args.real, config, out_dir=args.out, quiet=args.quiet, n_jobs=args.jobs)
         print(format_tables(result, title="Table 2 layout (real imprints)"))
         return 0
-    cache_dir = "default" if args.cache_dir is None else (None if args.cache_dir.lower() == "none" else args.cache_dir)
     with open_executor(
         workers=args.workers, scheduler=args.scheduler, n_jobs=args.jobs, preload=WORKER_MODULES, **_cluster(args)
     ) as executor:
@@ -383,7 +385,7 @@ def _experiment(args) -> int:
             args.objects,
             config,
             executor=executor,
-            cache_dir=cache_dir,
+            cache_dir=args.cache_dir,
             out_dir=args.out,
             quiet=args.quiet,
             skip_bad=args.skip_bad,
@@ -490,10 +492,9 @@ def _run(args) -> int:
         return 1
     except BrokenExecutor:
         # A local worker process ended abruptly: the system's out-of-memory killer, a crash or a kill.
-        cache = getattr(args, "cache_dir", None)
         after = (
             "nothing was cached (--cache-dir none): running the command again starts over"
-            if str(cache).lower() == "none"
+            if getattr(args, "cache_dir", "default") is None
             else "what finished is cached: run the same command again to resume"
         )
         print(

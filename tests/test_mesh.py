@@ -120,6 +120,7 @@ def test_surface_distance_of_a_square_and_a_sphere_has_the_known_answers():
     [
         ([[0, 1, 7]], None, "mesh 'tri': face index out of range (0..7 for 3 vertices)"),
         ([[0, -1, 2]], None, "mesh 'tri': face index out of range (-1..2 for 3 vertices)"),
+        (np.array([[0, 1, 2**32 + 1]]), None, f"mesh 'tri': face index out of range (0..{2**32 + 1} for 3 vertices)"),
         ([[0, 1, 2]], 2, "mesh 'tri': vertex 2 has non-finite coordinates"),
     ],
 )

@@ -87,6 +87,19 @@ class Similarity:
         return np.asarray(length, dtype=np.float64) / self.scale
 
 
+def check_face_indices(faces: np.ndarray, n_vertices: int, label: str) -> None:
+    """Refuse face indices outside ``[0, n_vertices)``: every stage indexes vertices by them, and Embree reads
+    out of range unchecked.
+
+    Raises
+    ------
+    MeshError
+        Led by ``label`` (a file, a mesh's name), with the indices' range.
+    """
+    if np.size(faces) and (faces.min() < 0 or faces.max() >= n_vertices):
+        raise MeshError(f"{label}: face index out of range ({faces.min()}..{faces.max()} for {n_vertices} vertices)")
+
+
 @dataclass(frozen=True, eq=False)
 class Mesh:
     """A triangle mesh with optional per-vertex colors and a texture.
@@ -130,15 +143,15 @@ class Mesh:
 
     def __post_init__(self):
         V = np.ascontiguousarray(self.vertices, dtype=np.float64)
-        F = np.ascontiguousarray(self.faces, dtype=np.int32)
+        given = np.asarray(self.faces)
         label = f"mesh {self.name!r}" if self.name else "mesh"
         if V.ndim != 2 or V.shape[1] != 3:
             raise MeshError(f"{label}: vertices must have shape (n, 3), got {V.shape}")
-        if F.ndim != 2 or F.shape[1] != 3:
-            raise MeshError(f"{label}: faces must have shape (m, 3), got {F.shape}")
-        # Every stage indexes vertices by faces and hands them to Embree, which reads out of range unchecked.
-        if F.size and (F.min() < 0 or F.max() >= len(V)):
-            raise MeshError(f"{label}: face index out of range ({F.min()}..{F.max()} for {len(V)} vertices)")
+        if given.ndim != 2 or given.shape[1] != 3:
+            raise MeshError(f"{label}: faces must have shape (m, 3), got {given.shape}")
+        # On the indices as given: int32 would wrap a larger one into range.
+        check_face_indices(given, len(V), label)
+        F = np.ascontiguousarray(given, dtype=np.int32)
         finite = np.isfinite(V).all(axis=1)
         if not finite.all():
             raise MeshError(f"{label}: vertex {int(np.argmin(finite))} has non-finite coordinates")

@@ -61,7 +61,7 @@ import numpy as np
 from meshsal.mesh import topology
 from meshsal.mesh.geometry import normal_defined
 from meshsal.mesh.outward import orient_outward
-from meshsal.mesh.record import Mesh, MeshError
+from meshsal.mesh.record import Mesh, MeshError, check_face_indices
 
 __all__ = ["MeshRepairWarning", "MeshReport", "repair_arrays", "repair_mesh", "ZERO_AREA", "SLIVER"]
 
@@ -276,8 +276,7 @@ def repair_arrays(vertices, faces, vertex_colors=None, uv=None, source: str = ""
         raise MeshError(f"{source}: vertices must be finite, of shape (n, 3), got shape {V.shape}")
     if len(F) == 0:
         raise MeshError(f"{source}: no faces")
-    if F.min() < 0 or F.max() >= len(V):
-        raise MeshError(f"{source}: face index out of range ({F.min()}..{F.max()} for {len(V)} vertices)")
+    check_face_indices(F, len(V), source)
     counts = {"source": source, "vertices": len(V), "faces": len(F)}
     V, F, C, counts["merged_vertices"] = _merge_duplicates(V, F, C)
     F, UV, degenerate = _drop_degenerate(V, F, UV)
