@@ -35,7 +35,7 @@ import sys
 from pathlib import Path
 
 import numpy as np
-from benchlib import DEFAULT_MESHES, arguments, run
+from benchlib import CORPUS, arguments, corpus_files, run
 
 from classify.runtime.cache import code_fingerprint, file_fingerprint
 from meshsal.util.atomic import atomic_path
@@ -43,7 +43,6 @@ from meshsal.util.pages import machine
 
 #: Counts whose first run takes less than this run ``--repeats`` times.
 _REPEAT_UNDER_S = 300
-CORPUS = DEFAULT_MESHES.parent / "corpus" / "random-objects"
 PNG = Path(__file__).resolve().parents[1] / "docs" / "benchmarks" / "bench_scaling.png"
 
 _ONE = """
@@ -70,16 +69,10 @@ print(json.dumps({"objects": n, "timings": result.timings, "usage": result.usage
 """
 
 
-def _files(count: int) -> list[str]:
-    found = sorted(p for p in CORPUS.iterdir() if p.suffix.lower() in (".obj", ".ply", ".off", ".stl"))
-    # A file that does not load is left out (--skip-bad): the table counts the objects that ran.
-    return [str(p) for p in found[:count]]
-
-
 def _measure(count: int) -> dict | None:
     """One run on the first ``count`` corpus objects, in a fresh process: its JSON row (None when it fails)."""
     done = subprocess.run(
-        [sys.executable, "-c", _ONE, json.dumps(_files(count))], capture_output=True, text=True, check=False
+        [sys.executable, "-c", _ONE, json.dumps(corpus_files(count))], capture_output=True, text=True, check=False
     )
     if done.returncode != 0:
         print(f"bench_scaling: {count} objects failed:\n{done.stderr[-2000:]}", file=sys.stderr)

@@ -22,6 +22,15 @@ import numpy as np
 from meshsal.util import pages
 
 DEFAULT_MESHES = Path(__file__).resolve().parents[2] / "shared" / "meshes"
+#: The 1,000-mesh corpus beside the public meshes.
+CORPUS = DEFAULT_MESHES.parent / "corpus" / "random-objects"
+
+
+def corpus_files(count: int) -> list[str]:
+    """The first ``count`` mesh files of :data:`CORPUS`, sorted by name (a file that does not load is left out by
+    the run that reads them: ``skip_bad``)."""
+    found = sorted(p for p in CORPUS.iterdir() if p.suffix.lower() in (".obj", ".ply", ".off", ".stl"))
+    return [str(p) for p in found[:count]]
 
 
 def machine() -> str:

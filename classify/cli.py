@@ -71,6 +71,7 @@ def _experiment_options(p) -> None:
     from classify.experiment.protocols import PROTOCOL_REGISTRY, PROTOCOLS
     from classify.policies import POLICIES
     from classify.recognizers.classifiers import CLASSIFIERS
+    from classify.recognizers.place import SCREENINGS
     from meshsal.points import POINT_METHODS
 
     p.add_argument(
@@ -181,6 +182,14 @@ def _experiment_options(p) -> None:
         type=int,
         default=8,
         help="place-aware recognizer: simulated touches per place and training instance in its codebooks",
+    )
+    p.add_argument(
+        "--screening",
+        choices=SCREENINGS,
+        default="touch",
+        help="place-aware recognizer past 16 objects: score a touch in full under the 16 objects its touch alone "
+        "puts nearest ('touch', the default), or under every object by its place, registering onto the 8 most "
+        "likely ('place': costs a pass over every object per touch)",
     )
     p.add_argument(
         "--mismatch",
@@ -373,6 +382,7 @@ def _experiment(args) -> int:
         policies=args.policies,
         replicates=FULL_REPLICATES if args.full else replicates,
         control=args.control,
+        params={} if args.screening == "touch" else {"place": {"screening": args.screening}},
     )
     if args.real:
         result = run_real(args.real, config, out_dir=args.out, quiet=args.quiet, n_jobs=args.jobs)

@@ -210,3 +210,29 @@ def test_a_renamed_option_keeps_its_old_spelling_for_a_release(capsys, argv, old
 
     assert getattr(build_parser().parse_args(argv), dest) == value
     assert f"visuotactile {argv[0]}: warning: {old} is deprecated and goes in 0.3: use {new}" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("screening, params", [(None, {}), ("touch", {}), ("place", {"place": {"screening": "place"}})])
+def test_experiment_passes_the_place_aware_screening_to_the_recognizer(monkeypatch, tmp_path, screening, params):
+    import classify.experiment
+    from classify.cli import main
+
+    seen = []
+
+    def stop(objects, config, **_):
+        seen.append(config)
+        raise SystemExit(7)
+
+    monkeypatch.setattr(classify.experiment, "run_experiment", stop)
+    argv = ["experiment", "--objects", "cup,hand", "--jobs", "1", "--out", str(tmp_path / "out"), "--quiet"]
+    with pytest.raises(SystemExit) as exit_:
+        main(argv + ([] if screening is None else ["--screening", screening]))
+    assert exit_.value.code == 7 and seen[0].params == params
+
+
+def test_experiment_refuses_an_unknown_screening(capsys):
+    from classify.cli import build_parser
+
+    with pytest.raises(SystemExit):
+        build_parser(deferred=True).parse_args(["experiment", "--screening", "sight"])
+    assert "argument --screening: invalid choice: 'sight'" in capsys.readouterr().err

@@ -1,5 +1,7 @@
 """Touch by touch: the policies see what they may, choose where objects differ, and places carry across instances."""
 
+import warnings
+
 import numpy as np
 import pytest
 import shapes
@@ -120,6 +122,28 @@ def test_expected_entropy_is_the_belief_entropy_where_no_hypothesis_knows_the_pl
     weights[:, 2] = 0.0  # place 2: nothing known
     h = expected_entropy(np.array([0.5, 0.5]), Forecast(posteriors, weights))
     assert h[0] < 0.1 and h[1] == pytest.approx(np.log(2)) and h[2] == pytest.approx(np.log(2))
+
+
+def test_expected_entropy_takes_posteriors_and_beliefs_rounded_to_zero_at_their_limit():
+    # Sharp posteriors underflow to exactly 0: 0 log 0 is 0, as the limit of a posterior that shrinks to it.
+    # (J=3, P=2, S=1, C=3): place 0 tells every object apart, place 1 little.
+    sure = np.stack([np.stack([np.eye(3)[j], np.where(np.arange(3) == j, 0.4, 0.3)])[:, None] for j in range(3)])
+    tiny = np.where(sure > 0, sure, 1e-300)
+    weights = np.ones((3, 2, 1))
+    belief = np.array([0.5, 0.5, 0.0])
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        h = expected_entropy(belief, Forecast(sure, weights))
+    np.testing.assert_allclose(h, expected_entropy(belief, Forecast(tiny, weights)), rtol=1e-12, atol=1e-12)
+    assert h[0] == pytest.approx(0.0) and h[1] > 0.6
+    # A touch whose posterior shares no object with the belief leaves the belief as it is: here sure of object 0,
+    # a touch that hypothesis 0 forecasts as surely object 1.
+    disjoint = sure.copy()
+    disjoint[0, 0, 0] = [0.0, 1.0, 0.0]
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        h = expected_entropy(np.array([1.0, 0.0, 0.0]), Forecast(disjoint, weights))
+    assert np.isfinite(h).all() and h[0] == 0.0
 
 
 def test_the_stopping_rule_stops_at_the_first_touch_whose_belief_reaches_the_level():

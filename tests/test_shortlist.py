@@ -1,4 +1,5 @@
-"""Shortlists: past ``shortlist`` objects a touch is scored in full only under its nearest objects.
+"""Shortlists: past ``shortlist`` objects a touch is scored in full only under its nearest objects, or under every
+object with its place located cheaply (``screening="place"``).
 
 Built on synthetic codebooks: ten objects whose places lie at the same
 positions in another order, each place with a descriptor of its own.
@@ -23,6 +24,7 @@ from classify.policies import (
     signatures,
 )
 from classify.policies.policy import InfoGainPolicy
+from classify.recognizers.place import PlaceAware
 from classify.recognizers.shortlist import FreeStack, SparseRows, nearest_classes
 from meshsal.points.learned import FEATURES
 
@@ -202,8 +204,6 @@ def test_registrations_per_test_instance_stay_bounded_past_the_shortlist(fitted)
 
 
 def test_exact_places_is_a_non_negative_integer():
-    from classify.recognizers.place import PlaceAware
-
     X = np.random.default_rng(0).normal(size=(8, 3))
     with pytest.raises(ValueError, match="exact_places must be a non-negative integer, got -1"):
         PlaceAware(exact_places=-1).fit(
@@ -458,3 +458,111 @@ def test_knn_shortlist_screens_in_each_touchs_object_among_many():
     np.testing.assert_array_equal(best, truth)
     np.testing.assert_array_equal(best, np.argmax(model.predict_proba(Q), axis=1))
     assert np.all(values.sum(axis=1) <= 1.0 + 1e-12)
+
+
+# -- screening by place ------------------------------------------------------------------------------------
+
+
+def _alike_felt(seed=7):
+    """Ten objects of one shape that feel alike, place-free: each holds the same descriptors at its places, in
+    another order.  A touch alone cannot tell them apart; a touch at a known place can."""
+    rng = np.random.default_rng(seed)
+    positions = rng.normal(size=(PLACES, 3)) * 50.0
+    base = rng.normal(size=(PLACES, 42)) * 2.0
+    training, feels = {}, {}
+    for j in range(OBJECTS):
+        feels[j] = base[rng.permutation(PLACES)]
+        for i in (1, 2):
+            book = (feels[j][:, None] + 0.5 * rng.normal(size=(PLACES, 6, 42))).astype(np.float32)
+            imprints = rng.random((1, PLACES, 16, 16)).astype(np.float32)
+            training[f"object{j:02d}", i] = PlaceSample(_places(positions, rng), imprints, book)
+    return training, feels
+
+
+@pytest.fixture(scope="module")
+def alike():
+    training, feels = _alike_felt()
+    by = {s: fit_place_knowledge(training, {"place": {"shortlist": 3, "screening": s}}) for s in ("touch", "place")}
+    return training, feels, by
+
+
+def _touches(feels, rng):
+    """Four touches of each object at its places 8-11, and their objects."""
+    X = np.concatenate([feels[j][8:12] + 0.5 * rng.normal(size=(4, 42)) for j in range(OBJECTS)])
+    truth = np.repeat(np.arange(OBJECTS), 4)
+    return X, truth
+
+
+def test_screening_by_place_keeps_the_object_a_touch_alone_drops(alike):
+    training, feels, by = alike
+    X, truth = _touches(feels, np.random.default_rng(8))
+    places = training["object00", 2].places  # every object has this shape
+    rows = np.arange(len(X))
+    G = np.tile(signatures(places)[8:12], (OBJECTS, 1))
+    right = {}
+    for screening, knowledge in by.items():
+        ll = knowledge.model.log_likelihood(X, G)
+        right[screening] = np.mean(ll.argmax(axis=1) == truth)
+        # the true object's rank among the scores (0: first)
+        if screening == "touch":
+            d2, _ = knowledge.model.free_.nearest(knowledge.model._standardized(X), np.full(len(X), -1))
+            dropped = np.mean((d2 < d2[rows, truth][:, None]).sum(axis=1) >= 3)
+    assert dropped > 0.5  # the stimulus: a touch alone leaves the true object off its shortlist of three
+    assert right["touch"] < 0.5 and right["place"] > 0.8
+
+
+def test_screening_by_place_scores_every_object_and_registers_the_most_likely(alike):
+    training, feels, by = alike
+    knowledge = by["place"]
+    model = copy.copy(knowledge.model)
+    model.exact_places = 2
+    X, truth = _touches(feels, np.random.default_rng(9))
+    X, truth = X[::4], truth[::4]  # one touch of each object
+    places = training["object00", 2].places
+    own = np.tile(signatures(places)[8:9], (len(X), 1))
+    # Registration is stood in for by a place a little off the instance's own: what the two-stage choice reads.
+    moved = own + 0.05
+    asked = []
+
+    def where(c, rows, exact):
+        asked.append((c, rows.copy(), exact.copy()))
+        return np.where(exact[:, None], moved[rows], own[rows])
+
+    ll = model.log_likelihood(X, where)
+    first = model.log_likelihood(X, own)  # every object at the instance's own place
+    again = model.log_likelihood(X, moved)
+    likely = np.argsort(-first, axis=1, kind="stable")[:, :2]
+    for r in range(len(X)):
+        located = {c for c, rows, exact in asked if r in rows and not exact[np.flatnonzero(rows == r)[0]]}
+        registered = {c for c, rows, exact in asked if r in rows and exact[np.flatnonzero(rows == r)[0]]}
+        assert located == set(range(OBJECTS)) and registered == set(likely[r].tolist())
+        for c in range(OBJECTS):
+            want = again[r, c] if c in registered else first[r, c]
+            np.testing.assert_allclose(ll[r, c], want, rtol=1e-9, atol=1e-9)
+    assert np.mean(ll.argmax(axis=1) == truth) > 0.9
+
+
+def test_screening_by_place_fits_on_every_object_and_is_the_full_model_up_to_the_shortlist(alike, fitted):
+    training, feels, by = alike
+    every = fit_place_knowledge(_alike_felt()[0], {"place": {"shortlist": 16}}).model
+    fitted_by_place = by["place"].model
+    # Past the shortlist the fit scores its held-out touches under every object: the full model's choice.
+    for name in ("bandwidth_", "mixture_", "temperature_", "fit_loss_"):
+        assert getattr(fitted_by_place, name) == getattr(every, name)
+    assert by["touch"].model.fit_loss_ != every.fit_loss_
+    # Up to the shortlist the screening changes nothing, bit for bit.
+    training, _, full, _ = fitted
+    same = fit_place_knowledge(training, {"place": {"shortlist": 16, "screening": "place"}})
+    X = training["object03", 2].codebook[8:12, 0]
+    G = signatures(training["object03", 2].places)[8:12]
+    np.testing.assert_array_equal(same.model.log_likelihood(X, G), full.model.log_likelihood(X, G))
+    assert same.model.fit_loss_ == full.model.fit_loss_
+
+
+def test_screening_is_touch_or_place():
+    X = np.random.default_rng(0).normal(size=(8, 3))
+    with pytest.raises(ValueError, match=r"screening must be one of \('touch', 'place'\), got 'sight'"):
+        PlaceAware(screening="sight").fit(
+            X, np.repeat([0, 1], 4), signatures=np.zeros((8, 2)), instances=np.tile([1, 2], 4), places=np.zeros(8, int)
+        )
+    assert PlaceAware().get_params()["screening"] == "touch"

@@ -221,11 +221,14 @@ class Forecast:
     posteriors: np.ndarray
     weights: np.ndarray
     classes: np.ndarray | None = None
-    #: ``posteriors * log(posteriors)``: the part of an entropy that does not depend on the belief (derived).
+    #: ``posteriors * log(posteriors)``, 0 where a posterior is 0 (its limit): the part of an entropy that does not
+    #: depend on the belief (derived).
     plogp: np.ndarray = None
 
     def __post_init__(self):
-        object.__setattr__(self, "plogp", self.posteriors * np.log(self.posteriors))
+        p = self.posteriors
+        with np.errstate(divide="ignore", invalid="ignore"):
+            object.__setattr__(self, "plogp", np.where(p > 0, p * np.log(p), 0.0))
 
 
 @dataclass(frozen=True, eq=False)

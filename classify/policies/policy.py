@@ -223,7 +223,10 @@ def expected_entropy(belief: np.ndarray, forecast: Forecast, places: np.ndarray 
     blogb = np.where(b > 0, b * np.log(np.where(b > 0, b, 1.0)), 0.0)
     P2, Q2 = P.reshape(-1, C), Q.reshape(-1, C)
     Z = P2 @ b.T  # (J m S, B)
-    h = np.log(Z) - (Q2 @ b.T + P2 @ blogb.T) / Z
+    with np.errstate(divide="ignore", invalid="ignore"):
+        h = np.log(Z) - (Q2 @ b.T + P2 @ blogb.T) / Z
+    # A touch whose posterior shares no object with the belief (both rounded to zero elsewhere) leaves it as it is.
+    h = np.where(Z > 0, h, -blogb.sum(axis=1)[None, :])
     h = (W.reshape(-1, 1) * h).reshape(J, m, S, -1).sum(axis=2)  # (J, m, B)
     h += (1.0 - W.sum(axis=2))[:, :, None] * (-blogb.sum(axis=1))[None, None, :]
     out = np.einsum("bj,jmb->bm", b, h)

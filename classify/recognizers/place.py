@@ -58,7 +58,7 @@ from classify.recognizers.banks import (
 )
 from classify.recognizers.shortlist import EXACT_PLACES, SHORTLIST, FreeStack, SparseRows, nearest_classes, spread
 
-__all__ = ["PlaceAware", "describe_touches"]
+__all__ = ["SCREENINGS", "PlaceAware", "describe_touches"]
 
 _NEG = -np.inf
 #: Temperatures tried by default: 0.25 to 64, evenly on a log scale.
@@ -73,6 +73,8 @@ _CHUNK = 1 << 10
 _HELD_OUT = 1 << 25
 #: Bytes of each (touches, objects) array the forecast table holds at once (it holds several).
 _FORECAST = 1 << 23
+#: How a touch is scored past the shortlist (``PlaceAware(screening=...)``).
+SCREENINGS = ("touch", "place")
 
 
 def describe_touches(X, copy: bool = True) -> np.ndarray:
@@ -161,6 +163,18 @@ class PlaceAware(ClassifierMixin, BaseEstimator):
         ``signatures`` is a function; under the rest of the shortlist it may
         be located more cheaply (``PlaceKnowledge`` then uses the touched
         instance's own landmarks instead of registering it onto the object).
+    screening : {"touch", "place"}
+        How a touch is scored past the shortlist (more objects than
+        ``shortlist``).  ``"touch"``: by the touch alone; the ``shortlist``
+        objects whose place-free samples come nearest are scored in full,
+        every other object by a lower bound.  ``"place"``: every object is
+        scored in full, the touch's place located by the touched instance's
+        own landmarks; the ``exact_places`` objects most likely so are scored
+        again with the place located by registration (when ``signatures`` is
+        a function).  It costs a pass over every object per touch, and keeps
+        the true object where a touch alone would drop it.  The fit then
+        scores its held-out touches under every object, and the forecast
+        tables stay shortlisted by the touch alone.
     fit_objects : int
         Objects whose held-out instances score the fit's grid (evenly spread
         over the objects when there are more).
@@ -202,6 +216,7 @@ class PlaceAware(ClassifierMixin, BaseEstimator):
         whiten=True,
         shortlist=SHORTLIST,
         exact_places=EXACT_PLACES,
+        screening="touch",
         fit_objects=64,
         random_state=0,
     ):
@@ -217,6 +232,7 @@ class PlaceAware(ClassifierMixin, BaseEstimator):
         self.whiten = whiten
         self.shortlist = shortlist
         self.exact_places = exact_places
+        self.screening = screening
         self.fit_objects = fit_objects
         self.random_state = random_state
 
@@ -273,6 +289,8 @@ class PlaceAware(ClassifierMixin, BaseEstimator):
             )
         if not (0 <= self.exact_places == int(self.exact_places)):
             raise ValueError(f"exact_places must be a non-negative integer, got {self.exact_places}")
+        if self.screening not in SCREENINGS:
+            raise ValueError(f"screening must be one of {SCREENINGS}, got {self.screening!r}")
         self.mean_ = Z.mean(axis=0)
         self.scale_ = np.maximum(Z.std(axis=0), 1e-9 * max(float(Z.std()), 1e-300))
         if session is None:
@@ -375,8 +393,9 @@ class PlaceAware(ClassifierMixin, BaseEstimator):
             span = slice(A, B)
             if C <= self.shortlist:
                 every = self._log_terms(Zs[span], sigs[span], insts[span], widths, chunk=_CHUNK)
-            else:  # one width at a time, each reading the same screening
-                every, screen = None, self.free_.nearest(Zs[span], insts[span])
+            else:  # one width at a time, each reading the same screening (if any)
+                every = None
+                screen = self.free_.nearest(Zs[span], insts[span]) if self.screening == "touch" else None
             done = {k: np.flatnonzero((ends[k] >= A) & (ends[k] < B)) for k in counts}
             next_lo = first[B - 1] if until[B - 1] >= B else B
             for a, h in enumerate(widths):
@@ -429,14 +448,16 @@ class PlaceAware(ClassifierMixin, BaseEstimator):
         logw = -0.5 * (dist**2 - dist[:, :1] ** 2) / bank.match_width**2
         return idx, logw - lse(logw, axis=1, keepdims=True)
 
-    def _log_terms(self, Z, G, exclude, widths, chunk: int = 1024, screen=None):
+    def _log_terms(self, Z, G, exclude, widths, chunk: int = 1024, screen=None, shortlisted=None):
         """Place and place-free log-likelihood terms, each (len(widths), n, C), of touches Z at places G.
 
         ``G`` is (n, L), the same place under every object, (n, C, L), or a
         function ``G(c, rows, exact)`` giving rows' places under object c as
         (len(rows), L); ``exact`` is (len(rows),) bool, whether c is among the
-        row's ``exact_places`` nearest objects by the screening, or None when
-        every object is scored.  Past the shortlist an object off a touch's shortlist has no place term
+        row's ``exact_places`` nearest objects by the screening (all False
+        past the shortlist without one: the places located cheaply), or None when
+        every object is scored with its place located in full.  Past the shortlist, when ``shortlisted``
+        (default: ``screening == "touch"``), an object off a touch's shortlist has no place term
         (-inf) and the place-free term's nearest kernel alone: lower bounds.
         The third value is the (n, C) bool shortlist then, else None.
         ``screen`` is ``self.free_.nearest(Z, exclude)`` when already at hand.
@@ -446,7 +467,10 @@ class PlaceAware(ClassifierMixin, BaseEstimator):
         free = np.full((len(widths), n, C), _NEG)
         inv = 0.5 / np.asarray(widths, np.float64) ** 2
         member = None
-        if C > self.shortlist:
+        past = C > self.shortlist
+        if shortlisted is None:
+            shortlisted = self.screening == "touch"
+        if past and shortlisted:
             screened, count = self.free_.nearest(Z, exclude) if screen is None else screen
             member = np.zeros((n, C), bool)
             # An object is among a row's exact_places nearest when fewer objects lie strictly nearer: when it lies
@@ -477,32 +501,41 @@ class PlaceAware(ClassifierMixin, BaseEstimator):
                     exact = None
                     if member is not None:
                         exact = screened[rows, c] <= limit[rows]
+                    elif past:
+                        exact = np.zeros(rows.size, bool)
                     g = G(c, rows, exact)
                 else:
                     g = G[rows] if G.ndim == 2 else G[rows, c]
-                idx, logw = self._match(bank, g)
-                d2 = sample_d2(bank, z, idx, ex)  # (m, K, S), inf where left out
-                fd2 = np.maximum(np.einsum("md,md->m", z, z)[:, None] + bank.free_sq[None] - 2.0 * z @ bank.free.T, 0.0)
-                fd2[bank.free_instances[None, :] == ex[:, None]] = np.inf
-                # Log-means of kernels over each entry's samples: the nearest sample sets the scale of the sum.
-                near, fnear = d2.min(axis=2, keepdims=True), fd2.min(axis=1, keepdims=True)
-                count, fcount = np.isfinite(d2).sum(axis=2), np.isfinite(fd2).sum(axis=1)
-                valid = count > 0
-                logw = np.where(valid, logw, _NEG)
-                top = logw.max(axis=1, keepdims=True)
-                with np.errstate(divide="ignore", invalid="ignore"):
-                    norm = np.log(np.exp(logw - top).sum(axis=1)) + top[:, 0]
-                    rel, frel = np.where(valid[..., None], d2 - near, np.inf), fd2 - fnear
-                    logcount, flogcount = np.log(np.maximum(count, 1)), np.log(np.maximum(fcount, 1))
-                    for b, s in enumerate(inv):
-                        lm = np.log(np.exp(-s * rel).sum(axis=2)) - s * near[..., 0] - logcount
-                        lm = np.where(valid, lm + logw, _NEG)
-                        peak = lm.max(axis=1, keepdims=True)
-                        place[b, rows, c] = np.log(np.exp(lm - peak).sum(axis=1)) + peak[:, 0] - norm
-                        free[b, rows, c] = np.log(np.exp(-s * frel).sum(axis=1)) - s * fnear[:, 0] - flogcount
+                place[:, rows, c], free[:, rows, c] = self._object_terms(bank, z, g, ex, inv)
         # A touch whose every matched entry is left out leans on the place-free term alone.
         place[np.isnan(place)] = _NEG
         return place, free, member
+
+    def _object_terms(self, bank: Bank, z, g, ex, inv):
+        """Place and place-free log terms, each (len(inv), m), of touches z (m, d) at places g (m, L) under one
+        object's ``bank``, each touch leaving out the instance in ``ex`` (m,); ``inv`` is 1 / (2 width^2) per width."""
+        idx, logw = self._match(bank, g)
+        d2 = sample_d2(bank, z, idx, ex)  # (m, K, S), inf where left out
+        fd2 = np.maximum(np.einsum("md,md->m", z, z)[:, None] + bank.free_sq[None] - 2.0 * z @ bank.free.T, 0.0)
+        fd2[bank.free_instances[None, :] == ex[:, None]] = np.inf
+        # Log-means of kernels over each entry's samples: the nearest sample sets the scale of the sum.
+        near, fnear = d2.min(axis=2, keepdims=True), fd2.min(axis=1, keepdims=True)
+        count, fcount = np.isfinite(d2).sum(axis=2), np.isfinite(fd2).sum(axis=1)
+        valid = count > 0
+        logw = np.where(valid, logw, _NEG)
+        top = logw.max(axis=1, keepdims=True)
+        place, free = np.empty((len(inv), len(z))), np.empty((len(inv), len(z)))
+        with np.errstate(divide="ignore", invalid="ignore"):
+            norm = np.log(np.exp(logw - top).sum(axis=1)) + top[:, 0]
+            rel, frel = np.where(valid[..., None], d2 - near, np.inf), fd2 - fnear
+            logcount, flogcount = np.log(np.maximum(count, 1)), np.log(np.maximum(fcount, 1))
+            for b, s in enumerate(inv):
+                lm = np.log(np.exp(-s * rel).sum(axis=2)) - s * near[..., 0] - logcount
+                lm = np.where(valid, lm + logw, _NEG)
+                peak = lm.max(axis=1, keepdims=True)
+                place[b] = np.log(np.exp(lm - peak).sum(axis=1)) + peak[:, 0] - norm
+                free[b] = np.log(np.exp(-s * frel).sum(axis=1)) - s * fnear[:, 0] - flogcount
+        return place, free
 
     def log_likelihood(self, X, signatures, exclude=None) -> np.ndarray:
         """Untempered log-likelihood of each touch under each object, (n, C) float64 (up to one constant).
@@ -527,12 +560,31 @@ class PlaceAware(ClassifierMixin, BaseEstimator):
         ex = np.full(len(Z), -1, np.int64) if exclude is None else np.asarray(exclude, np.int64)
         return self._mixed(Z, G, ex)[0]
 
-    def _mixed(self, Z, G, exclude, chunk: int = _CHUNK):
+    def _mixed(self, Z, G, exclude, chunk: int = _CHUNK, shortlisted=None):
         """The fitted mixture of place and place-free terms of standardized touches Z, (n, C), and
-        ``_log_terms``' shortlist (n, C) bool or None."""
-        place, free, member = self._log_terms(Z, G, exclude, [self.bandwidth_], chunk=chunk)
+        ``_log_terms``' shortlist (n, C) bool or None.
+
+        Past the shortlist without one (``screening="place"``) and with
+        places given as a function, each touch's ``exact_places`` most likely
+        objects are scored again, the place located in full.
+        """
+        place, free, member = self._log_terms(Z, G, exclude, [self.bandwidth_], chunk=chunk, shortlisted=shortlisted)
         w = self.mixture_
-        return np.logaddexp(np.log1p(-w) + place[0], np.log(w) + free[0]), member
+        ll = np.logaddexp(np.log1p(-w) + place[0], np.log(w) + free[0])
+        C, E = ll.shape[1], min(int(self.exact_places), ll.shape[1])
+        if member is None and callable(G) and C > self.shortlist and E > 0:
+            inv = np.array([0.5 / self.bandwidth_**2])
+            # Ties at the E-th value are broken by the object's index, so the choice does not depend on the order
+            # of the rows.
+            likely = np.sort(np.argsort(-ll, axis=1, kind="stable")[:, :E], axis=1)
+            for c in np.unique(likely):
+                rows = np.flatnonzero((likely == c).any(axis=1))
+                g = G(c, rows, np.ones(rows.size, bool))
+                p, f = self._object_terms(self.banks_[c], Z[rows], g, exclude[rows], inv)
+                with np.errstate(invalid="ignore"):
+                    p[np.isnan(p)] = _NEG
+                ll[rows, c] = np.logaddexp(np.log1p(-w) + p[0], np.log(w) + f[0])
+        return ll, member
 
     def predict_proba(self, X, signatures) -> np.ndarray:
         """(n, C) single-touch posteriors: each touch's tempered likelihoods, normalized.
@@ -628,7 +680,9 @@ class PlaceAware(ClassifierMixin, BaseEstimator):
             ex = np.concatenate([bank.instances[e, k] for bank, e, _, k in banks])
             # Past the shortlist an object scores only the rows that shortlist it, so a whole group is one chunk;
             # up to it every object scores every row of a chunk.
-            ll, member = self._mixed(Z, G, ex, chunk=max(len(Z), 1) if C > self.shortlist else _CHUNK)
+            ll, member = self._mixed(
+                Z, G, ex, chunk=max(len(Z), 1) if C > self.shortlist else _CHUNK, shortlisted=C > self.shortlist
+            )
             ll /= self.temperature_
             post = np.exp(ll - lse(ll, axis=1, keepdims=True))
             if member is None:

@@ -1,0 +1,113 @@
+"""Benchmark: what the place-aware recognizer's shortlist costs past 16 objects, screened by touch or by place.
+
+Past its ``shortlist`` (16 objects) the place-aware recognizer scores a
+touch in full only under some objects (``PlaceAware(screening=...)``):
+
+* ``touch`` (the default): the 16 objects whose place-free samples come
+  nearest the touch; every other object gets a lower bound;
+* ``place``: every object, the touch's place located by the touched
+  instance's own landmarks; the 8 most likely objects again, the place
+  located by registration.
+
+For the first ``--objects`` corpus objects (``../shared/corpus/random-objects``,
+sorted by name, a file that does not load left out), the settings of
+``bench_scaling.py`` (2 replicates of the instance protocol, uniform and
+mesh-saliency points, kNN and the place-aware recognizer, ``info_gain``, 5
+points per instance, 64 px views, seed 0) run under each screening, each
+with the shuffled control beside it (each test instance given another
+object's imprints, place for place: chance is 1 / objects).  The four runs
+share one cache, so the instances are computed once, by the first run; each
+run is a fresh process.  The table gives the recognition rate after 1 to 5
+touches with its interval, and the place-aware stage's wall time, CPU time
+and peak memory (all processes); kNN does not depend on the screening and
+is given once.
+
+    python -m meshsal.util.reproducible .venv/bin/python benchmarks/bench_screening.py [--objects 256]
+"""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+import tempfile
+
+from benchlib import CORPUS, arguments, corpus_files, run
+
+from classify.recognizers.place import SCREENINGS
+
+_ONE = """
+import json, sys, warnings
+from classify.experiment import ExperimentConfig, Settings, run_experiment
+files, screening, control, cache = json.loads(sys.argv[1])
+config = ExperimentConfig(
+    methods=("mesh_saliency", "uniform"), protocols=("instance",), classifiers=("knn", "place"),
+    features="polar", policies=("info_gain",), replicates=2, control=control,
+    settings=Settings(n_points=5, view_size=64, seed=0), params={"place": {"screening": screening}},
+)
+with warnings.catch_warnings():
+    warnings.simplefilter("ignore")
+    result = run_experiment(files, config, cache_dir=cache, quiet=True, skip_bad=True)
+n = len(result.object_names)
+rates = {}
+for method, protocol, clf in (("mesh_saliency", "instance", "knn"), ("mesh_saliency", "instance", "place"),
+                              ("info_gain", "sequential", "place")):
+    rates[f"{method}/{clf}"] = [
+        [c.mean, c.ci_low, c.ci_high] for c in (result.cell(method, protocol, clf, n, False, k) for k in range(1, 6))
+    ]
+print(json.dumps({"objects": n, "usage": result.usage, "rates": rates}))
+"""
+
+
+def _arm(files: list, screening: str, control, cache: str) -> dict:
+    """One run in a fresh process: its JSON row (SystemExit naming the arm when it fails)."""
+    done = subprocess.run(
+        [sys.executable, "-c", _ONE, json.dumps([files, screening, control, cache])],
+        capture_output=True,
+        text=True,
+        check=False,
+    )
+    if done.returncode != 0:
+        raise SystemExit(f"bench_screening: screening {screening}, control {control} failed:\n{done.stderr[-2000:]}")
+    return json.loads(done.stdout.strip().splitlines()[-1])
+
+
+def _rates(values) -> str:
+    return " | ".join(f"{m:.1f} [{lo:.1f}, {hi:.1f}]" for m, lo, hi in values)
+
+
+def main() -> int:
+    parser = arguments(__doc__, 1, meshes_dir=False)
+    parser.add_argument("--objects", type=int, default=256, help="the first N corpus files (default 256)")
+    args = parser.parse_args()
+    if not CORPUS.is_dir():
+        print(f"bench_screening: error: {CORPUS} not found", file=sys.stderr)
+        return 1
+    files = corpus_files(args.objects)
+    rows = {}
+    with tempfile.TemporaryDirectory(prefix="bench_screening-") as cache:
+        for screening in SCREENINGS:
+            for control in (None, "shuffled"):
+                rows[screening, control] = _arm(files, screening, control, cache)
+                print(f"screening {screening}, control {control}: done", file=sys.stderr)
+    n = rows["touch", None]["objects"]
+    print(f"{n} corpus objects, 2 replicates, seed 0; chance {100 / n:.1f} %\n")
+    print("| recognizer | touches: 1 | 2 | 3 | 4 | 5 |")
+    print("|---|:---:|:---:|:---:|:---:|:---:|")
+    print(f"| kNN, mesh saliency's plan | {_rates(rows['touch', None]['rates']['mesh_saliency/knn'])} |")
+    for screening in SCREENINGS:
+        for control in (None, "shuffled"):
+            r = rows[screening, control]["rates"]
+            arm = f"screening `{screening}`" + (", shuffled control" if control else "")
+            print(f"| place-aware, mesh saliency's plan, {arm} | {_rates(r['mesh_saliency/place'])} |")
+            print(f"| place-aware, `info_gain`, {arm} | {_rates(r['info_gain/place'])} |")
+    print("\n| screening | control | place-aware stage wall (s) | CPU (s) | peak memory, all processes (MB) |")
+    print("|---|---|---:|---:|---:|")
+    for (screening, control), row in rows.items():
+        u = row["usage"]["place"]
+        print(f"| {screening} | {control or 'none'} | {u['wall_s']:.1f} | {u['cpu_s']:.1f} | {u['peak_mb']:.0f} |")
+    return 0
+
+
+if __name__ == "__main__":
+    run("bench_screening", "The place-aware recognizer past its shortlist: screened by touch or by place", main)
