@@ -581,8 +581,7 @@ class PlaceAware(ClassifierMixin, BaseEstimator):
                 rows = np.flatnonzero((likely == c).any(axis=1))
                 g = G(c, rows, np.ones(rows.size, bool))
                 p, f = self._object_terms(self.banks_[c], Z[rows], g, exclude[rows], inv)
-                with np.errstate(invalid="ignore"):
-                    p[np.isnan(p)] = _NEG
+                p[np.isnan(p)] = _NEG  # every matched entry left out: the place-free term alone, as in _log_terms
                 ll[rows, c] = np.logaddexp(np.log1p(-w) + p[0], np.log(w) + f[0])
         return ll, member
 
