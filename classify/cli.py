@@ -72,6 +72,7 @@ def _experiment_options(p) -> None:
     from classify.policies import POLICIES
     from classify.recognizers.classifiers import CLASSIFIERS
     from classify.recognizers.place import SCREENINGS
+    from classify.recognizers.shortlist import EXACT_PLACES, SHORTLIST
     from meshsal.points import POINT_METHODS
 
     p.add_argument(
@@ -187,9 +188,9 @@ def _experiment_options(p) -> None:
         "--screening",
         choices=SCREENINGS,
         default="touch",
-        help="place-aware recognizer past 16 objects: score a touch in full under the 16 objects its touch alone "
-        "puts nearest ('touch', the default), or under every object by its place, registering onto the 8 most "
-        "likely ('place': costs a pass over every object per touch)",
+        help=f"place-aware recognizer past {SHORTLIST} objects: score a touch in full under the {SHORTLIST} objects "
+        f"its touch alone puts nearest ('touch', the default), or under every object by its place, registering onto "
+        f"the {EXACT_PLACES} most likely ('place': costs a pass over every object per touch)",
     )
     p.add_argument(
         "--mismatch",

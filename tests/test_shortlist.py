@@ -543,12 +543,11 @@ def test_screening_by_place_scores_every_object_and_registers_the_most_likely(al
 
 
 def test_screening_by_place_fits_on_every_object_and_is_the_full_model_up_to_the_shortlist(alike, fitted):
-    training, feels, by = alike
-    every = fit_place_knowledge(_alike_felt()[0], {"place": {"shortlist": 16}}).model
-    fitted_by_place = by["place"].model
+    alike_training, _, by = alike
+    every = fit_place_knowledge(alike_training, {"place": {"shortlist": 16}}).model
     # Past the shortlist the fit scores its held-out touches under every object: the full model's choice.
     for name in ("bandwidth_", "mixture_", "temperature_", "fit_loss_"):
-        assert getattr(fitted_by_place, name) == getattr(every, name)
+        assert getattr(by["place"].model, name) == getattr(every, name)
     assert by["touch"].model.fit_loss_ != every.fit_loss_
     # Up to the shortlist the screening changes nothing, bit for bit.
     training, _, full, _ = fitted

@@ -507,8 +507,6 @@ class PlaceAware(ClassifierMixin, BaseEstimator):
                 else:
                     g = G[rows] if G.ndim == 2 else G[rows, c]
                 place[:, rows, c], free[:, rows, c] = self._object_terms(bank, z, g, ex, inv)
-        # A touch whose every matched entry is left out leans on the place-free term alone.
-        place[np.isnan(place)] = _NEG
         return place, free, member
 
     def _object_terms(self, bank: Bank, z, g, ex, inv):
@@ -535,6 +533,8 @@ class PlaceAware(ClassifierMixin, BaseEstimator):
                 peak = lm.max(axis=1, keepdims=True)
                 place[b] = np.log(np.exp(lm - peak).sum(axis=1)) + peak[:, 0] - norm
                 free[b] = np.log(np.exp(-s * frel).sum(axis=1)) - s * fnear[:, 0] - flogcount
+        # A touch whose every matched entry is left out leans on the place-free term alone.
+        place[np.isnan(place)] = _NEG
         return place, free
 
     def log_likelihood(self, X, signatures, exclude=None) -> np.ndarray:
@@ -570,7 +570,11 @@ class PlaceAware(ClassifierMixin, BaseEstimator):
         """
         place, free, member = self._log_terms(Z, G, exclude, [self.bandwidth_], chunk=chunk, shortlisted=shortlisted)
         w = self.mixture_
-        ll = np.logaddexp(np.log1p(-w) + place[0], np.log(w) + free[0])
+
+        def mixed(place, free):
+            return np.logaddexp(np.log1p(-w) + place, np.log(w) + free)
+
+        ll = mixed(place[0], free[0])
         C, E = ll.shape[1], min(int(self.exact_places), ll.shape[1])
         if member is None and callable(G) and C > self.shortlist and E > 0:
             inv = np.array([0.5 / self.bandwidth_**2])
@@ -581,8 +585,7 @@ class PlaceAware(ClassifierMixin, BaseEstimator):
                 rows = np.flatnonzero((likely == c).any(axis=1))
                 g = G(c, rows, np.ones(rows.size, bool))
                 p, f = self._object_terms(self.banks_[c], Z[rows], g, exclude[rows], inv)
-                p[np.isnan(p)] = _NEG  # every matched entry left out: the place-free term alone, as in _log_terms
-                ll[rows, c] = np.logaddexp(np.log1p(-w) + p[0], np.log(w) + f[0])
+                ll[rows, c] = mixed(p[0], f[0])
         return ll, member
 
     def predict_proba(self, X, signatures) -> np.ndarray:
