@@ -6,21 +6,23 @@ touch in full only under some objects (``PlaceAware(screening=...)``):
 * ``touch`` (the default): the 16 objects whose place-free samples come
   nearest the touch; every other object gets a lower bound;
 * ``place``: every object, the touch's place located by the touched
-  instance's own landmarks; the 8 most likely objects again, the place
-  located by registration.
+  instance's own landmarks; the ``exact_places`` (8) most likely objects
+  again, the place located by registration, or none
+  (``exact_places=0``).
 
 For the first ``--objects`` corpus objects (``../shared/corpus/random-objects``,
 sorted by name, a file that does not load left out), the settings of
 ``bench_scaling.py`` (2 replicates of the instance protocol, uniform and
 mesh-saliency points, kNN and the place-aware recognizer, ``info_gain``, 5
-points per instance, 64 px views, seed 0) run under each screening, each
-with the shuffled control beside it (each test instance given another
-object's imprints, place for place: chance is 1 / objects).  The four runs
-share one cache, so the instances are computed once, by the first run; each
-run is a fresh process.  The table gives the recognition rate after 1 to 5
-touches with its interval, and the place-aware stage's wall time, CPU time
-and peak memory (all processes); kNN does not depend on the screening and
-is given once.
+points per instance, 64 px views, seed 0) run under each of the three, each
+with both controls beside it: each test instance given another object's
+imprints, place for place (``shuffled``) or in a random order
+(``scrambled``, which keeps nothing of where they were taken); chance is
+1 / objects.  The nine runs share one cache, so the instances are computed
+once, by the first run; each run is a fresh process.  The table gives the
+recognition rate after 1 to 5 touches with its interval, and the
+place-aware stage's wall time, CPU time and peak memory (all processes);
+kNN does not depend on the screening and is given once per control.
 
     python -m meshsal.util.reproducible .venv/bin/python benchmarks/bench_screening.py [--objects 256]
 """
@@ -34,16 +36,14 @@ import tempfile
 
 from benchlib import CORPUS, arguments, corpus_files, run
 
-from classify.recognizers.place import SCREENINGS
-
 _ONE = """
 import json, sys, warnings
 from classify.experiment import ExperimentConfig, Settings, run_experiment
-files, screening, control, cache = json.loads(sys.argv[1])
+files, params, control, cache = json.loads(sys.argv[1])
 config = ExperimentConfig(
     methods=("mesh_saliency", "uniform"), protocols=("instance",), classifiers=("knn", "place"),
     features="polar", policies=("info_gain",), replicates=2, control=control,
-    settings=Settings(n_points=5, view_size=64, seed=0), params={"place": {"screening": screening}},
+    settings=Settings(n_points=5, view_size=64, seed=0), params={"place": params},
 )
 with warnings.catch_warnings():
     warnings.simplefilter("ignore")
@@ -59,16 +59,26 @@ print(json.dumps({"objects": n, "usage": result.usage, "rates": rates}))
 """
 
 
-def _arm(files: list, screening: str, control, cache: str) -> dict:
+#: The screenings compared: a label and the place-aware recognizer's parameters.
+ARMS = (
+    ("touch", {"screening": "touch"}),
+    ("place, 8 registered", {"screening": "place"}),
+    ("place, none registered", {"screening": "place", "exact_places": 0}),
+)
+#: Each screening's controls: none, then the donor's imprints place for place, then in a random order.
+CONTROLS = (None, "shuffled", "scrambled")
+
+
+def _arm(files: list, label: str, params: dict, control, cache: str) -> dict:
     """One run in a fresh process: its JSON row (SystemExit naming the arm when it fails)."""
     done = subprocess.run(
-        [sys.executable, "-c", _ONE, json.dumps([files, screening, control, cache])],
+        [sys.executable, "-c", _ONE, json.dumps([files, params, control, cache])],
         capture_output=True,
         text=True,
         check=False,
     )
     if done.returncode != 0:
-        raise SystemExit(f"bench_screening: screening {screening}, control {control} failed:\n{done.stderr[-2000:]}")
+        raise SystemExit(f"bench_screening: screening {label}, control {control} failed:\n{done.stderr[-2000:]}")
     return json.loads(done.stdout.strip().splitlines()[-1])
 
 
@@ -86,26 +96,29 @@ def main() -> int:
     files = corpus_files(args.objects)
     rows = {}
     with tempfile.TemporaryDirectory(prefix="bench_screening-") as cache:
-        for screening in SCREENINGS:
-            for control in (None, "shuffled"):
-                rows[screening, control] = _arm(files, screening, control, cache)
-                print(f"screening {screening}, control {control}: done", file=sys.stderr)
-    n = rows["touch", None]["objects"]
+        for label, params in ARMS:
+            for control in CONTROLS:
+                rows[label, control] = _arm(files, label, params, control, cache)
+                print(f"screening {label}, control {control}: done", file=sys.stderr)
+    first = ARMS[0][0]
+    n = rows[first, None]["objects"]
     print(f"{n} corpus objects, 2 replicates, seed 0; chance {100 / n:.1f} %\n")
     print("| recognizer | touches: 1 | 2 | 3 | 4 | 5 |")
     print("|---|:---:|:---:|:---:|:---:|:---:|")
-    print(f"| kNN, mesh saliency's plan | {_rates(rows['touch', None]['rates']['mesh_saliency/knn'])} |")
-    for screening in SCREENINGS:
-        for control in (None, "shuffled"):
-            r = rows[screening, control]["rates"]
-            arm = f"screening `{screening}`" + (", shuffled control" if control else "")
+    for control in CONTROLS:
+        arm = f", {control} control" if control else ""
+        print(f"| kNN, mesh saliency's plan{arm} | {_rates(rows[first, control]['rates']['mesh_saliency/knn'])} |")
+    for label, _ in ARMS:
+        for control in CONTROLS:
+            r = rows[label, control]["rates"]
+            arm = f"screening {label}" + (f", {control} control" if control else "")
             print(f"| place-aware, mesh saliency's plan, {arm} | {_rates(r['mesh_saliency/place'])} |")
             print(f"| place-aware, `info_gain`, {arm} | {_rates(r['info_gain/place'])} |")
     print("\n| screening | control | place-aware stage wall (s) | CPU (s) | peak memory, all processes (MB) |")
     print("|---|---|---:|---:|---:|")
-    for (screening, control), row in rows.items():
+    for (label, control), row in rows.items():
         u = row["usage"]["place"]
-        print(f"| {screening} | {control or 'none'} | {u['wall_s']:.1f} | {u['cpu_s']:.1f} | {u['peak_mb']:.0f} |")
+        print(f"| {label} | {control or 'none'} | {u['wall_s']:.1f} | {u['cpu_s']:.1f} | {u['peak_mb']:.0f} |")
     return 0
 
 
