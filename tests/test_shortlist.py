@@ -525,17 +525,22 @@ def test_screening_by_place_scores_every_object_and_registers_the_most_likely(al
     asked = []
 
     def where(c, rows, exact):
-        asked.append((c, rows.copy(), exact.copy()))
+        asked.append((c, rows.copy(), None if exact is None else exact.copy()))
+        if c is None:  # the place under every object, located on the instance's own landmarks
+            return own[rows]
         return np.where(exact[:, None], moved[rows], own[rows])
 
     ll = model.log_likelihood(X, where)
     first = model.log_likelihood(X, own)  # every object at the instance's own place
     again = model.log_likelihood(X, moved)
     likely = np.argsort(-first, axis=1, kind="stable")[:, :2]
+    # Every touch is located cheaply once, for every object, and by registration under its two most likely.
+    cheap = np.concatenate([rows for c, rows, _ in asked if c is None])
+    np.testing.assert_array_equal(np.sort(cheap), np.arange(len(X)))
+    assert all(exact.all() for c, _, exact in asked if c is not None)
     for r in range(len(X)):
-        located = {c for c, rows, exact in asked if r in rows and not exact[np.flatnonzero(rows == r)[0]]}
-        registered = {c for c, rows, exact in asked if r in rows and exact[np.flatnonzero(rows == r)[0]]}
-        assert located == set(range(OBJECTS)) and registered == set(likely[r].tolist())
+        registered = {c for c, rows, _ in asked if c is not None and r in rows}
+        assert registered == set(likely[r].tolist())
         for c in range(OBJECTS):
             want = again[r, c] if c in registered else first[r, c]
             np.testing.assert_allclose(ll[r, c], want, rtol=1e-9, atol=1e-9)
@@ -556,6 +561,42 @@ def test_screening_by_place_fits_on_every_object_and_is_the_full_model_up_to_the
     G = signatures(training["object03", 2].places)[8:12]
     np.testing.assert_array_equal(same.model.log_likelihood(X, G), full.model.log_likelihood(X, G))
     assert same.model.fit_loss_ == full.model.fit_loss_
+
+
+def test_screening_by_place_scores_every_object_at_once_as_each_in_turn():
+    # Objects of unequal banks: 2 to 6 places (some fewer than the 4 matched neighbours), 1 to 3 touches per place
+    # and instance, two or three instances.  Scored all at once (places the same under every object) or object
+    # by object (the same places given per object), the terms agree, left-out instances and -inf included.
+    rng = np.random.default_rng(21)
+    X, y, sig, inst, keys = [], [], [], [], []
+    for c in range(12):
+        for i in range(1, 3 + c % 2):
+            for p in range(2 + c % 5):
+                k = 1 + (c + p + i) % 3
+                X.append(rng.normal(c % 4, 1.0, (k, 5)))
+                sig.append(np.tile(np.array([p, c % 3, 1.0]) + 0.01 * i, (k, 1)))
+                y += [c] * k
+                inst += [i] * k
+                keys += [p] * k
+    X, sig = np.concatenate(X), np.concatenate(sig)
+    model = PlaceAware(shortlist=4, screening="place", exact_places=0, fit_sets=5).fit(
+        X, np.array(y), signatures=sig, instances=np.array(inst), places=np.array(keys)
+    )
+    Q, G = rng.normal(1.5, 1.5, (40, 5)), rng.uniform(0, 6, (40, 3))
+    exclude = np.where(np.arange(40) % 3 == 0, 1, -1)
+    at_once = model.log_likelihood(Q, G, exclude=exclude)
+    in_turn = model.log_likelihood(Q, np.repeat(G[:, None], 12, axis=1), exclude=exclude)
+    assert at_once.shape == (40, 12) and np.all(np.isfinite(at_once))
+    np.testing.assert_allclose(at_once, in_turn, rtol=1e-12, atol=1e-12)
+    # A function of the places is asked once, for every object (c None).
+    asked = []
+
+    def where(c, rows, exact):
+        asked.append(c)
+        return G[rows]
+
+    np.testing.assert_array_equal(model.log_likelihood(Q, where, exclude=exclude), at_once)
+    assert set(asked) == {None}
 
 
 def test_screening_is_touch_or_place():

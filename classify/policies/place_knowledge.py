@@ -194,13 +194,19 @@ class PlaceKnowledge:
 
     def posterior_at(self, imprints: np.ndarray, positions, places: Places) -> np.ndarray:
         """(k, C) single-touch posteriors of imprints taken at ``positions`` (k, 3) on the instance of ``places``."""
+        from meshsal.points.places import LANDMARKS
+        from meshsal.points.places import signatures as located
+
         if len(imprints) == 0:
             return np.zeros((0, self.n_classes))
         positions = np.asarray(positions, np.float64)
 
         # Located on an object only when the model asks: when the object is on a touch's shortlist; past the
-        # shortlist, by registration only under the objects the screening puts nearest (``exact``).
+        # shortlist, by registration only under the objects the screening puts nearest (``exact``), and on the
+        # instance's own landmarks under every object at once (c None).
         def where(c, rows, exact):
+            if c is None:
+                return located(positions[rows], places.positions[:LANDMARKS])
             return self.signatures_at(positions[rows], places, [c], exact)[:, 0]
 
         return self.model.predict_proba(imprints, where)

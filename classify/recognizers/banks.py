@@ -12,6 +12,7 @@ import numpy as np
 
 __all__ = [
     "Bank",
+    "BankStack",
     "entries",
     "evenly_spaced",
     "free_subsample",
@@ -46,6 +47,81 @@ class Bank:
         self.tree = cKDTree(signatures)
         self.sq = np.einsum("esd,esd->es", self.samples, self.samples)
         self.free_sq = np.einsum("fd,fd->f", free, free)
+
+
+class BankStack:
+    """Every object's bank in padded arrays, to score a touch under all objects in one pass.
+
+    Built from the banks (a copy of their samples): signatures (C, E, L) and
+    their squared norms (C, E), inf past an object's entries; the entries'
+    samples, squared norms and instances stacked object after object, with
+    one empty entry last (every sample -1) that a pick past an object's
+    entries points to; the place-free samples (C, F, d) and their instances
+    (C, F), -1 past an object's.
+    """
+
+    def __init__(self, banks: list):
+        C, E = len(banks), max(len(b.keys) for b in banks)
+        L, d = banks[0].signatures.shape[1], banks[0].samples.shape[2]
+        S, F = max(b.samples.shape[1] for b in banks), max(len(b.free) for b in banks)
+        self.entries = np.array([len(b.keys) for b in banks], np.int64)
+        self.starts = np.r_[0, np.cumsum(self.entries)[:-1]]
+        self.signatures, self.sig_sq = np.zeros((C, E, L)), np.full((C, E), np.inf)
+        total = int(self.entries.sum())
+        self.samples = np.zeros((total + 1, S, d), np.float32)
+        self.sq = np.zeros((total + 1, S), np.float32)
+        self.instances = np.full((total + 1, S), -1, np.int64)
+        self.free, self.free_sq = np.zeros((C, F, d)), np.zeros((C, F))
+        self.free_instances = np.full((C, F), -1, np.int64)
+        self.match_width = np.array([b.match_width for b in banks], np.float64)
+        for c, (b, a) in enumerate(zip(banks, self.starts)):
+            e, s, f = len(b.keys), b.samples.shape[1], len(b.free)
+            self.signatures[c, :e] = b.signatures
+            self.sig_sq[c, :e] = np.einsum("el,el->e", b.signatures, b.signatures)
+            self.samples[a : a + e, :s], self.sq[a : a + e, :s] = b.samples, b.sq
+            self.instances[a : a + e, :s] = b.instances
+            self.free[c, :f], self.free_sq[c, :f], self.free_instances[c, :f] = b.free, b.free_sq, b.free_instances
+
+    def match(self, G: np.ndarray, neighbours: int) -> tuple[np.ndarray, np.ndarray]:
+        """(m, C, K) stacked entry rows and log weights (summing to one) of places G (m, L) under every object:
+        each object's ``neighbours`` entries of nearest signature, weighted as ``PlaceAware`` weighs them."""
+        (C, E, L), m = self.signatures.shape, len(G)
+        K = min(int(neighbours), E)
+        d2 = (G @ self.signatures.reshape(C * E, L).T).reshape(m, C, E)
+        d2 *= -2.0
+        d2 += np.einsum("ml,ml->m", G, G)[:, None, None]
+        d2 += self.sig_sq[None]  # inf past an object's entries
+        np.maximum(d2, 0.0, out=d2)
+        pick = np.argpartition(d2, K - 1, axis=2)[..., :K] if K < E else np.tile(np.arange(E), (m, C, 1))
+        near = np.take_along_axis(d2, pick, axis=2)
+        order = np.argsort(near, axis=2, kind="stable")
+        pick, near = np.take_along_axis(pick, order, axis=2), np.take_along_axis(near, order, axis=2)
+        real = pick < self.entries[None, :, None]
+        with np.errstate(invalid="ignore"):
+            logw = np.where(real, -0.5 * (near - near[..., :1]) / self.match_width[None, :, None] ** 2, -np.inf)
+        rows = np.where(real, self.starts[None, :, None] + pick, len(self.samples) - 1)
+        return rows, logw - lse(logw, axis=2, keepdims=True)
+
+    def sample_d2(self, Z: np.ndarray, rows: np.ndarray, exclude: np.ndarray) -> np.ndarray:
+        """(m, C, K, S) squared distances from each touch Z (m, d) to the samples of its matched entries ``rows``
+        (m, C, K); inf for padding and for samples of the touch's excluded instance (m,)."""
+        z = Z.astype(np.float32)
+        d2 = np.einsum("md,md->m", z, z)[:, None, None, None] + self.sq[rows]
+        d2 -= 2.0 * np.einsum("md,mcksd->mcks", z, self.samples[rows])
+        inst = self.instances[rows]
+        bad = (inst < 0) | (inst == exclude[:, None, None, None])
+        return np.where(bad, np.inf, np.maximum(d2.astype(np.float64), 0.0))
+
+    def free_d2(self, Z: np.ndarray, exclude: np.ndarray) -> np.ndarray:
+        """(m, C, F) squared distances from each touch Z (m, d) to every object's place-free samples; inf for
+        padding and for samples of the touch's excluded instance (m,)."""
+        C, F, d = self.free.shape
+        fd2 = np.einsum("md,md->m", Z, Z)[:, None, None] + self.free_sq[None]
+        fd2 -= 2.0 * (Z @ self.free.reshape(C * F, d).T).reshape(len(Z), C, F)
+        np.maximum(fd2, 0.0, out=fd2)
+        inst = self.free_instances[None]
+        fd2[np.broadcast_to((inst < 0) | (inst == exclude[:, None, None]), fd2.shape)] = np.inf
+        return fd2
 
 
 def entries(keys, Z, signatures, instances):

@@ -48,6 +48,7 @@ from sklearn.utils.validation import check_is_fitted
 
 from classify.recognizers.banks import (
     Bank,
+    BankStack,
     entries,
     evenly_spaced,
     free_subsample,
@@ -73,6 +74,8 @@ _CHUNK = 1 << 10
 _HELD_OUT = 1 << 25
 #: Bytes of each (touches, objects) array the forecast table holds at once (it holds several).
 _FORECAST = 1 << 23
+#: Bytes of matched samples gathered at once when every object scores a touch (``BankStack``).
+_STACKED = 1 << 26
 #: How a touch is scored past the shortlist (``PlaceAware(screening=...)``).
 SCREENINGS = ("touch", "place")
 
@@ -121,6 +124,32 @@ def _tempered_losses(total: np.ndarray, truth: np.ndarray, temps: np.ndarray) ->
             with np.errstate(divide="ignore"):
                 losses[j, a:b] = (np.log(scaled.sum(axis=1, keepdims=True)) + top)[:, 0] - picked
     return losses
+
+
+def _kernel_terms(logw, d2, fd2, inv) -> tuple[np.ndarray, np.ndarray]:
+    """Place and place-free log terms, each (len(inv), ...), from the log match weights (..., K) of a touch's
+    matched entries, the squared distances (..., K, S) to their samples and (..., F) to the place-free samples
+    (inf where left out); ``inv`` is 1 / (2 width^2) per width."""
+    # Log-means of kernels over each entry's samples: the nearest sample sets the scale of the sum.
+    near, fnear = d2.min(axis=-1, keepdims=True), fd2.min(axis=-1, keepdims=True)
+    count, fcount = np.isfinite(d2).sum(axis=-1), np.isfinite(fd2).sum(axis=-1)
+    valid = count > 0
+    logw = np.where(valid, logw, _NEG)
+    top = logw.max(axis=-1, keepdims=True)
+    place, free = np.empty((len(inv), *logw.shape[:-1])), np.empty((len(inv), *logw.shape[:-1]))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        norm = np.log(np.exp(logw - top).sum(axis=-1)) + top[..., 0]
+        rel, frel = np.where(valid[..., None], d2 - near, np.inf), fd2 - fnear
+        logcount, flogcount = np.log(np.maximum(count, 1)), np.log(np.maximum(fcount, 1))
+        for b, s in enumerate(inv):
+            lm = np.log(np.exp(-s * rel).sum(axis=-1)) - s * near[..., 0] - logcount
+            lm = np.where(valid, lm + logw, _NEG)
+            peak = lm.max(axis=-1, keepdims=True)
+            place[b] = np.log(np.exp(lm - peak).sum(axis=-1)) + peak[..., 0] - norm
+            free[b] = np.log(np.exp(-s * frel).sum(axis=-1)) - s * fnear[..., 0] - flogcount
+    # A touch whose every matched entry is left out leans on the place-free term alone.
+    place[np.isnan(place)] = _NEG
+    return place, free
 
 
 class PlaceAware(ClassifierMixin, BaseEstimator):
@@ -384,18 +413,25 @@ class PlaceAware(ClassifierMixin, BaseEstimator):
         # The held-out touches are scored a block of rows at a time, so that the (rows, C) arrays stay a few tens of
         # megabytes at a thousand objects.  A block is whole chunks of _log_terms, so each row is scored beside the
         # same rows as in one call; the log-likelihoods of an instance that goes on in the next block wait for it
-        # (rows lo to A, one array per width and mixture).
+        # (rows lo to A, one array per width and mixture).  Screened by place, every width is scored in one call,
+        # which finds each row's matched samples and distances once, in chunks whose (widths, rows, C) arrays stay
+        # near _HELD_OUT bytes; screened by touch, one width at a time, each reading the same screening.
         N = len(Zs)
-        block = _CHUNK * max(1, _HELD_OUT // (_CHUNK * 8 * C))
+        by_place = C > self.shortlist and self.screening == "place"
+        W = len(widths) if by_place else 1
+        chunk = _CHUNK
+        if by_place:
+            chunk = min(_CHUNK, max(64, 1 << int(np.log2(max(_HELD_OUT // (8 * C * W), 1)))))
+        block = chunk * max(1, _HELD_OUT // (chunk * 8 * C * W))
         lo, held = 0, {}
         for A in range(0, N, block):
             B = min(A + block, N)
             span = slice(A, B)
-            if C <= self.shortlist:
-                every = self._log_terms(Zs[span], sigs[span], insts[span], widths, chunk=_CHUNK)
-            else:  # one width at a time, each reading the same screening (if any)
+            if C <= self.shortlist or by_place:
+                every = self._log_terms(Zs[span], sigs[span], insts[span], widths, chunk=chunk)
+            else:
                 every = None
-                screen = self.free_.nearest(Zs[span], insts[span]) if self.screening == "touch" else None
+                screen = self.free_.nearest(Zs[span], insts[span])
             done = {k: np.flatnonzero((ends[k] >= A) & (ends[k] < B)) for k in counts}
             next_lo = first[B - 1] if until[B - 1] >= B else B
             for a, h in enumerate(widths):
@@ -454,9 +490,12 @@ class PlaceAware(ClassifierMixin, BaseEstimator):
         ``G`` is (n, L), the same place under every object, (n, C, L), or a
         function ``G(c, rows, exact)`` giving rows' places under object c as
         (len(rows), L); ``exact`` is (len(rows),) bool, whether c is among the
-        row's ``exact_places`` nearest objects by the screening (all False
-        past the shortlist without one: the places located cheaply), or None when
-        every object is scored with its place located in full.  Past the shortlist, when ``shortlisted``
+        row's ``exact_places`` nearest objects by the screening, or None when
+        every object is scored with its place located in full.  Past the
+        shortlist without one, the function is asked once for the rows, with
+        c and ``exact`` None: their places located cheaply (on the touched
+        instance's own landmarks), the same under every object, which are
+        then scored all at once (``BankStack``).  Past the shortlist, when ``shortlisted``
         (default: ``screening == "touch"``), an object off a touch's shortlist has no place term
         (-inf) and the place-free term's nearest kernel alone: lower bounds.
         The third value is the (n, C) bool shortlist then, else None.
@@ -491,6 +530,15 @@ class PlaceAware(ClassifierMixin, BaseEstimator):
                         term = free[b, rows]
                         np.subtract(np.multiply(-s, screened[rows], out=term), logcount, out=term)
                         term[count[rows] <= 0] = _NEG
+        if past and not shortlisted and (callable(G) or G.ndim == 2):
+            # Every object at once, at the place located on the touched instance's own landmarks.
+            stack = self._stack()
+            step = max(1, _STACKED // (C * stack.samples[0].nbytes * min(self.neighbours, stack.signatures.shape[1])))
+            for a in range(0, n, step):
+                rows = np.arange(a, min(a + step, n))
+                g = G(None, rows, None) if callable(G) else G[rows]
+                place[:, rows], free[:, rows] = self._every_object_terms(stack, Z[rows], g, exclude[rows], inv)
+            return place, free, None
         for a in range(0, n, chunk):
             span = np.arange(a, min(a + chunk, n))
             for c in range(C) if member is None else np.flatnonzero(member[span].any(axis=0)):
@@ -509,6 +557,14 @@ class PlaceAware(ClassifierMixin, BaseEstimator):
                 place[:, rows, c], free[:, rows, c] = self._object_terms(bank, z, g, ex, inv)
         return place, free, member
 
+    def _stack(self) -> BankStack:
+        """The banks stacked for scoring every object at once (built when first asked for, and again when the
+        banks change: ``with_places`` gives a copy other banks)."""
+        found = getattr(self, "_stacked", None)
+        if found is None or found[0] is not self.banks_:
+            found = self._stacked = (self.banks_, BankStack(self.banks_))
+        return found[1]
+
     def _object_terms(self, bank: Bank, z, g, ex, inv):
         """Place and place-free log terms, each (len(inv), m), of touches z (m, d) at places g (m, L) under one
         object's ``bank``, each touch leaving out the instance in ``ex`` (m,); ``inv`` is 1 / (2 width^2) per width."""
@@ -516,26 +572,15 @@ class PlaceAware(ClassifierMixin, BaseEstimator):
         d2 = sample_d2(bank, z, idx, ex)  # (m, K, S), inf where left out
         fd2 = np.maximum(np.einsum("md,md->m", z, z)[:, None] + bank.free_sq[None] - 2.0 * z @ bank.free.T, 0.0)
         fd2[bank.free_instances[None, :] == ex[:, None]] = np.inf
-        # Log-means of kernels over each entry's samples: the nearest sample sets the scale of the sum.
-        near, fnear = d2.min(axis=2, keepdims=True), fd2.min(axis=1, keepdims=True)
-        count, fcount = np.isfinite(d2).sum(axis=2), np.isfinite(fd2).sum(axis=1)
-        valid = count > 0
-        logw = np.where(valid, logw, _NEG)
-        top = logw.max(axis=1, keepdims=True)
-        place, free = np.empty((len(inv), len(z))), np.empty((len(inv), len(z)))
-        with np.errstate(divide="ignore", invalid="ignore"):
-            norm = np.log(np.exp(logw - top).sum(axis=1)) + top[:, 0]
-            rel, frel = np.where(valid[..., None], d2 - near, np.inf), fd2 - fnear
-            logcount, flogcount = np.log(np.maximum(count, 1)), np.log(np.maximum(fcount, 1))
-            for b, s in enumerate(inv):
-                lm = np.log(np.exp(-s * rel).sum(axis=2)) - s * near[..., 0] - logcount
-                lm = np.where(valid, lm + logw, _NEG)
-                peak = lm.max(axis=1, keepdims=True)
-                place[b] = np.log(np.exp(lm - peak).sum(axis=1)) + peak[:, 0] - norm
-                free[b] = np.log(np.exp(-s * frel).sum(axis=1)) - s * fnear[:, 0] - flogcount
-        # A touch whose every matched entry is left out leans on the place-free term alone.
-        place[np.isnan(place)] = _NEG
-        return place, free
+        return _kernel_terms(logw, d2, fd2, inv)
+
+    def _every_object_terms(self, stack: BankStack, z, g, ex, inv):
+        """Place and place-free log terms, each (len(inv), m, C), of touches z (m, d) at places g (m, L), the same
+        under every object, each touch leaving out the instance in ``ex`` (m,): ``_object_terms`` under all of
+        ``stack``'s objects at once (one pass over arrays, not a call per object)."""
+        idx, logw = stack.match(g, self.neighbours)
+        d2 = stack.sample_d2(z, idx, ex)  # (m, C, K, S), inf where left out
+        return _kernel_terms(logw, d2, stack.free_d2(z, ex), inv)
 
     def log_likelihood(self, X, signatures, exclude=None) -> np.ndarray:
         """Untempered log-likelihood of each touch under each object, (n, C) float64 (up to one constant).
@@ -547,7 +592,9 @@ class PlaceAware(ClassifierMixin, BaseEstimator):
             under each object's hypothesis, or a function ``(c, rows, exact) -> (len(rows), L)`` of the same,
             called only for the objects on a touch's shortlist; ``exact`` (len(rows),) bool says which touches
             have c among their ``exact_places`` nearest objects by the screening (None when every object is
-            scored): under the others a caller may locate the place more cheaply
+            scored): under the others a caller may locate the place more cheaply.  Screened by place past the
+            shortlist, it is asked with c and ``exact`` None for the place located cheaply under every object,
+            then with ``exact`` all True under each touch's ``exact_places`` most likely objects
         exclude : (n,) int, optional
             A training instance whose touches each query leaves out (-1: none).
         """
