@@ -6,9 +6,9 @@ touch in full only under some objects (``PlaceAware(screening=...)``):
 * ``touch`` (the default): the 16 objects whose place-free samples come
   nearest the touch; every other object gets a lower bound;
 * ``place``: every object, the touch's place located by the touched
-  instance's own landmarks; the ``exact_places`` (8) most likely objects
-  again, the place located by registration, or none
-  (``exact_places=0``).
+  instance's own landmarks (by default nothing more, ``exact_places=0``),
+  and with ``exact_places=8`` the 8 most likely objects again, the place
+  located by registration.
 
 For the first ``--objects`` corpus objects (``../shared/corpus/random-objects``,
 sorted by name, a file that does not load left out), the settings of
@@ -62,8 +62,8 @@ print(json.dumps({"objects": n, "usage": result.usage, "rates": rates}))
 #: The screenings compared: a label and the place-aware recognizer's parameters.
 ARMS = (
     ("touch", {"screening": "touch"}),
-    ("place, 8 registered", {"screening": "place"}),
-    ("place, none registered", {"screening": "place", "exact_places": 0}),
+    ("place, 8 registered", {"screening": "place", "exact_places": 8}),
+    ("place, none registered", {"screening": "place"}),
 )
 #: Each screening's controls: none, then the donor's imprints place for place, then in a random order.
 CONTROLS = (None, "shuffled", "scrambled")

@@ -189,8 +189,8 @@ def _experiment_options(p) -> None:
         choices=SCREENINGS,
         default="touch",
         help=f"place-aware recognizer past {SHORTLIST} objects: score a touch in full under the {SHORTLIST} objects "
-        f"its touch alone puts nearest ('touch', the default), or under every object by its place, registering onto "
-        f"the {EXACT_PLACES} most likely ('place': costs a pass over every object per touch)",
+        f"its touch alone puts nearest, registering onto the {EXACT_PLACES} nearest ('touch', the default), or under "
+        "every object at its place on the touched instance's own landmarks ('place')",
     )
     p.add_argument(
         "--mismatch",

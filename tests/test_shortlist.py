@@ -205,11 +205,13 @@ def test_registrations_per_test_instance_stay_bounded_past_the_shortlist(fitted)
 
 def test_exact_places_is_a_non_negative_integer():
     X = np.random.default_rng(0).normal(size=(8, 3))
-    with pytest.raises(ValueError, match="exact_places must be a non-negative integer, got -1"):
+    with pytest.raises(ValueError, match="exact_places must be a non-negative integer or None, got -1"):
         PlaceAware(exact_places=-1).fit(
             X, np.repeat([0, 1], 4), signatures=np.zeros((8, 2)), instances=np.tile([1, 2], 4), places=np.zeros(8, int)
         )
-    assert PlaceAware().get_params()["exact_places"] == 8
+    assert PlaceAware().get_params()["exact_places"] is None
+    assert PlaceAware()._exact_places() == 8 and PlaceAware(screening="place")._exact_places() == 0
+    assert PlaceAware(screening="place", exact_places=3)._exact_places() == 3
 
 
 def test_a_forecast_over_some_objects_is_the_full_forecast_restricted(fitted):
@@ -545,6 +547,23 @@ def test_screening_by_place_scores_every_object_and_registers_the_most_likely(al
             want = again[r, c] if c in registered else first[r, c]
             np.testing.assert_allclose(ll[r, c], want, rtol=1e-9, atol=1e-9)
     assert np.mean(ll.argmax(axis=1) == truth) > 0.9
+
+
+def test_screening_by_place_registers_onto_no_object_by_default(alike):
+    # Registration lets the test instance's shape in (it keeps the true object's place and moves the others'), so
+    # by default the place screening locates every touch on the instance's own landmarks alone.
+    training, feels, by = alike
+    X, _ = _touches(feels, np.random.default_rng(10))
+    own = np.tile(signatures(training["object00", 2].places)[8:12], (OBJECTS, 1))
+    asked = []
+
+    def where(c, rows, exact):
+        asked.append(c)
+        return own[rows]
+
+    assert by["place"].model.exact_places is None
+    np.testing.assert_array_equal(by["place"].model.log_likelihood(X, where), by["place"].model.log_likelihood(X, own))
+    assert asked == [None]
 
 
 def test_screening_by_place_fits_on_every_object_and_is_the_full_model_up_to_the_shortlist(alike, fitted):

@@ -186,24 +186,29 @@ class PlaceAware(ClassifierMixin, BaseEstimator):
         samples come nearest it (``classify.recognizers.shortlist``); every
         other object keeps a lower bound of its likelihood.  With no more
         objects than this, every object is scored in full.
-    exact_places : int
-        Past the shortlist, the shortlisted objects (nearest by the screening
-        first) under which a touch's place is asked for in full when
-        ``signatures`` is a function; under the rest of the shortlist it may
-        be located more cheaply (``PlaceKnowledge`` then uses the touched
-        instance's own landmarks instead of registering it onto the object).
+    exact_places : int or None
+        Past the shortlist, the objects under which a touch's place is asked
+        for in full (by registration, in ``PlaceKnowledge``) when
+        ``signatures`` is a function; under the others it is located more
+        cheaply, on the touched instance's own landmarks.  Screened by touch,
+        the shortlisted objects nearest by the screening (None: 8,
+        ``EXACT_PLACES``); screened by place, the objects most likely at the
+        cheap place, which are then scored again (None: 0, none).
     screening : {"touch", "place"}
         How a touch is scored past the shortlist (more objects than
         ``shortlist``).  ``"touch"``: by the touch alone; the ``shortlist``
         objects whose place-free samples come nearest are scored in full,
         every other object by a lower bound.  ``"place"``: every object is
         scored in full, the touch's place located by the touched instance's
-        own landmarks; the ``exact_places`` objects most likely so are scored
-        again with the place located by registration (when ``signatures`` is
-        a function).  It costs a pass over every object per touch, and keeps
-        the true object where a touch alone would drop it.  The fit then
-        scores its held-out touches under every object, and the forecast
-        tables stay shortlisted by the touch alone.
+        own landmarks, in one pass over the banks stacked (``BankStack``, a
+        copy of their samples); it keeps the true object where a touch alone
+        would drop it.  The fit then scores its held-out touches under every
+        object, and the forecast tables stay shortlisted by the touch alone.
+        Registering the most likely objects again (``exact_places``) lets
+        the test instance's shape in: the true object, when among those
+        scored again, tends to win even when what was felt came from another
+        object (at 255 objects, 8 registered, the controls sit near 8 / 255,
+        not at chance: ``docs/benchmarks/bench_screening.md``).
     fit_objects : int
         Objects whose held-out instances score the fit's grid (evenly spread
         over the objects when there are more).
@@ -244,7 +249,7 @@ class PlaceAware(ClassifierMixin, BaseEstimator):
         fit_places=100,
         whiten=True,
         shortlist=SHORTLIST,
-        exact_places=EXACT_PLACES,
+        exact_places=None,
         screening="touch",
         fit_objects=64,
         random_state=0,
@@ -316,8 +321,8 @@ class PlaceAware(ClassifierMixin, BaseEstimator):
             raise ValueError(
                 f"shortlist and fit_objects must be positive integers, got {self.shortlist}, {self.fit_objects}"
             )
-        if not (0 <= self.exact_places == int(self.exact_places)):
-            raise ValueError(f"exact_places must be a non-negative integer, got {self.exact_places}")
+        if self.exact_places is not None and not (0 <= self.exact_places == int(self.exact_places)):
+            raise ValueError(f"exact_places must be a non-negative integer or None, got {self.exact_places}")
         if self.screening not in SCREENINGS:
             raise ValueError(f"screening must be one of {SCREENINGS}, got {self.screening!r}")
         self.mean_ = Z.mean(axis=0)
@@ -514,7 +519,7 @@ class PlaceAware(ClassifierMixin, BaseEstimator):
             member = np.zeros((n, C), bool)
             # An object is among a row's exact_places nearest when fewer objects lie strictly nearer: when it lies
             # no farther than the row's exact_places-th least distance, which is a shortlisted one's.
-            limit, E = np.full(n, -np.inf), min(self.exact_places, self.shortlist)
+            limit, E = np.full(n, -np.inf), min(self._exact_places(), self.shortlist)
             # A chunk of rows at a time, in place: (n, C) arrays are large at a thousand objects.
             for a in range(0, n, chunk):
                 rows = slice(a, a + chunk)
@@ -556,6 +561,12 @@ class PlaceAware(ClassifierMixin, BaseEstimator):
                     g = G[rows] if G.ndim == 2 else G[rows, c]
                 place[:, rows, c], free[:, rows, c] = self._object_terms(bank, z, g, ex, inv)
         return place, free, member
+
+    def _exact_places(self) -> int:
+        """``exact_places``, None read as the screening's default: 8 by touch, 0 by place."""
+        if self.exact_places is None:
+            return EXACT_PLACES if self.screening == "touch" else 0
+        return int(self.exact_places)
 
     def _stack(self) -> BankStack:
         """The banks stacked for scoring every object at once (built when first asked for, and again when the
@@ -622,7 +633,7 @@ class PlaceAware(ClassifierMixin, BaseEstimator):
             return np.logaddexp(np.log1p(-w) + place, np.log(w) + free)
 
         ll = mixed(place[0], free[0])
-        C, E = ll.shape[1], min(int(self.exact_places), ll.shape[1])
+        C, E = ll.shape[1], min(self._exact_places(), ll.shape[1])
         if member is None and callable(G) and C > self.shortlist and E > 0:
             inv = np.array([0.5 / self.bandwidth_**2])
             # Ties at the E-th value are broken by the object's index, so the choice does not depend on the order
