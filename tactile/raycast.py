@@ -38,12 +38,19 @@ _CHUNK_RAYS = 1 << 15
 
 
 def _holds_mesh(scene, mesh: Mesh) -> bool:
-    """Probe a few large faces of the mesh: rays from just above each must hit at that distance."""
-    F = mesh.faces[np.linspace(0, mesh.n_faces - 1, min(mesh.n_faces, 16)).astype(np.int64)]
-    T = mesh.vertices[F]
+    """Probe a few large faces of the mesh: rays from just above each must hit at that distance.
+
+    A ray that meets another face first, nearer than its own (a fold or an
+    overlap of the surface, which decimation can make), says nothing, and
+    the next largest face is probed instead: the scene holds the mesh when
+    every probe that says something hits its face's distance (at most three
+    of them asked, all of the 16 sampled faces tried).
+    """
+    picked = np.linspace(0, mesh.n_faces - 1, min(mesh.n_faces, 16)).astype(np.int64)
+    T = mesh.vertices[mesh.faces[picked]]
     cross = np.cross(T[:, 1] - T[:, 0], T[:, 2] - T[:, 0])
     double_area = np.linalg.norm(cross, axis=1)
-    best = np.argsort(double_area)[::-1][:3]
+    best = np.argsort(double_area, kind="stable")[::-1]
     best = best[double_area[best] > 0]
     if best.size == 0:
         return True  # only degenerate faces sampled: nothing to probe
@@ -52,7 +59,10 @@ def _holds_mesh(scene, mesh: Mesh) -> bool:
     normal = cross[best] / double_area[best, None]
     origins = T[best].mean(axis=1) + height[:, None] * normal
     hit = scene.run(origins.astype(np.float32), (-normal).astype(np.float32), output=1)
-    return bool(((hit["primID"] >= 0) & (np.abs(hit["tfar"] - height) <= 0.25 * height)).all())
+    held = (hit["primID"] >= 0) & (np.abs(hit["tfar"] - height) <= 0.25 * height)
+    covered = (hit["primID"] >= 0) & (hit["primID"] != picked[best]) & (hit["tfar"] < 0.75 * height)
+    telling = np.flatnonzero(~covered)[:3]
+    return bool(held[telling].all())
 
 
 def mesh_scene(mesh: Mesh, scene=None):

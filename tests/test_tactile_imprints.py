@@ -256,6 +256,23 @@ def test_prebuilt_scene_gives_the_same_imprints_and_a_foreign_scene_is_refused()
         tactile.imprints(surface, P, N, sensor, scene="scene")
 
 
+def test_a_scene_is_recognized_through_a_fold_of_its_own_mesh():
+    # A decimation can fold a surface so that a small face lies just above a large one: a probe from above the
+    # large face meets the small one first.  The scene still holds its mesh; the mesh moved along the faces'
+    # normal, or scaled, is still refused.
+    from meshsal.mesh import Mesh
+    from meshsal.mesh.embree import embree_scene
+    from tactile.raycast import mesh_scene
+
+    V = np.array([[-10.0, -10, 0], [10, -10, 0], [0, 10, 0], [-1, -5, 0.1], [1, -5, 0.1], [0, -1, 0.1]])
+    folded = Mesh(vertices=V, faces=np.array([[0, 1, 2], [3, 4, 5]]))
+    scene = embree_scene(folded)
+    assert mesh_scene(folded, scene) is scene
+    for other in (folded.replace(vertices=V + [0.0, 0.0, 0.5]), folded.replace(vertices=V * 1.5)):
+        with pytest.raises(ValueError, match="scene does not hold mesh"):
+            mesh_scene(other, scene)
+
+
 def test_thread_chunks_do_not_change_the_imprints():
     surface = shapes.bumps()
     rng = np.random.default_rng(4)
