@@ -188,11 +188,13 @@ def _readings(codes: np.ndarray) -> np.ndarray:
     return (codes / LEVELS).astype(np.float32)
 
 
-def signatures(places: Places) -> np.ndarray:
-    """Where each place lies on its shape, whatever the pose and size: (P, LANDMARKS) float64.
+def signatures(places: Places, positions=None) -> np.ndarray:
+    """Where each place lies on its shape, whatever the pose and size: (P, LANDMARKS) float64; or where
+    ``positions`` (k, 3) on the instance of ``places`` lie, (k, LANDMARKS).
 
-    ``meshsal.points.places.signatures`` of the places against their own first
-    :data:`LANDMARKS` (the start of the shape-determined pool).
+    ``meshsal.points.places.signatures`` of the places (or the positions)
+    against the places' own first :data:`LANDMARKS` (the start of the
+    shape-determined pool).
 
     Examples
     --------
@@ -203,7 +205,7 @@ def signatures(places: Places) -> np.ndarray:
     """
     from meshsal.points.places import signatures as located
 
-    return located(places.positions, places.positions[:LANDMARKS])
+    return located(places.positions if positions is None else positions, places.positions[:LANDMARKS])
 
 
 @dataclass(frozen=True, eq=False)

@@ -173,12 +173,11 @@ class PlaceKnowledge:
         the instance onto each object (default: every point); the others are
         located against the instance's own landmarks, as its places are.
         """
-        from meshsal.points.places import LANDMARKS
         from meshsal.points.places import signatures as located
 
         J = range(self.n_classes) if classes is None else classes
         mask = None if registered is None else np.asarray(registered, bool)[:, None]
-        own = None if mask is None or mask.all() else located(positions, places.positions[:LANDMARKS])
+        own = None if mask is None or mask.all() else signatures(places, positions)
 
         def under(j: int) -> np.ndarray:
             if own is not None and not mask.any():
@@ -194,9 +193,6 @@ class PlaceKnowledge:
 
     def posterior_at(self, imprints: np.ndarray, positions, places: Places) -> np.ndarray:
         """(k, C) single-touch posteriors of imprints taken at ``positions`` (k, 3) on the instance of ``places``."""
-        from meshsal.points.places import LANDMARKS
-        from meshsal.points.places import signatures as located
-
         if len(imprints) == 0:
             return np.zeros((0, self.n_classes))
         positions = np.asarray(positions, np.float64)
@@ -206,7 +202,7 @@ class PlaceKnowledge:
         # instance's own landmarks under every object at once (c None).
         def where(c, rows, exact):
             if c is None:
-                return located(positions[rows], places.positions[:LANDMARKS])
+                return signatures(places, positions[rows])
             return self.signatures_at(positions[rows], places, [c], exact)[:, 0]
 
         return self.model.predict_proba(imprints, where)

@@ -15,6 +15,7 @@ __all__ = [
     "BankStack",
     "entries",
     "evenly_spaced",
+    "free_d2",
     "free_subsample",
     "lse",
     "sample_d2",
@@ -101,27 +102,6 @@ class BankStack:
             logw = np.where(real, -0.5 * (near - near[..., :1]) / self.match_width[None, :, None] ** 2, -np.inf)
         rows = np.where(real, self.starts[None, :, None] + pick, len(self.samples) - 1)
         return rows, logw - lse(logw, axis=2, keepdims=True)
-
-    def sample_d2(self, Z: np.ndarray, rows: np.ndarray, exclude: np.ndarray) -> np.ndarray:
-        """(m, C, K, S) squared distances from each touch Z (m, d) to the samples of its matched entries ``rows``
-        (m, C, K); inf for padding and for samples of the touch's excluded instance (m,)."""
-        z = Z.astype(np.float32)
-        d2 = np.einsum("md,md->m", z, z)[:, None, None, None] + self.sq[rows]
-        d2 -= 2.0 * np.einsum("md,mcksd->mcks", z, self.samples[rows])
-        inst = self.instances[rows]
-        bad = (inst < 0) | (inst == exclude[:, None, None, None])
-        return np.where(bad, np.inf, np.maximum(d2.astype(np.float64), 0.0))
-
-    def free_d2(self, Z: np.ndarray, exclude: np.ndarray) -> np.ndarray:
-        """(m, C, F) squared distances from each touch Z (m, d) to every object's place-free samples; inf for
-        padding and for samples of the touch's excluded instance (m,)."""
-        C, F, d = self.free.shape
-        fd2 = np.einsum("md,md->m", Z, Z)[:, None, None] + self.free_sq[None]
-        fd2 -= 2.0 * (Z @ self.free.reshape(C * F, d).T).reshape(len(Z), C, F)
-        np.maximum(fd2, 0.0, out=fd2)
-        inst = self.free_instances[None]
-        fd2[np.broadcast_to((inst < 0) | (inst == exclude[:, None, None]), fd2.shape)] = np.inf
-        return fd2
 
 
 def entries(keys, Z, signatures, instances):
@@ -229,13 +209,29 @@ def within_place_whitening(Z, y, keys) -> np.ndarray:
     return vecs @ np.diag(1.0 / np.sqrt(vals)) @ vecs.T
 
 
-def sample_d2(bank: Bank, Z, idx, exclude):
-    """(n, K, S) squared distances from each touch to its matched entries' samples; inf for padding and for
-    samples of the touch's excluded instance."""
-    Y = bank.samples[idx]  # (n, K, S, d)
+def sample_d2(bank, Z, idx, exclude):
+    """Squared distances from each touch Z (n, d) to the samples of its matched entries ``idx`` (n, ...): (n, ...,
+    S); inf for padding and for samples of the touch's excluded instance (n,).  ``bank`` is a :class:`Bank`
+    (``idx`` (n, K)) or a :class:`BankStack` (``idx`` (n, C, K) stacked rows)."""
+    Y = bank.samples[idx]  # (n, ..., S, d)
     z = Z.astype(np.float32)
-    d2 = np.einsum("nd,nd->n", z, z)[:, None, None] + bank.sq[idx] - 2.0 * np.einsum("nd,nksd->nks", z, Y)
+    lead = (slice(None),) + (None,) * idx.ndim
+    d2 = np.einsum("nd,nd->n", z, z)[lead] + bank.sq[idx] - 2.0 * np.einsum("nd,n...sd->n...s", z, Y)
     d2 = d2.astype(np.float64)
     inst = bank.instances[idx]
-    bad = (inst < 0) | (inst == exclude[:, None, None])
+    bad = (inst < 0) | (inst == exclude[lead])
     return np.where(bad, np.inf, np.maximum(d2, 0.0))
+
+
+def free_d2(bank, Z, exclude):
+    """Squared distances from each touch Z (n, d) to the place-free samples of ``bank``: (n, F) for a
+    :class:`Bank`, (n, C, F) for a :class:`BankStack`; inf for padding and for samples of the touch's excluded
+    instance (n,)."""
+    shape = bank.free.shape[:-1]
+    lead = (slice(None),) + (None,) * len(shape)
+    fd2 = np.einsum("nd,nd->n", Z, Z)[lead] + bank.free_sq[None]
+    fd2 -= 2.0 * (Z @ bank.free.reshape(-1, Z.shape[1]).T).reshape(len(Z), *shape)
+    np.maximum(fd2, 0.0, out=fd2)
+    inst = bank.free_instances[None]
+    fd2[np.broadcast_to((inst < 0) | (inst == exclude[lead]), fd2.shape)] = np.inf
+    return fd2

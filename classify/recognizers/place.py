@@ -51,6 +51,7 @@ from classify.recognizers.banks import (
     BankStack,
     entries,
     evenly_spaced,
+    free_d2,
     free_subsample,
     lse,
     sample_d2,
@@ -419,21 +420,21 @@ class PlaceAware(ClassifierMixin, BaseEstimator):
         # megabytes at a thousand objects.  A block is whole chunks of _log_terms, so each row is scored beside the
         # same rows as in one call; the log-likelihoods of an instance that goes on in the next block wait for it
         # (rows lo to A, one array per width and mixture).  Screened by place, every width is scored in one call,
-        # which finds each row's matched samples and distances once, in chunks whose (widths, rows, C) arrays stay
-        # near _HELD_OUT bytes; screened by touch, one width at a time, each reading the same screening.
+        # which finds each row's matched samples and distances once, in blocks of at most _CHUNK rows whose
+        # (widths, rows, C) arrays stay near _HELD_OUT bytes; screened by touch, one width at a time, each reading
+        # the same screening.
         N = len(Zs)
         by_place = C > self.shortlist and self.screening == "place"
-        W = len(widths) if by_place else 1
-        chunk = _CHUNK
         if by_place:
-            chunk = min(_CHUNK, max(64, 1 << int(np.log2(max(_HELD_OUT // (8 * C * W), 1)))))
-        block = chunk * max(1, _HELD_OUT // (chunk * 8 * C * W))
+            block = min(_CHUNK, max(64, _HELD_OUT // (8 * C * len(widths))))
+        else:
+            block = _CHUNK * max(1, _HELD_OUT // (_CHUNK * 8 * C))
         lo, held = 0, {}
         for A in range(0, N, block):
             B = min(A + block, N)
             span = slice(A, B)
             if C <= self.shortlist or by_place:
-                every = self._log_terms(Zs[span], sigs[span], insts[span], widths, chunk=chunk)
+                every = self._log_terms(Zs[span], sigs[span], insts[span], widths, chunk=_CHUNK)
             else:
                 every = None
                 screen = self.free_.nearest(Zs[span], insts[span])
@@ -551,12 +552,7 @@ class PlaceAware(ClassifierMixin, BaseEstimator):
                 rows = span if member is None else span[member[span, c]]
                 z, ex = Z[rows], exclude[rows]
                 if callable(G):
-                    exact = None
-                    if member is not None:
-                        exact = screened[rows, c] <= limit[rows]
-                    elif past:
-                        exact = np.zeros(rows.size, bool)
-                    g = G(c, rows, exact)
+                    g = G(c, rows, None if member is None else screened[rows, c] <= limit[rows])
                 else:
                     g = G[rows] if G.ndim == 2 else G[rows, c]
                 place[:, rows, c], free[:, rows, c] = self._object_terms(bank, z, g, ex, inv)
@@ -580,18 +576,14 @@ class PlaceAware(ClassifierMixin, BaseEstimator):
         """Place and place-free log terms, each (len(inv), m), of touches z (m, d) at places g (m, L) under one
         object's ``bank``, each touch leaving out the instance in ``ex`` (m,); ``inv`` is 1 / (2 width^2) per width."""
         idx, logw = self._match(bank, g)
-        d2 = sample_d2(bank, z, idx, ex)  # (m, K, S), inf where left out
-        fd2 = np.maximum(np.einsum("md,md->m", z, z)[:, None] + bank.free_sq[None] - 2.0 * z @ bank.free.T, 0.0)
-        fd2[bank.free_instances[None, :] == ex[:, None]] = np.inf
-        return _kernel_terms(logw, d2, fd2, inv)
+        return _kernel_terms(logw, sample_d2(bank, z, idx, ex), free_d2(bank, z, ex), inv)
 
     def _every_object_terms(self, stack: BankStack, z, g, ex, inv):
         """Place and place-free log terms, each (len(inv), m, C), of touches z (m, d) at places g (m, L), the same
         under every object, each touch leaving out the instance in ``ex`` (m,): ``_object_terms`` under all of
         ``stack``'s objects at once (one pass over arrays, not a call per object)."""
         idx, logw = stack.match(g, self.neighbours)
-        d2 = stack.sample_d2(z, idx, ex)  # (m, C, K, S), inf where left out
-        return _kernel_terms(logw, d2, stack.free_d2(z, ex), inv)
+        return _kernel_terms(logw, sample_d2(stack, z, idx, ex), free_d2(stack, z, ex), inv)
 
     def log_likelihood(self, X, signatures, exclude=None) -> np.ndarray:
         """Untempered log-likelihood of each touch under each object, (n, C) float64 (up to one constant).
