@@ -21,8 +21,11 @@ Stages whose time per object grows with the objects are the ones to fix.
 Past 16 objects the place-aware recognizer and ``info_gain`` work on
 shortlists of 16 objects (``classify.recognizers.shortlist``): their
 rates there are the shortlisted model's, below what the full model gives.
+``--screening place`` runs the recognizer with ``screening="place"`` (every
+touch scored under every object) and writes ``bench_scaling_place.md``
+and its PNG instead, so the default screening's page stays.
 
-    python -m meshsal.util.reproducible .venv/bin/python benchmarks/bench_scaling.py [--counts 16,64,256,1000] [--repeats 3] [--keep DIR]
+    python -m meshsal.util.reproducible .venv/bin/python benchmarks/bench_scaling.py [--counts 16,64,256,1000] [--repeats 3] [--keep DIR] [--screening touch|place]
 """
 
 from __future__ import annotations
@@ -43,7 +46,7 @@ from meshsal.util.pages import machine
 
 #: Counts whose first run takes less than this run ``--repeats`` times.
 _REPEAT_UNDER_S = 300
-PNG = Path(__file__).resolve().parents[1] / "docs" / "benchmarks" / "bench_scaling.png"
+PAGES = Path(__file__).resolve().parents[1] / "docs" / "benchmarks"
 
 _ONE = """
 import json, resource, sys, time, warnings
@@ -52,7 +55,7 @@ files = json.loads(sys.argv[1])
 config = ExperimentConfig(
     methods=("mesh_saliency", "uniform"), protocols=("instance",), classifiers=("knn", "place"),
     features="polar", policies=("info_gain",), replicates=2,
-    settings=Settings(n_points=5, view_size=64, seed=0),
+    settings=Settings(n_points=5, view_size=64, seed=0), params=json.loads(sys.argv[2]),
 )
 with warnings.catch_warnings():
     warnings.simplefilter("ignore")
@@ -69,10 +72,18 @@ print(json.dumps({"objects": n, "timings": result.timings, "usage": result.usage
 """
 
 
-def _measure(count: int) -> dict | None:
+def _page(screening: str | None) -> str:
+    """The page's name: ``bench_scaling`` under the recognizer's default screening, else with the screening's."""
+    return "bench_scaling" if screening is None else f"bench_scaling_{screening}"
+
+
+def _measure(count: int, params: dict) -> dict | None:
     """One run on the first ``count`` corpus objects, in a fresh process: its JSON row (None when it fails)."""
     done = subprocess.run(
-        [sys.executable, "-c", _ONE, json.dumps(corpus_files(count))], capture_output=True, text=True, check=False
+        [sys.executable, "-c", _ONE, json.dumps(corpus_files(count)), json.dumps(params)],
+        capture_output=True,
+        text=True,
+        check=False,
     )
     if done.returncode != 0:
         print(f"bench_scaling: {count} objects failed:\n{done.stderr[-2000:]}", file=sys.stderr)
@@ -80,7 +91,7 @@ def _measure(count: int) -> dict | None:
     return json.loads(done.stdout.strip().splitlines()[-1])
 
 
-def main() -> int:
+def parser():
     parser = arguments(
         __doc__,
         3,
@@ -95,13 +106,23 @@ def main() -> int:
         help="keep each count's row in DIR as it is measured; a row kept for the same code is read back "
         "instead of measured again, so a long run resumes where it stopped",
     )
-    args = parser.parse_args()
+    parser.add_argument(
+        "--screening",
+        choices=("touch", "place"),
+        help="the place-aware recognizer's screening past its shortlist (default: the recognizer's own); "
+        "a screening given writes its own page, bench_scaling_SCREENING.md",
+    )
+    return parser
+
+
+def main(args) -> int:
+    params = {} if args.screening is None else {"place": {"screening": args.screening}}
     counts = [int(c) for c in args.counts.split(",")]
     if not CORPUS.is_dir():
         print(f"bench_scaling: error: {CORPUS} not found", file=sys.stderr)
         return 1
     # Rows are kept under the code they measured: the toolkit's sources and this script.
-    code = code_fingerprint("meshsal", "tactile", "classify") + file_fingerprint(__file__)
+    code = code_fingerprint("meshsal", "tactile", "classify") + file_fingerprint(__file__) + json.dumps(params)
     code = hashlib.sha256(code.encode()).hexdigest()[:16]
     rows = []
     for count in counts:
@@ -110,9 +131,9 @@ def main() -> int:
             rows.append(json.loads(kept.read_text()))
             print(f"{count} objects: kept from {rows[-1]['measured']}", file=sys.stderr)
             continue
-        runs = [_measure(count)]
+        runs = [_measure(count, params)]
         if runs[0] is not None and runs[0]["timings"]["total"] < _REPEAT_UNDER_S:
-            runs += [_measure(count) for _ in range(args.repeats - 1)]
+            runs += [_measure(count, params) for _ in range(args.repeats - 1)]
         if None in runs:
             return 1
         walls = sorted(r["timings"]["total"] for r in runs)
@@ -159,12 +180,13 @@ def main() -> int:
         print(f"- {r['objects']} objects measured {r['measured']}{which}")
     per = [r["timings"]["total"] / r["objects"] for r in rows]
     print(f"\ntime per object, largest over smallest: {max(per) / min(per):.2f}x (target <= 1.5x)")
-    _plot(rows, stages)
-    print(f"\n![time per object]({PNG.name})")
+    png = PAGES / f"{_page(args.screening)}.png"
+    _plot(rows, stages, png)
+    print(f"\n![time per object]({png.name})")
     return 0
 
 
-def _plot(rows, stages) -> None:
+def _plot(rows, stages, png: Path) -> None:
     import matplotlib
 
     matplotlib.use("Agg")
@@ -180,9 +202,13 @@ def _plot(rows, stages) -> None:
     ax.set_ylabel("wall seconds per object")
     ax.legend(fontsize=7)
     fig.tight_layout()
-    with atomic_path(PNG) as tmp:
+    with atomic_path(png) as tmp:
         fig.savefig(tmp, dpi=120)
 
 
 if __name__ == "__main__":
-    run("bench_scaling", "How the experiment's cost grows with the number of objects", main)
+    args = parser().parse_args()
+    title = "How the experiment's cost grows with the number of objects"
+    run(
+        _page(args.screening), title + (f", screened by {args.screening}" if args.screening else ""), lambda: main(args)
+    )
