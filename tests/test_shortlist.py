@@ -607,6 +607,7 @@ def test_screening_by_place_scores_every_object_at_once_as_each_in_turn():
     in_turn = model.log_likelihood(Q, np.repeat(G[:, None], 12, axis=1), exclude=exclude)
     assert at_once.shape == (40, 12) and np.all(np.isfinite(at_once))
     np.testing.assert_allclose(at_once, in_turn, rtol=1e-12, atol=1e-12)
+    assert all(np.shares_memory(bank.samples, model._stack().samples) for bank in model.banks_)  # held once
     # A function of the places is asked once, for every object (c None).
     asked = []
 
@@ -616,6 +617,40 @@ def test_screening_by_place_scores_every_object_at_once_as_each_in_turn():
 
     np.testing.assert_array_equal(model.log_likelihood(Q, where, exclude=exclude), at_once)
     assert set(asked) == {None}
+
+
+def test_a_bank_stack_lends_its_banks_their_samples_unchanged():
+    # Banks of unequal sizes (entries, samples per entry, place-free samples): once stacked, each reads its
+    # arrays from views of the stack's, so the samples are held once, and every value and distance is the same.
+    from classify.recognizers.banks import Bank, BankStack, free_d2, sample_d2
+
+    rng = np.random.default_rng(5)
+    banks = []
+    for c, (e, s, f) in enumerate([(3, 2, 4), (5, 4, 2), (1, 3, 3)]):
+        inst = np.where(rng.random((e, s)) < 0.3, -1, rng.integers(0, 3, (e, s)))
+        banks.append(
+            Bank(
+                np.arange(e),
+                rng.normal(size=(e, 3)),
+                rng.normal(size=(e, s, 4)),
+                inst,
+                rng.normal(size=(f, 4)),
+                rng.integers(0, 3, f),
+                0.5 + c,
+            )
+        )
+    before = copy.deepcopy(banks)
+    Z, exclude = rng.normal(size=(6, 4)), np.array([-1, 0, 1, 2, -1, 1])
+    stack = BankStack(banks)
+    stack.lend(banks)
+    for bank, old in zip(banks, before):
+        for name in ("samples", "sq", "instances", "free", "free_sq", "free_instances"):
+            mine, base = getattr(bank, name), getattr(stack, name)
+            assert np.shares_memory(mine, base), name
+            np.testing.assert_array_equal(mine, getattr(old, name))
+        idx = rng.integers(0, len(old.keys), (6, 2))
+        np.testing.assert_array_equal(sample_d2(bank, Z, idx, exclude), sample_d2(old, Z, idx, exclude))
+        np.testing.assert_array_equal(free_d2(bank, Z, exclude), free_d2(old, Z, exclude))
 
 
 def test_screening_is_touch_or_place():

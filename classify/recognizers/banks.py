@@ -53,7 +53,7 @@ class Bank:
 class BankStack:
     """Every object's bank in padded arrays, to score a touch under all objects in one pass.
 
-    Built from the banks (a copy of their samples): signatures (C, E, L) and
+    Built from the banks (a copy of their samples, which :meth:`lend` lends back): signatures (C, E, L) and
     their squared norms (C, E), inf past an object's entries; the entries'
     samples, squared norms and instances stacked object after object, with
     one empty entry last (every sample -1) that a pick past an object's
@@ -82,6 +82,15 @@ class BankStack:
             self.samples[a : a + e, :s], self.sq[a : a + e, :s] = b.samples, b.sq
             self.instances[a : a + e, :s] = b.instances
             self.free[c, :f], self.free_sq[c, :f], self.free_instances[c, :f] = b.free, b.free_sq, b.free_instances
+
+    def lend(self, banks: list) -> None:
+        """Make each of ``banks`` (those the stack was built from) read its samples, their squared norms and
+        instances, and its place-free samples, from views of the stack's: the same values, held once (at
+        1,000 objects the copy is hundreds of megabytes per process)."""
+        for c, (b, a) in enumerate(zip(banks, self.starts)):
+            e, s, f = len(b.keys), b.samples.shape[1], len(b.free)
+            b.samples, b.sq, b.instances = (x[a : a + e, :s] for x in (self.samples, self.sq, self.instances))
+            b.free, b.free_sq, b.free_instances = (x[c, :f] for x in (self.free, self.free_sq, self.free_instances))
 
     def match(self, G: np.ndarray, neighbours: int) -> tuple[np.ndarray, np.ndarray]:
         """(m, C, K) stacked entry rows and log weights (summing to one) of places G (m, L) under every object:

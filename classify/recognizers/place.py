@@ -566,10 +566,12 @@ class PlaceAware(ClassifierMixin, BaseEstimator):
 
     def _stack(self) -> BankStack:
         """The banks stacked for scoring every object at once (built when first asked for, and again when the
-        banks change: ``with_places`` gives a copy other banks)."""
+        banks change: ``with_places`` gives a copy other banks); the banks then read their samples from it."""
         found = getattr(self, "_stacked", None)
         if found is None or found[0] is not self.banks_:
-            found = self._stacked = (self.banks_, BankStack(self.banks_))
+            stack = BankStack(self.banks_)
+            stack.lend(self.banks_)
+            found = self._stacked = (self.banks_, stack)
         return found[1]
 
     def _object_terms(self, bank: Bank, z, g, ex, inv):
