@@ -18,13 +18,17 @@ points per instance, 64 px views, seed 0) run under each of the three, each
 with both controls beside it: each test instance given another object's
 imprints, place for place (``shuffled``) or in a random order
 (``scrambled``, which keeps nothing of where they were taken); chance is
-1 / objects.  The nine runs share one cache, so the instances are computed
+1 / objects.  ``--mismatch decimated`` (any of
+``classify.experiment.config.MISMATCHES``) makes the test instances differ
+from the training ones as that mismatch arm does (``decimated``: another
+tessellation, where the instance's own landmarks lie elsewhere) and writes
+``bench_screening_MISMATCH.md`` instead.  The nine runs share one cache, so the instances are computed
 once, by the first run; each run is a fresh process.  The table gives the
 recognition rate after 1 to 5 touches with its interval, and the
 place-aware stage's wall time, CPU time and peak memory (all processes);
 kNN does not depend on the screening and is given once per control.
 
-    python -m meshsal.util.reproducible .venv/bin/python benchmarks/bench_screening.py [--objects 256]
+    python -m meshsal.util.reproducible .venv/bin/python benchmarks/bench_screening.py [--objects 256] [--mismatch decimated]
 """
 
 from __future__ import annotations
@@ -39,11 +43,11 @@ from benchlib import CORPUS, arguments, corpus_files, run
 _ONE = """
 import json, sys, warnings
 from classify.experiment import ExperimentConfig, Settings, run_experiment
-files, params, control, cache = json.loads(sys.argv[1])
+files, params, control, mismatch, cache = json.loads(sys.argv[1])
 config = ExperimentConfig(
     methods=("mesh_saliency", "uniform"), protocols=("instance",), classifiers=("knn", "place"),
     features="polar", policies=("info_gain",), replicates=2, control=control,
-    settings=Settings(n_points=5, view_size=64, seed=0), params={"place": params},
+    settings=Settings(n_points=5, view_size=64, seed=0, mismatch=tuple(mismatch)), params={"place": params},
 )
 with warnings.catch_warnings():
     warnings.simplefilter("ignore")
@@ -69,10 +73,10 @@ ARMS = (
 CONTROLS = (None, "shuffled", "scrambled")
 
 
-def _arm(files: list, label: str, params: dict, control, cache: str) -> dict:
+def _arm(files: list, label: str, params: dict, control, mismatch: list, cache: str) -> dict:
     """One run in a fresh process: its JSON row (SystemExit naming the arm when it fails)."""
     done = subprocess.run(
-        [sys.executable, "-c", _ONE, json.dumps([files, params, control, cache])],
+        [sys.executable, "-c", _ONE, json.dumps([files, params, control, mismatch, cache])],
         capture_output=True,
         text=True,
         check=False,
@@ -86,10 +90,27 @@ def _rates(values) -> str:
     return " | ".join(f"{m:.1f} [{lo:.1f}, {hi:.1f}]" for m, lo, hi in values)
 
 
-def main() -> int:
+def _page(mismatch: list) -> str:
+    """The page's name: ``bench_screening``, with the mismatch arm's names when there is one."""
+    return "_".join(["bench_screening", *mismatch])
+
+
+def parser():
+    from classify.experiment.config import MISMATCHES
+
     parser = arguments(__doc__, 1, meshes_dir=False)
     parser.add_argument("--objects", type=int, default=256, help="the first N corpus files (default 256)")
-    args = parser.parse_args()
+    parser.add_argument(
+        "--mismatch",
+        choices=MISMATCHES,
+        action="append",
+        default=[],
+        help="a mismatch arm of the test instances (repeat for several); writes bench_screening_MISMATCH.md",
+    )
+    return parser
+
+
+def main(args) -> int:
     if not CORPUS.is_dir():
         print(f"bench_screening: error: {CORPUS} not found", file=sys.stderr)
         return 1
@@ -98,11 +119,12 @@ def main() -> int:
     with tempfile.TemporaryDirectory(prefix="bench_screening-") as cache:
         for label, params in ARMS:
             for control in CONTROLS:
-                rows[label, control] = _arm(files, label, params, control, cache)
+                rows[label, control] = _arm(files, label, params, control, args.mismatch, cache)
                 print(f"screening {label}, control {control}: done", file=sys.stderr)
     first = ARMS[0][0]
     n = rows[first, None]["objects"]
-    print(f"{n} corpus objects, 2 replicates, seed 0; chance {100 / n:.1f} %\n")
+    arm = f"; test instances {', '.join(args.mismatch)}" if args.mismatch else ""
+    print(f"{n} corpus objects, 2 replicates, seed 0{arm}; chance {100 / n:.1f} %\n")
     print("| recognizer | touches: 1 | 2 | 3 | 4 | 5 |")
     print("|---|:---:|:---:|:---:|:---:|:---:|")
     for control in CONTROLS:
@@ -123,4 +145,6 @@ def main() -> int:
 
 
 if __name__ == "__main__":
-    run("bench_screening", "The place-aware recognizer past its shortlist: screened by touch or by place", main)
+    args = parser().parse_args()
+    title = "The place-aware recognizer past its shortlist: screened by touch or by place"
+    run(_page(args.mismatch), title + "".join(f", {m} test instances" for m in args.mismatch), lambda: main(args))
