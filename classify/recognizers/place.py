@@ -201,8 +201,8 @@ class PlaceAware(ClassifierMixin, BaseEstimator):
         objects whose place-free samples come nearest are scored in full,
         every other object by a lower bound.  ``"place"``: every object is
         scored in full, the touch's place located by the touched instance's
-        own landmarks, in one pass over the banks stacked (``BankStack``, a
-        copy of their samples); it keeps the true object where a touch alone
+        own landmarks, in one pass over the banks stacked (``BankStack``,
+        whose arrays the banks then read: the samples held once); it keeps the true object where a touch alone
         would drop it.  The fit then scores its held-out touches under every
         object, and the forecast tables stay shortlisted by the touch alone.
         Registering the most likely objects again (``exact_places``) lets
