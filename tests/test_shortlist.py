@@ -621,7 +621,10 @@ def test_screening_by_place_scores_every_object_at_once_as_each_in_turn():
 
 def test_a_bank_stack_lends_its_banks_their_samples_unchanged():
     # Banks of unequal sizes (entries, samples per entry, place-free samples): once stacked, each reads its
-    # arrays from views of the stack's, so the samples are held once, and every value and distance is the same.
+    # arrays from views of the stack's, its own let go, so the samples are held once, and every value and
+    # distance is the same.
+    import weakref
+
     from classify.recognizers.banks import Bank, BankStack, free_d2, sample_d2
 
     rng = np.random.default_rng(5)
@@ -640,9 +643,10 @@ def test_a_bank_stack_lends_its_banks_their_samples_unchanged():
             )
         )
     before = copy.deepcopy(banks)
+    own = [weakref.ref(b.samples) for b in banks] + [weakref.ref(b.free) for b in banks]
     Z, exclude = rng.normal(size=(6, 4)), np.array([-1, 0, 1, 2, -1, 1])
-    stack = BankStack(banks)
-    stack.lend(banks)
+    stack = BankStack(banks, lend=True)
+    assert all(ref() is None for ref in own)
     for bank, old in zip(banks, before):
         for name in ("samples", "sq", "instances", "free", "free_sq", "free_instances"):
             mine, base = getattr(bank, name), getattr(stack, name)
@@ -651,6 +655,10 @@ def test_a_bank_stack_lends_its_banks_their_samples_unchanged():
         idx = rng.integers(0, len(old.keys), (6, 2))
         np.testing.assert_array_equal(sample_d2(bank, Z, idx, exclude), sample_d2(old, Z, idx, exclude))
         np.testing.assert_array_equal(free_d2(bank, Z, exclude), free_d2(old, Z, exclude))
+    # Without lending, the banks keep their own arrays.
+    kept = copy.deepcopy(before)
+    BankStack(kept)
+    assert all(np.array_equal(k.samples, b.samples) and k.samples.base is None for k, b in zip(kept, before))
 
 
 def test_screening_is_touch_or_place():

@@ -53,15 +53,19 @@ class Bank:
 class BankStack:
     """Every object's bank in padded arrays, to score a touch under all objects in one pass.
 
-    Built from the banks (a copy of their samples, which :meth:`lend` lends back): signatures (C, E, L) and
-    their squared norms (C, E), inf past an object's entries; the entries'
-    samples, squared norms and instances stacked object after object, with
-    one empty entry last (every sample -1) that a pick past an object's
-    entries points to; the place-free samples (C, F, d) and their instances
-    (C, F), -1 past an object's.
+    Built from the banks: signatures (C, E, L) and their squared norms (C, E),
+    inf past an object's entries; the entries' samples, squared norms and
+    instances stacked object after object, with one empty entry last (every
+    sample -1) that a pick past an object's entries points to; the
+    place-free samples (C, F, d) and their instances (C, F), -1 past an
+    object's.  With ``lend``, each bank then reads its samples, their
+    squared norms and instances, and its place-free samples, from views of
+    the stack's (the same values), as soon as they are copied: the samples
+    are held once, and never twice even while the stack is built (at 1,000
+    objects they are hundreds of megabytes per process).
     """
 
-    def __init__(self, banks: list):
+    def __init__(self, banks: list, lend: bool = False):
         C, E = len(banks), max(len(b.keys) for b in banks)
         L, d = banks[0].signatures.shape[1], banks[0].samples.shape[2]
         S, F = max(b.samples.shape[1] for b in banks), max(len(b.free) for b in banks)
@@ -69,6 +73,7 @@ class BankStack:
         self.starts = np.r_[0, np.cumsum(self.entries)[:-1]]
         self.signatures, self.sig_sq = np.zeros((C, E, L)), np.full((C, E), np.inf)
         total = int(self.entries.sum())
+        # Zeros are mapped, not written: an object's rows take memory as its bank's are copied and let go.
         self.samples = np.zeros((total + 1, S, d), np.float32)
         self.sq = np.zeros((total + 1, S), np.float32)
         self.instances = np.full((total + 1, S), -1, np.int64)
@@ -82,15 +87,9 @@ class BankStack:
             self.samples[a : a + e, :s], self.sq[a : a + e, :s] = b.samples, b.sq
             self.instances[a : a + e, :s] = b.instances
             self.free[c, :f], self.free_sq[c, :f], self.free_instances[c, :f] = b.free, b.free_sq, b.free_instances
-
-    def lend(self, banks: list) -> None:
-        """Make each of ``banks`` (those the stack was built from) read its samples, their squared norms and
-        instances, and its place-free samples, from views of the stack's: the same values, held once (at
-        1,000 objects the copy is hundreds of megabytes per process)."""
-        for c, (b, a) in enumerate(zip(banks, self.starts)):
-            e, s, f = len(b.keys), b.samples.shape[1], len(b.free)
-            b.samples, b.sq, b.instances = (x[a : a + e, :s] for x in (self.samples, self.sq, self.instances))
-            b.free, b.free_sq, b.free_instances = (x[c, :f] for x in (self.free, self.free_sq, self.free_instances))
+            if lend:
+                b.samples, b.sq, b.instances = (x[a : a + e, :s] for x in (self.samples, self.sq, self.instances))
+                b.free, b.free_sq, b.free_instances = (x[c, :f] for x in (self.free, self.free_sq, self.free_instances))
 
     def match(self, G: np.ndarray, neighbours: int) -> tuple[np.ndarray, np.ndarray]:
         """(m, C, K) stacked entry rows and log weights (summing to one) of places G (m, L) under every object:

@@ -569,9 +569,7 @@ class PlaceAware(ClassifierMixin, BaseEstimator):
         banks change: ``with_places`` gives a copy other banks); the banks then read their samples from it."""
         found = getattr(self, "_stacked", None)
         if found is None or found[0] is not self.banks_:
-            stack = BankStack(self.banks_)
-            stack.lend(self.banks_)
-            found = self._stacked = (self.banks_, stack)
+            found = self._stacked = (self.banks_, BankStack(self.banks_, lend=True))
         return found[1]
 
     def _object_terms(self, bank: Bank, z, g, ex, inv):
