@@ -661,6 +661,39 @@ def test_a_bank_stack_lends_its_banks_their_samples_unchanged():
     assert all(np.array_equal(k.samples, b.samples) and k.samples.base is None for k, b in zip(kept, before))
 
 
+def test_the_knowledge_lets_its_training_touches_go_before_the_fit_chooses(monkeypatch):
+    # A thousand objects' codebook touches are hundreds of megabytes per worker; the choice of the fit, screened
+    # by place, scores under every object, so the touches must not lie beside it.  The same fit, bit for bit.
+    import weakref
+
+    import classify.policies.place_knowledge as pk
+
+    training, _ = _training()
+    made, alive = [], []
+    touches, choose = pk.place_touches, PlaceAware._choose
+
+    def traced(*args, **kwargs):
+        out = touches(*args, **kwargs)
+        made.append(weakref.ref(out[0]))
+        return out
+
+    def checked(self, session):
+        alive.append(made[-1]() is not None)
+        return choose(self, session)
+
+    monkeypatch.setattr(pk, "place_touches", traced)
+    monkeypatch.setattr(PlaceAware, "_choose", checked)
+    params = {"shortlist": 3, "screening": "place"}
+    knowledge = fit_place_knowledge(training, {"place": params})
+    assert alive == [False]
+    X, y, sig, inst, keys = touches(training, knowledge.names, dtype=np.float64)
+    whole = PlaceAware(**params).fit(
+        X, y, signatures=sig, instances=inst, places=keys, session=pk._session_touches(training, knowledge.names)
+    )
+    got = (knowledge.model.fit_loss_, knowledge.model.bandwidth_, knowledge.model.mixture_)
+    assert got == (whole.fit_loss_, whole.bandwidth_, whole.mixture_)
+
+
 def test_screening_is_touch_or_place():
     X = np.random.default_rng(0).normal(size=(8, 3))
     with pytest.raises(ValueError, match=r"screening must be one of \('touch', 'place'\), got 'sight'"):

@@ -237,11 +237,12 @@ def fit_place_knowledge(training: dict, params: dict | None = None) -> PlaceKnow
 
     names = tuple(sorted({name for name, _ in training}))
     X, y, sig, inst, keys = place_touches(training, names, dtype=np.float64)
-    # The fit standardizes X in place (no float64 copy beside it), and X is spent.
-    model = make("place", **(params or {}).get("place", {})).fit(
-        X, y, signatures=sig, instances=inst, places=keys, session=_session_touches(training, names), overwrite_X=True
-    )
-    del X
+    model = make("place", **(params or {}).get("place", {}))
+    # The banks take X standardized in place (no float64 copy beside it); the touches then go before the fit
+    # chooses its parameters, whose scoring (under every object, screened by place) would lie beside them.
+    session = model._fit_banks(X, y, sig, inst, keys, _session_touches(training, names), overwrite_X=True)
+    del X, y, sig, inst, keys
+    model._choose(session)
     table, weights = model.forecast_table()
     # Each object's first training instance.
     first = {}

@@ -298,6 +298,13 @@ class PlaceAware(ClassifierMixin, BaseEstimator):
         -------
         self
         """
+        self._choose(self._fit_banks(X, y, signatures, instances, places, session, overwrite_X))
+        return self
+
+    def _fit_banks(self, X, y, signatures, instances, places, session, overwrite_X):
+        """The first half of :meth:`fit`: check the parameters and touches, standardize and whiten, build the banks;
+        returns the held-out session the second half (``_choose``) scores.  A caller whose ``X`` is spent lets it
+        go in between (``fit_place_knowledge``): the choice, screened by place, scores under every object."""
         Z = describe_touches(X, copy=not overwrite_X)
         y = np.asarray(y, np.int64)
         sig = np.asarray(signatures, np.float64)
@@ -350,9 +357,7 @@ class PlaceAware(ClassifierMixin, BaseEstimator):
                 Bank(k, s, samples, sample_inst, Z[mine][free], inst[mine][free], self.match_width * spacing(s))
             )
         self.free_ = FreeStack.of([b.free for b in self.banks_], [b.free_instances for b in self.banks_])
-        del Z
-        self._choose(session)
-        return self
+        return session
 
     def _standardized(self, D: np.ndarray) -> np.ndarray:
         return ((D - self.mean_) / self.scale_) @ self.whitening_
