@@ -22,8 +22,9 @@ imprints, place for place (``shuffled``) or in a random order
 ``classify.experiment.config.MISMATCHES``) makes the test instances differ
 from the training ones as that mismatch arm does (``decimated``: another
 tessellation, where the instance's own landmarks lie elsewhere) and writes
-``bench_screening_MISMATCH.md`` instead.  The nine runs share one cache, so the instances are computed
-once, by the first run; each run is a fresh process.  The table gives the
+``bench_screening_MISMATCH.md`` instead.  The nine runs share one cache,
+so the instances are computed once, by the first run; each run is a fresh
+process.  The table gives the
 recognition rate after 1 to 5 touches with its interval, and the
 place-aware stage's wall time, CPU time and peak memory (all processes);
 kNN does not depend on the screening and is given once per control.
