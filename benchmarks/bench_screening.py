@@ -124,8 +124,8 @@ def main(args) -> int:
                 print(f"screening {label}, control {control}: done", file=sys.stderr)
     first = ARMS[0][0]
     n = rows[first, None]["objects"]
-    arm = f"; test instances {', '.join(args.mismatch)}" if args.mismatch else ""
-    print(f"{n} corpus objects, 2 replicates, seed 0{arm}; chance {100 / n:.1f} %\n")
+    tested = f"; test instances {', '.join(args.mismatch)}" if args.mismatch else ""
+    print(f"{n} corpus objects, 2 replicates, seed 0{tested}; chance {100 / n:.1f} %\n")
     print("| recognizer | touches: 1 | 2 | 3 | 4 | 5 |")
     print("|---|:---:|:---:|:---:|:---:|:---:|")
     for control in CONTROLS:

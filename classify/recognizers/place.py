@@ -202,9 +202,10 @@ class PlaceAware(ClassifierMixin, BaseEstimator):
         every other object by a lower bound.  ``"place"``: every object is
         scored in full, the touch's place located by the touched instance's
         own landmarks, in one pass over the banks stacked (``BankStack``,
-        whose arrays the banks then read: the samples held once); it keeps the true object where a touch alone
-        would drop it.  The fit then scores its held-out touches under every
-        object, and the forecast tables stay shortlisted by the touch alone.
+        whose arrays the banks then read: the samples held once); it keeps
+        the true object where a touch alone would drop it.  The fit then
+        scores its held-out touches under every object, and the forecast
+        tables stay shortlisted by the touch alone.
         Registering the most likely objects again (``exact_places``) lets
         the test instance's shape in: the true object, when among those
         scored again, tends to win even when what was felt came from another
