@@ -190,7 +190,7 @@ def _experiment_options(p) -> None:
         default="touch",
         help=f"place-aware recognizer past {SHORTLIST} objects: score a touch in full under the {SHORTLIST} objects "
         f"its touch alone puts nearest, registering onto the {EXACT_PLACES} nearest ('touch', the default), or under "
-        "every object at its place on the touched instance's own landmarks ('place')",
+        "every object at its place located through the two surface frames ('place')",
     )
     p.add_argument(
         "--mismatch",

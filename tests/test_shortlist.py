@@ -26,6 +26,7 @@ from classify.policies import (
 from classify.policies.policy import InfoGainPolicy
 from classify.recognizers.place import PlaceAware
 from classify.recognizers.shortlist import FreeStack, SparseRows, nearest_classes
+from meshsal.points.frames import ShapeFrame
 from meshsal.points.learned import FEATURES
 
 OBJECTS, PLACES = 10, 24
@@ -47,8 +48,13 @@ def _training(seed=0):
 
 
 def _places(positions, rng):
+    """Places in one frame for every instance (the identity): each object's landmarks laid onto another
+    instance lie where its own are."""
     n = len(positions)
-    return Places(np.arange(n), positions, rng.normal(size=(n, 3)), np.zeros((n, len(FEATURES))), np.ones(n, bool))
+    frame = ShapeFrame(np.zeros(3), np.eye(3), 1.0)
+    return Places(
+        np.arange(n), positions, rng.normal(size=(n, 3)), np.zeros((n, len(FEATURES))), np.ones(n, bool), frame
+    )
 
 
 @pytest.fixture(scope="module")
@@ -169,6 +175,37 @@ def test_past_the_shortlist_only_the_nearest_objects_ask_for_the_exact_place(fit
     assert sorted(asked) == list(range(OBJECTS)) and all(e is None for _, e in asked.values())
 
 
+def test_past_the_shortlist_a_turned_resized_instance_is_located_through_its_frame(fitted):
+    # The test instance turned, moved and resized, its frame with it: every object's landmarks are laid onto it
+    # through the frames, so its touches are located, and scored, as on the instance in the training frame.
+    import dataclasses
+
+    training, feels, full, _ = fitted
+    X, positions, places = _touches_of_object(training, feels, 5, np.random.default_rng(8))
+    Q, _ = np.linalg.qr(np.random.default_rng(9).normal(size=(3, 3)))
+    R, s, t = Q * np.sign(np.linalg.det(Q)), 2.5, np.array([30.0, -4.0, 9.0])
+    frame = ShapeFrame(t, R.T.copy(), s)  # the identity frame, turned, moved and resized
+    turned = dataclasses.replace(places, positions=s * places.positions @ R.T + t, frame=frame)
+    moved = s * positions @ R.T + t
+    nowhere = _limited(full, 6, 0)
+    np.testing.assert_allclose(
+        nowhere.signatures_at(moved, turned, None, np.zeros(len(moved), bool)),
+        nowhere.signatures_at(positions, places, None, np.zeros(len(moved), bool)),
+        atol=1e-12,
+    )
+    post = nowhere.posterior_at(X, moved, turned)
+    np.testing.assert_allclose(post, nowhere.posterior_at(X, positions, places), atol=1e-9)
+    assert int(np.argmax(post.prod(axis=0))) == 5
+    # A frame that does not turn with the instance lays the landmarks elsewhere.
+    astray = dataclasses.replace(turned, frame=ShapeFrame(t, np.eye(3), s))
+    wrong = nowhere.signatures_at(moved, astray, None, np.zeros(len(moved), bool))
+    assert np.abs(wrong - nowhere.signatures_at(positions, places, None, np.zeros(len(moved), bool))).max() > 0.1
+    # Places without a frame cannot be located past the shortlist: a clear error, not another location.
+    bare = dataclasses.replace(places, frame=None)
+    with pytest.raises(ValueError, match="no surface frame"):
+        nowhere.posterior_at(X, positions, bare)
+
+
 def test_registration_onto_the_whole_shortlist_is_the_full_location_bit_for_bit(fitted):
     training, feels, full, _ = fitted
     X, positions, places = _touches_of_object(training, feels, 5, np.random.default_rng(5))
@@ -176,7 +213,8 @@ def test_registration_onto_the_whole_shortlist_is_the_full_location_bit_for_bit(
     # Every object's place by registration, given as an array: what the shortlist then reads of it.
     G = full.signatures_at(positions, places)
     np.testing.assert_array_equal(everywhere.posterior_at(X, positions, places), everywhere.model.predict_proba(X, G))
-    # With no exact place, every object locates the touch against the instance's own landmarks.
+    # With no exact place, every object's landmarks are laid onto the instance through the frames: here where
+    # the instance's own lie.
     nowhere = _limited(full, 6, 0)
     post = nowhere.posterior_at(X, positions, places)
     np.testing.assert_array_equal(post, nowhere.model.predict_proba(X, signatures(places)[8:14]))
@@ -617,6 +655,12 @@ def test_screening_by_place_scores_every_object_at_once_as_each_in_turn():
 
     np.testing.assert_array_equal(model.log_likelihood(Q, where, exclude=exclude), at_once)
     assert set(asked) == {None}
+    # Each object's own places (as the surface frames lay them), given by the function at once, are scored as
+    # the same places given object by object.
+    H = G[:, None] + rng.uniform(-1.0, 1.0, (40, 12, 3))
+    at_once = model.log_likelihood(Q, lambda c, rows, exact: H[rows], exclude=exclude)
+    np.testing.assert_allclose(at_once, model.log_likelihood(Q, H, exclude=exclude), rtol=1e-12, atol=1e-12)
+    assert not np.allclose(at_once, in_turn)
 
 
 def test_a_bank_stack_lends_its_banks_their_samples_unchanged():

@@ -8,8 +8,8 @@ Then, with the same fitted model:
 
 * every **fixed plan** (each of ``--methods``) adds the codebooks of its own
   points on the training instances to the banks, locates the points it
-  touches on the test instance by their signatures (against the test
-  instance's own landmarks), and fuses the touches' place-aware posteriors
+  touches on the test instance as the knowledge locates any touch
+  (``classify.policies.PlaceKnowledge``), and fuses the touches' place-aware posteriors
   over the same touch sets, tie breaks and stopping rule as the place-free
   recognizers (``classify.experiment.protocols.plan_outcome``);
 * every **touch policy** runs its episodes with the place-aware belief and

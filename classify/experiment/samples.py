@@ -288,11 +288,12 @@ def candidate_places_at(piece, ids, features, settings: Settings) -> Places:
     Their imprints are session 0 of the instance (:func:`instance_samples`):
     the same streams as the methods' sessions, so the same devices.
     """
+    from meshsal.points.frames import shape_frame
     from meshsal.points.touch import touchable
 
     positions, normals = piece.mesh.vertices[ids], piece.vertex_normals[ids]
     ok = touchable(piece.mesh, positions, normals, settings.sensor.width_mm, scene=piece.scene)
-    return Places(ids, positions, normals, features, ok)
+    return Places(ids, positions, normals, features, ok, shape_frame(piece.mesh.vertices, piece.mesh.faces))
 
 
 def _looked_at(piece, settings: Settings, places: bool):

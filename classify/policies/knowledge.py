@@ -67,6 +67,10 @@ class Places:
         What the 72 views see at each place.
     touchable : (P,) bool
         The pad pressed along the normal meets the place first (``meshsal.points.touch``).
+    frame : meshsal.points.frames.ShapeFrame or None
+        The instance's surface frame (``meshsal.points.frames.shape_frame``):
+        how another object's landmarks are laid onto it without registering
+        it (``classify.policies.place_knowledge``).  None where no mesh gave one.
     """
 
     vertex_ids: np.ndarray
@@ -74,22 +78,29 @@ class Places:
     normals: np.ndarray
     features: np.ndarray
     touchable: np.ndarray
+    frame: object = None
 
     def __len__(self) -> int:
         return int(self.vertex_ids.size)
 
     def to_arrays(self) -> dict:
-        return {
+        arrays = {
             "vertex_ids": self.vertex_ids,
             "positions": self.positions,
             "normals": self.normals,
             "features": self.features,
             "touchable": self.touchable,
         }
+        if self.frame is not None:
+            arrays["frame"] = self.frame.to_array()
+        return arrays
 
     @staticmethod
     def from_arrays(a: dict) -> Places:
-        return Places(a["vertex_ids"], a["positions"], a["normals"], a["features"], a["touchable"].astype(bool))
+        from meshsal.points.frames import ShapeFrame
+
+        frame = ShapeFrame.from_array(a["frame"]) if "frame" in a else None
+        return Places(a["vertex_ids"], a["positions"], a["normals"], a["features"], a["touchable"].astype(bool), frame)
 
 
 @dataclass(frozen=True, eq=False)

@@ -13,7 +13,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from classify.policies.knowledge import Forecast, Places, in_object_order, signatures
+from classify.policies.knowledge import LANDMARKS, Forecast, Places, in_object_order, signatures
 
 __all__ = ["PlaceKnowledge", "fit_place_knowledge", "place_keys", "place_touches"]
 
@@ -103,9 +103,12 @@ class PlaceKnowledge:
     landmarks elsewhere; every hypothesis is treated alike, and how well the
     places fit is never evidence.  Past the recognizer's shortlist, a touch is
     located so only under the ``exact_places`` objects its screening puts
-    nearest, and a forecast under none: elsewhere the instance's own
-    landmarks locate it, so that the registrations per test instance stay
-    bounded however many objects there are.  The forecast of a place under j is what
+    nearest, and a forecast under none: elsewhere j's landmarks are laid onto
+    the instance through the two surface frames
+    (``meshsal.points.frames.lay_landmarks``: each instance's own, from its
+    surface alone), so that the registrations per test instance stay bounded
+    however many objects there are, and another tessellation of the test
+    instance still finds j's places.  The forecast of a place under j is what
     j's codebook touches at its matched places would make of the belief.
 
     Attributes
@@ -115,6 +118,7 @@ class PlaceKnowledge:
     table : list of classify.recognizers.shortlist.SparseRows (E_j, S), ``model.forecast_table()`` posteriors
     table_weights : list of (E_j, S) float64
     references : tuple of (P_j, 3) float64, each object's training places (its first training instance's)
+    frames : tuple of meshsal.points.frames.ShapeFrame, the surface frame of that instance
     features : str, always "polar"
     """
 
@@ -123,11 +127,13 @@ class PlaceKnowledge:
     table: list
     table_weights: list
     references: tuple
+    frames: tuple
     features: str = "polar"
     #: Matched entries a forecast draws on per object and place.
     forecast_neighbours: int = 2
     _landmarks: dict = field(default_factory=dict, repr=False)
     _references: dict = field(default_factory=dict, repr=False)
+    _frame_landmarks: list = field(default_factory=list, repr=False)
 
     @property
     def n_classes(self) -> int:
@@ -165,27 +171,46 @@ class PlaceKnowledge:
             self._references[c] = registration_places(self.references[c])
         return self._references[c]
 
+    def laid_landmarks(self, places: Places, classes=None) -> np.ndarray:
+        """(J, LANDMARKS, 3) the landmarks of each object of ``classes`` (default: every object) laid onto the
+        instance of ``places`` through the two surface frames (``meshsal.points.frames.lay_landmarks``)."""
+        if places.frame is None:
+            raise ValueError(
+                "the instance's places have no surface frame (meshsal.points.frames.shape_frame): past the "
+                "recognizer's shortlist its places are located through it"
+            )
+        if not self._frame_landmarks:
+            self._frame_landmarks.append(
+                np.stack([f.to_shape(r[:LANDMARKS]) for f, r in zip(self.frames, self.references)])
+            )
+        coords = self._frame_landmarks[0]
+        if classes is not None:
+            coords = coords[np.asarray(classes, np.int64)]
+        return places.frame.from_shape(coords.reshape(-1, 3)).reshape(coords.shape)
+
     def signatures_at(self, positions, places: Places, classes=None, registered=None) -> np.ndarray:
         """(k, J, LANDMARKS) where points of the instance of ``places`` lie on each object of ``classes``
         (default: every object).
 
         ``registered`` (k,) bool, optional: the points located by registering
         the instance onto each object (default: every point); the others are
-        located against the instance's own landmarks, as its places are.
+        located against each object's landmarks laid onto the instance through
+        the two surface frames (:meth:`laid_landmarks`).
         """
         from meshsal.points.places import signatures as located
 
-        J = range(self.n_classes) if classes is None else classes
+        positions = np.asarray(positions, np.float64).reshape(-1, 3)
+        J = np.arange(self.n_classes) if classes is None else np.asarray(classes, np.int64)
         mask = None if registered is None else np.asarray(registered, bool)[:, None]
-        own = None if mask is None or mask.all() else signatures(places, positions)
+        laid = None if mask is None or mask.all() else _located(positions, self.laid_landmarks(places, J))
+        if laid is not None and not mask.any():
+            return laid  # registered onto nothing
 
-        def under(j: int) -> np.ndarray:
-            if own is not None and not mask.any():
-                return own  # registered onto nothing
+        def under(a: int, j: int) -> np.ndarray:
             at = located(positions, self.landmarks(places, j))
-            return at if own is None else np.where(mask, at, own)
+            return at if laid is None else np.where(mask, at, laid[:, a])
 
-        return np.stack([under(int(j)) for j in J], axis=1)
+        return np.stack([under(a, int(j)) for a, j in enumerate(J)], axis=1)
 
     def posterior(self, imprints: np.ndarray, places: Places) -> np.ndarray:
         """(k, C) single-touch posteriors of imprints (k, rows, cols) taken at the first k of ``places``."""
@@ -198,11 +223,11 @@ class PlaceKnowledge:
         positions = np.asarray(positions, np.float64)
 
         # Located on an object only when the model asks: when the object is on a touch's shortlist; past the
-        # shortlist, by registration only under the objects the screening puts nearest (``exact``), and on the
-        # instance's own landmarks under every object at once (c None).
+        # shortlist, by registration only under the objects the screening puts nearest (``exact``), and through
+        # the surface frames under every object at once (c None).
         def where(c, rows, exact):
             if c is None:
-                return signatures(places, positions[rows])
+                return self.signatures_at(positions[rows], places, None, np.zeros(len(rows), bool))
             return self.signatures_at(positions[rows], places, [c], exact)[:, 0]
 
         return self.model.predict_proba(imprints, where)
@@ -212,8 +237,8 @@ class PlaceKnowledge:
         from the codebooks of the matched entries."""
         C, P = self.n_classes, len(places)
         J = np.arange(C) if classes is None else np.asarray(classes, np.int64)
-        # Past the shortlist the places are located against the instance's own landmarks under every
-        # hypothesis: a forecast only ranks places.  Registering onto its hypotheses (255 objects, 4 exact
+        # Past the shortlist the places are located through the surface frames under every hypothesis: a
+        # forecast only ranks places.  Registering onto its hypotheses (255 objects, 4 exact
         # places) took 78 registrations per test instance instead of 49, and moved the rates by 1.6 points at most.
         G = self.signatures_at(places.positions, places, J, np.zeros(P, bool) if C > self.hypotheses else None)
         K = self.forecast_neighbours
@@ -249,4 +274,17 @@ def fit_place_knowledge(training: dict, params: dict | None = None) -> PlaceKnow
     for _, name, j, _ in in_object_order(training, names):
         first.setdefault(name, j)
     references = tuple(training[name, first[name]].places.positions for name in names)
-    return PlaceKnowledge(names, model, table, weights, references)
+    frames = tuple(training[name, first[name]].places.frame for name in names)
+    return PlaceKnowledge(names, model, table, weights, references, frames)
+
+
+def _located(positions: np.ndarray, laid: np.ndarray) -> np.ndarray:
+    """``meshsal.points.places.signatures`` of positions (k, 3) against each of J landmark sets (J, L, 3) at once:
+    (k, J, L) float64, a landmark column at a time (no (k, J, L, 3) array)."""
+    k, (J, L, _) = len(positions), laid.shape
+    out = np.empty((k, J, L))
+    for m in range(L):
+        out[:, :, m] = np.linalg.norm(positions[:, None, :] - laid[None, :, m, :], axis=2)
+    scale = np.linalg.norm(laid[:, 1] - laid[:, 0], axis=1) if L > 1 else np.zeros(J)
+    out /= np.where(scale > 0, scale, 1.0)[None, :, None]
+    return out

@@ -92,13 +92,19 @@ class BankStack:
                 b.free, b.free_sq, b.free_instances = (x[c, :f] for x in (self.free, self.free_sq, self.free_instances))
 
     def match(self, G: np.ndarray, neighbours: int) -> tuple[np.ndarray, np.ndarray]:
-        """(m, C, K) stacked entry rows and log weights (summing to one) of places G (m, L) under every object:
-        each object's ``neighbours`` entries of nearest signature, weighted as ``PlaceAware`` weighs them."""
+        """(m, C, K) stacked entry rows and log weights (summing to one) of places G (m, L), the same under every
+        object, or (m, C, L), each object's own: each object's ``neighbours`` entries of nearest signature,
+        weighted as ``PlaceAware`` weighs them."""
         (C, E, L), m = self.signatures.shape, len(G)
         K = min(int(neighbours), E)
-        d2 = (G @ self.signatures.reshape(C * E, L).T).reshape(m, C, E)
-        d2 *= -2.0
-        d2 += np.einsum("ml,ml->m", G, G)[:, None, None]
+        if G.ndim == 3:
+            d2 = np.matmul(G.transpose(1, 0, 2), self.signatures.transpose(0, 2, 1)).transpose(1, 0, 2).copy()
+            d2 *= -2.0
+            d2 += np.einsum("mcl,mcl->mc", G, G)[:, :, None]
+        else:
+            d2 = (G @ self.signatures.reshape(C * E, L).T).reshape(m, C, E)
+            d2 *= -2.0
+            d2 += np.einsum("ml,ml->m", G, G)[:, None, None]
         d2 += self.sig_sq[None]  # inf past an object's entries
         np.maximum(d2, 0.0, out=d2)
         pick = np.argpartition(d2, K - 1, axis=2)[..., :K] if K < E else np.tile(np.arange(E), (m, C, 1))

@@ -191,7 +191,8 @@ class PlaceAware(ClassifierMixin, BaseEstimator):
         Past the shortlist, the objects under which a touch's place is asked
         for in full (by registration, in ``PlaceKnowledge``) when
         ``signatures`` is a function; under the others it is located more
-        cheaply, on the touched instance's own landmarks.  Screened by touch,
+        cheaply, each object's landmarks laid onto the touched instance
+        through the two surface frames (``meshsal.points.frames``).  Screened by touch,
         the shortlisted objects nearest by the screening (None: 8,
         ``EXACT_PLACES``); screened by place, the objects most likely at the
         cheap place, which are then scored again (None: 0, none).
@@ -200,8 +201,8 @@ class PlaceAware(ClassifierMixin, BaseEstimator):
         ``shortlist``).  ``"touch"``: by the touch alone; the ``shortlist``
         objects whose place-free samples come nearest are scored in full,
         every other object by a lower bound.  ``"place"``: every object is
-        scored in full, the touch's place located by the touched instance's
-        own landmarks, in one pass over the banks stacked (``BankStack``,
+        scored in full, the touch's place located through the surface frames,
+        in one pass over the banks stacked (``BankStack``,
         whose arrays the banks then read: the samples held once); it keeps
         the true object where a touch alone would drop it.  The fit then
         scores its held-out touches under every object, and the forecast
@@ -505,9 +506,10 @@ class PlaceAware(ClassifierMixin, BaseEstimator):
         row's ``exact_places`` nearest objects by the screening, or None when
         every object is scored with its place located in full.  Past the
         shortlist without one, the function is asked once for the rows, with
-        c and ``exact`` None: their places located cheaply (on the touched
-        instance's own landmarks), the same under every object, which are
-        then scored all at once (``BankStack``).  Past the shortlist, when ``shortlisted``
+        c and ``exact`` None: their places located cheaply, (len(rows), L)
+        the same under every object or (len(rows), C, L) each object's (its
+        landmarks laid onto the touched instance through the surface frames),
+        which are then scored all at once (``BankStack``).  Past the shortlist, when ``shortlisted``
         (default: ``screening == "touch"``), an object off a touch's shortlist has no place term
         (-inf) and the place-free term's nearest kernel alone: lower bounds.
         The third value is the (n, C) bool shortlist then, else None.
@@ -543,7 +545,7 @@ class PlaceAware(ClassifierMixin, BaseEstimator):
                         np.subtract(np.multiply(-s, screened[rows], out=term), logcount, out=term)
                         term[count[rows] <= 0] = _NEG
         if past and not shortlisted and (callable(G) or G.ndim == 2):
-            # Every object at once, at the place located on the touched instance's own landmarks.
+            # Every object at once, at the place located cheaply (the same under every object, or each object's).
             stack = self._stack()
             step = max(1, _STACKED // (C * stack.samples[0].nbytes * min(self.neighbours, stack.signatures.shape[1])))
             for a in range(0, n, step):
@@ -602,8 +604,9 @@ class PlaceAware(ClassifierMixin, BaseEstimator):
             called only for the objects on a touch's shortlist; ``exact`` (len(rows),) bool says which touches
             have c among their ``exact_places`` nearest objects by the screening (None when every object is
             scored): under the others a caller may locate the place more cheaply.  Screened by place past the
-            shortlist, it is asked with c and ``exact`` None for the place located cheaply under every object,
-            then with ``exact`` all True under each touch's ``exact_places`` most likely objects
+            shortlist, it is asked with c and ``exact`` None for the place located cheaply under every object
+            ((len(rows), L) the same under all, or (len(rows), C, L)), then with ``exact`` all True under each
+            touch's ``exact_places`` most likely objects
         exclude : (n,) int, optional
             A training instance whose touches each query leaves out (-1: none).
         """
