@@ -60,6 +60,7 @@ def test_the_frame_turns_moves_and_scales_with_the_shape(seed):
     V, F = _lopsided()
     R, s, t = _turn(seed), 0.3 + seed, np.array([5.0, -2.0, 7.0]) * seed
     one, other = shape_frame(V, F), shape_frame(s * V @ R.T + t, F)
+    assert np.linalg.det(one.axes) == pytest.approx(1.0) and np.linalg.det(other.axes) == pytest.approx(1.0)
     np.testing.assert_allclose(other.center, s * R @ one.center + t, atol=1e-9)
     np.testing.assert_allclose(other.axes, one.axes @ R.T, atol=1e-9)
     assert other.scale == pytest.approx(s * one.scale, rel=1e-12)

@@ -5,16 +5,16 @@ a mesh's surface from its area-weighted moments, integrated exactly over
 the faces: another tessellation of the same surface has the same moments,
 so, unlike the landmarks of :func:`meshsal.points.places.candidate_pool`
 (farthest-point samples, whose order another tessellation can change), the
-frame moves with the surface only.  Each axis points where the surface
-reaches farther (its third moment along the axis is positive), so a turned,
-moved and resized instance has its frame turned, moved and resized with it.
-The three signs are chosen each on its own, and the frame may be mirrored
-(its axes' determinant -1): two instances of one shape agree on it, and
-where a shape is mirror-symmetric the axis across its plane of symmetry,
-along which the surface is balanced, may come out either way, which lays a
-place onto its mirror image, a place that feels alike.  Where two axes
-have equal spread the frame is defined only up to that symmetry, as the
-places are.
+frame moves with the surface only.  The first two axes point where the
+surface reaches farther (its third moment along the axis is positive), and
+the third completes a right-handed frame, so a turned, moved and resized
+instance has its frame turned, moved and resized with it.  The third axis's
+own third moment is not asked: along the least spread it is often near
+zero, and another tessellation would flip it (on 64 decimated corpus
+meshes, 20 % of the third axes against 16 % of the second).  Where the
+shape is symmetric (two axes of equal spread, or a surface balanced along
+one of the first two axes) the frame is defined only up to that symmetry,
+as the places are.
 
 :func:`lay_landmarks` carries one instance's landmarks onto another through
 the two frames: under the hypothesis "the object is j", the test instance's
@@ -33,9 +33,8 @@ __all__ = ["ShapeFrame", "shape_frame", "lay_landmarks"]
 
 @dataclass(frozen=True, eq=False)
 class ShapeFrame:
-    """A surface's centroid ``center`` (3,), principal ``axes`` (3, 3) as orthonormal rows (largest spread first,
-    each towards the surface's positive third moment) and ``scale`` (the surface's root-mean-square distance from
-    its centroid), float64."""
+    """A surface's centroid ``center`` (3,), principal ``axes`` (3, 3) as rows (largest spread first, a proper
+    rotation) and ``scale`` (the surface's root-mean-square distance from its centroid), float64."""
 
     center: np.ndarray
     axes: np.ndarray
@@ -108,9 +107,11 @@ def shape_frame(vertices, faces) -> ShapeFrame:
     second /= 12.0
     spread, vectors = np.linalg.eigh(second)
     axes = vectors[:, ::-1].T.copy()
-    for k in range(3):
+    for k in range(2):
         if _third_moment(w, a, b, c, axes[k]) < 0:
             axes[k] = -axes[k]
+    # Instances are turned, never mirrored: the third axis completes a right-handed frame.
+    axes[2] = np.cross(axes[0], axes[1])
     return ShapeFrame(center, axes, float(np.sqrt(max(spread.sum(), 0.0))))
 
 
