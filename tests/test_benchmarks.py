@@ -43,3 +43,31 @@ def test_bench_batch_measures_the_same_meshes_in_its_own_process(bench_batch, tm
     one = [{"stages": here["stages"], "tasks": 3 * here["cpu_per_mesh"], "done": 2}]
     ycb = dict.fromkeys(bench_batch.STAGES, 0.001)
     assert "1.50x: what a Dask worker adds to a task" in bench_batch._stages(one, [here], ycb)
+
+
+@pytest.fixture
+def bench_locate(monkeypatch):
+    monkeypatch.syspath_prepend(str(BENCHMARKS))
+    import bench_locate
+
+    yield bench_locate
+    sys.modules.pop("bench_locate", None)
+
+
+def test_bench_locate_finds_every_place_of_a_turned_copy_and_puts_it_back_in_the_meshs_frame(bench_locate):
+    import numpy as np
+
+    # A ball stretched and rippled out of every symmetry, turned, resized and moved: the same vertices, so every
+    # way of locating finds every place exactly, and the benchmark's undo brings the copy back onto the mesh.
+    ball = shapes.icosphere(radius=40.0, subdivisions=3)
+    V = ball.vertices * [1.0, 0.7, 0.45]
+    V *= 1.0 + 0.2 * np.sin(V @ [0.071, 0.043, 0.029] + 0.3)[:, None]
+    mesh = ball.replace(vertices=V)
+    Q, _ = np.linalg.qr(np.random.default_rng(1).normal(size=(3, 3)))
+    R = Q * np.sign(np.linalg.det(Q))
+    copy = mesh.replace(vertices=1.7 * V @ R.T + 5.0)
+    undo = lambda X: ((X - 5.0) / 1.7) @ R  # noqa: E731
+    np.testing.assert_allclose(undo(copy.vertices), V, atol=1e-9)
+    for how in ("own", "frames", "registration"):
+        excess, seconds = bench_locate._located(mesh, copy, undo, how)
+        assert excess.size > 20 and np.abs(excess).max() < 1e-6 and seconds > 0, how
