@@ -5,10 +5,11 @@ touch in full only under some objects (``PlaceAware(screening=...)``):
 
 * ``touch`` (the default): the 16 objects whose place-free samples come
   nearest the touch; every other object gets a lower bound;
-* ``place``: every object, the touch's place located by the touched
-  instance's own landmarks (by default nothing more, ``exact_places=0``),
-  and with ``exact_places=8`` the 8 most likely objects again, the place
-  located by registration.
+* ``place``: every object, the touch's place located by laying each
+  object's landmarks onto the touched instance through the two surface
+  frames (by default nothing more, ``exact_places=0``), and with
+  ``exact_places=8`` the 8 most likely objects again, the place located by
+  registration.
 
 For the first ``--objects`` corpus objects (``../shared/corpus/random-objects``,
 sorted by name, a file that does not load left out), the settings of
@@ -21,7 +22,7 @@ imprints, place for place (``shuffled``) or in a random order
 1 / objects.  ``--mismatch decimated`` (any of
 ``classify.experiment.config.MISMATCHES``) makes the test instances differ
 from the training ones as that mismatch arm does (``decimated``: another
-tessellation, where the instance's own landmarks lie elsewhere) and writes
+tessellation, which can reorder the instance's own landmarks) and writes
 ``bench_screening_MISMATCH.md`` instead.  The nine runs share one cache,
 so the instances are computed once, by the first run; each run is a fresh
 process.  The table gives the
