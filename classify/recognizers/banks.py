@@ -99,12 +99,12 @@ class BankStack:
         K = min(int(neighbours), E)
         if G.ndim == 3:
             d2 = np.matmul(G.transpose(1, 0, 2), self.signatures.transpose(0, 2, 1)).transpose(1, 0, 2).copy()
-            d2 *= -2.0
-            d2 += np.einsum("mcl,mcl->mc", G, G)[:, :, None]
+            norms = np.einsum("mcl,mcl->mc", G, G)[:, :, None]
         else:
             d2 = (G @ self.signatures.reshape(C * E, L).T).reshape(m, C, E)
-            d2 *= -2.0
-            d2 += np.einsum("ml,ml->m", G, G)[:, None, None]
+            norms = np.einsum("ml,ml->m", G, G)[:, None, None]
+        d2 *= -2.0
+        d2 += norms
         d2 += self.sig_sq[None]  # inf past an object's entries
         np.maximum(d2, 0.0, out=d2)
         pick = np.argpartition(d2, K - 1, axis=2)[..., :K] if K < E else np.tile(np.arange(E), (m, C, 1))
