@@ -44,7 +44,7 @@ POINTS = 5
 
 
 def _instances(files: list, kind: str, seed: int) -> list:
-    """(A, B, undo) per object: its mesh, a turned, resized, moved retessellation, and B's positions back in A's."""
+    """:func:`_pair` per object: its mesh, a turned, resized, moved retessellation, and B's positions back in A's."""
     import meshsal
     from meshsal.mesh import MeshError
     from meshsal.mesh.transform import scale_to
@@ -64,18 +64,26 @@ def _instances(files: list, kind: str, seed: int) -> list:
         Q, _ = np.linalg.qr(rng.normal(size=(3, 3)))
         R, s, t = Q * np.sign(np.linalg.det(Q)), rng.uniform(0.5, 2.0), rng.uniform(-100.0, 100.0, 3)
         B = B.replace(vertices=s * B.vertices @ R.T + t)
-        out.append((A, B, lambda X, R=R, s=s, t=t: ((X - t) / s) @ R))
+        out.append(_pair(A, B, lambda X, R=R, s=s, t=t: ((X - t) / s) @ R))
     return out
 
 
-def _located(A, B, undo, how: str) -> tuple[np.ndarray, float]:
-    """Each of B's places' excess distance from the best A place (landmark spacings), and the seconds it took."""
+def _pair(A, B, undo) -> tuple:
+    """(A, B, XA, XB, undo): the two meshes with their candidate places' positions, found once for every way
+    and repeat, and ``undo``, B's positions back in A's frame."""
     from meshsal.mesh.curvature import mesh_saliency
-    from meshsal.points.frames import lay_landmarks, shape_frame
-    from meshsal.points.places import LANDMARKS, candidate_places, landmarks_in, signatures
+    from meshsal.points.places import candidate_places
 
-    XA = A.vertices[candidate_places(A, mesh_saliency(A), POINTS)]
-    XB = B.vertices[candidate_places(B, mesh_saliency(B), POINTS)]
+    XA, XB = (m.vertices[candidate_places(m, mesh_saliency(m), POINTS)] for m in (A, B))
+    return A, B, XA, XB, undo
+
+
+def _located(pair: tuple, how: str) -> tuple[np.ndarray, float]:
+    """Each of B's places' excess distance from the best A place (landmark spacings), and the seconds it took."""
+    from meshsal.points.frames import lay_landmarks, shape_frame
+    from meshsal.points.places import LANDMARKS, landmarks_in, signatures
+
+    A, B, XA, XB, undo = pair
     LA = XA[:LANDMARKS]
     start = time.perf_counter()
     if how == "own":
@@ -111,8 +119,8 @@ def main(argv=None) -> int:
         label = f"{kind} ({len(pairs)} objects)"
         for how, landmarks in labels.items():
             excess, times = [], []
-            for A, B, undo in pairs:
-                runs = [_located(A, B, undo, how) for _ in range(args.repeats)]
+            for pair in pairs:
+                runs = [_located(pair, how) for _ in range(args.repeats)]
                 excess.append(runs[0][0])
                 times.append(statistics.median(r[1] for r in runs))
             e = np.concatenate(excess)

@@ -69,5 +69,5 @@ def test_bench_locate_finds_every_place_of_a_turned_copy_and_puts_it_back_in_the
     undo = lambda X: ((X - 5.0) / 1.7) @ R  # noqa: E731
     np.testing.assert_allclose(undo(copy.vertices), V, atol=1e-9)
     for how in ("own", "frames", "registration"):
-        excess, seconds = bench_locate._located(mesh, copy, undo, how)
+        excess, seconds = bench_locate._located(bench_locate._pair(mesh, copy, undo), how)
         assert excess.size > 20 and np.abs(excess).max() < 1e-6 and seconds > 0, how

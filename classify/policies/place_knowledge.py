@@ -9,6 +9,7 @@ forecasts what a touch there would make of the belief.
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -133,7 +134,6 @@ class PlaceKnowledge:
     forecast_neighbours: int = 2
     _landmarks: dict = field(default_factory=dict, repr=False)
     _references: dict = field(default_factory=dict, repr=False)
-    _frame_landmarks: list = field(default_factory=list, repr=False)
 
     @property
     def n_classes(self) -> int:
@@ -179,14 +179,15 @@ class PlaceKnowledge:
                 "the instance's places have no surface frame (meshsal.points.frames.shape_frame): past the "
                 "recognizer's shortlist its places are located through it"
             )
-        if not self._frame_landmarks:
-            self._frame_landmarks.append(
-                np.stack([f.to_shape(r[:LANDMARKS]) for f, r in zip(self.frames, self.references)])
-            )
-        coords = self._frame_landmarks[0]
+        coords = self._landmarks_in_frames
         if classes is not None:
             coords = coords[np.asarray(classes, np.int64)]
         return places.frame.from_shape(coords.reshape(-1, 3)).reshape(coords.shape)
+
+    @functools.cached_property
+    def _landmarks_in_frames(self) -> np.ndarray:
+        """(C, LANDMARKS, 3) each object's landmarks in its own surface frame."""
+        return np.stack([f.to_shape(r[:LANDMARKS]) for f, r in zip(self.frames, self.references)])
 
     def signatures_at(self, positions, places: Places, classes=None, registered=None) -> np.ndarray:
         """(k, J, LANDMARKS) where points of the instance of ``places`` lie on each object of ``classes``
@@ -202,7 +203,7 @@ class PlaceKnowledge:
         positions = np.asarray(positions, np.float64).reshape(-1, 3)
         J = np.arange(self.n_classes) if classes is None else np.asarray(classes, np.int64)
         mask = None if registered is None else np.asarray(registered, bool)[:, None]
-        laid = None if mask is None or mask.all() else _located(positions, self.laid_landmarks(places, J))
+        laid = None if mask is None or mask.all() else located(positions, self.laid_landmarks(places, J))
         if laid is not None and not mask.any():
             return laid  # registered onto nothing
 
@@ -276,15 +277,3 @@ def fit_place_knowledge(training: dict, params: dict | None = None) -> PlaceKnow
     references = tuple(training[name, first[name]].places.positions for name in names)
     frames = tuple(training[name, first[name]].places.frame for name in names)
     return PlaceKnowledge(names, model, table, weights, references, frames)
-
-
-def _located(positions: np.ndarray, laid: np.ndarray) -> np.ndarray:
-    """``meshsal.points.places.signatures`` of positions (k, 3) against each of J landmark sets (J, L, 3) at once:
-    (k, J, L) float64, a landmark column at a time (no (k, J, L, 3) array)."""
-    k, (J, L, _) = len(positions), laid.shape
-    out = np.empty((k, J, L))
-    for m in range(L):
-        out[:, :, m] = np.linalg.norm(positions[:, None, :] - laid[None, :, m, :], axis=2)
-    scale = np.linalg.norm(laid[:, 1] - laid[:, 0], axis=1) if L > 1 else np.zeros(J)
-    out /= np.where(scale > 0, scale, 1.0)[None, :, None]
-    return out

@@ -107,7 +107,8 @@ def candidate_places(
 
 
 def signatures(positions, landmarks) -> np.ndarray:
-    """Where each point lies on its shape, whatever the pose and size: (k, L) float64.
+    """Where each point lies on its shape, whatever the pose and size: (k, L) float64, or (k, J, L) against J
+    landmark sets at once.
 
     A point's distances to the ``L`` landmarks (the first :data:`LANDMARKS`
     places of the instance's :func:`candidate_pool`), over the distance between
@@ -118,7 +119,8 @@ def signatures(positions, landmarks) -> np.ndarray:
     Parameters
     ----------
     positions : (k, 3) float64
-    landmarks : (L, 3) float64, in the same frame
+    landmarks : (L, 3) float64, in the same frame; or (J, L, 3), J sets (e.g. J objects' landmarks laid
+        onto one instance, ``meshsal.points.frames.lay_landmarks``), each against its own first two
 
     Examples
     --------
@@ -128,12 +130,28 @@ def signatures(positions, landmarks) -> np.ndarray:
     >>> turned = X @ np.array([[0.0, 1, 0], [-1, 0, 0], [0, 0, 1]]) * 3 + 7     # turned, scaled, moved
     >>> bool(np.allclose(signatures(turned, turned), signatures(X, X)))
     True
+    >>> signatures(X, np.stack([X, 2 * X])).shape
+    (3, 2, 3)
     """
     X = np.asarray(positions, dtype=np.float64).reshape(-1, 3)
-    L = np.asarray(landmarks, dtype=np.float64).reshape(-1, 3)
+    L = np.asarray(landmarks, dtype=np.float64)
+    if L.ndim == 3:
+        return _signatures_of_sets(X, L)
+    L = L.reshape(-1, 3)
     d = np.linalg.norm(X[:, None, :] - L[None, :, :], axis=2)
     scale = float(np.linalg.norm(L[1] - L[0])) if len(L) > 1 else 0.0
     return d / scale if scale > 0 else d
+
+
+def _signatures_of_sets(X: np.ndarray, L: np.ndarray) -> np.ndarray:
+    """:func:`signatures` of points (k, 3) against J landmark sets (J, L, 3): (k, J, L), a landmark column at a
+    time (no (k, J, L, 3) array)."""
+    (J, n, _), out = L.shape, np.empty((len(X), *L.shape[:2]))
+    for m in range(n):
+        out[:, :, m] = np.linalg.norm(X[:, None, :] - L[None, :, m, :], axis=2)
+    scale = np.linalg.norm(L[:, 1] - L[:, 0], axis=1) if n > 1 else np.zeros(J)
+    out /= np.where(scale > 0, scale, 1.0)[None, :, None]
+    return out
 
 
 def similarity_fit(source, target) -> tuple[float, np.ndarray, np.ndarray]:
