@@ -237,6 +237,32 @@ def test_the_fit_standardizes_in_place_as_its_predictions_do_with_few_touch_size
         assert np.array_equal(bank.samples[bank.instances >= 0], Z[mine][order].astype(np.float32))
 
 
+def test_the_within_place_whitening_forms_its_residuals_a_block_at_a_time():
+    # A thousand objects' codebooks are millions of touches: a touch-sized array of residuals beside them is
+    # hundreds of megabytes.  In blocks, the same map (the sums' order alone differs); in one block, the same bits.
+    import tracemalloc
+
+    from classify.recognizers.banks import within_place_whitening
+
+    X, y, _, _, key = _many_touches()
+    whole = within_place_whitening(X, y, key, rows=len(X))
+    assert np.array_equal(within_place_whitening(X, y, key), whole)  # fewer touches than a block
+    tracemalloc.start()
+    try:
+        blocked = within_place_whitening(X, y, key, rows=1000)
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    np.testing.assert_allclose(blocked, whole, rtol=1e-12, atol=1e-12)
+    assert peak < 0.4 * X.nbytes, peak / X.nbytes
+    # The map whitens: the pooled within-place spread becomes (nearly) the identity, up to the shrinkage.
+    means = np.zeros((y.max() + 1, key.max() + 1, X.shape[1]))
+    np.add.at(means, (y, key), X)
+    R = (X - means[y, key] / np.bincount(y * (key.max() + 1) + key)[y * (key.max() + 1) + key, None]) @ whole
+    spread = R.T @ R / (len(R) - (y.max() + 1) * (key.max() + 1))  # less one degree of freedom per place
+    assert np.abs(np.diag(spread) - 1).max() < 0.05 and np.abs(spread - np.diag(np.diag(spread))).max() < 0.05
+
+
 def test_a_fit_that_may_overwrite_its_descriptors_is_the_same_fit_with_one_touch_sized_array_fewer(monkeypatch):
     import tracemalloc
 

@@ -112,11 +112,11 @@ class PlaceOutcome:
 def place_job(job: PlaceJob) -> PlaceOutcome:
     """Fit the place-aware recognizer on the training codebooks, then recognize every plan and run every policy."""
     n, K, L = len(job.names), job.touches, len(job.stop_levels)
-    # Packed training places unpack one at a time, as the knowledge reads them; the tests, read at every touch,
-    # unpack once.
-    tests = tuple(t.unpacked() for t in job.tests)
     with threadpool_limits(1):
+        # Packed training places unpack one at a time, as the knowledge reads them; the tests, read at every
+        # touch, unpack once, after the fit (whose peak they would add to).
         knowledge = fit_place_knowledge(job.training, job.params)
+        tests = tuple(t.unpacked() for t in job.tests)
         plans = [_plan_outcome(job, m, knowledge, tests) for m in job.methods]
         if job.policies:
             policy = run_policies(

@@ -52,26 +52,43 @@ def place_touches(samples: dict, names: tuple, points=None, dtype=None) -> tuple
     """
     from meshsal.points.places import signatures as located
 
-    X, y, sig, inst, keys = [], [], [], [], []
+    # Two passes: the first locates the touches and counts them, the second copies the codebooks into X, which is
+    # allocated once (a thousand objects' codebooks, gathered and then joined, would lie twice in memory).
+    found, kinds = [], []
     for c, name, j, sample in in_object_order(samples, names):
-        sample = sample.in_memory()  # read once: a stored sample reads its file on each use
-        if sample.codebook is None:
-            raise ValueError(f"{name}, training instance {j}: no touch codebook (run with the place-aware recognizer)")
-        if points is None:
-            ok = sample.places.touchable
-            where = located(sample.places.positions[ok], sample.landmarks)
-            book = sample.codebook[ok]
-        else:
-            plan = points[name, j]
-            where = located(plan.positions, sample.landmarks)
-            book = plan.codebook
-        draws = book.shape[1]
-        X.append(book.reshape(-1, book.shape[2]))
-        y.append(np.full(book.shape[0] * draws, c))
-        sig.append(np.repeat(where, draws, axis=0))
-        inst.append(np.full(book.shape[0] * draws, j))
-        keys.append(np.repeat(place_keys(where), draws))
-    return (np.concatenate(X, dtype=dtype), *(np.concatenate(a) for a in (y, sig, inst, keys)))
+        book, where = _codebook(sample, name, j, points, located)
+        found.append((c, j, where, book.shape[1]))
+        kinds.append(book.dtype)
+        d = book.shape[2]
+    X = np.empty((sum(len(where) * draws for _, _, where, draws in found), d), dtype or np.result_type(*kinds))
+    start = 0
+    for _, name, j, sample in in_object_order(samples, names):
+        book = _codebook(sample, name, j, points)[0]
+        X[start : start + book.shape[0] * book.shape[1]] = book.reshape(-1, d)
+        start += book.shape[0] * book.shape[1]
+    # Per place, then repeated per draw: no per-touch array is gathered in pieces.
+    where = np.concatenate([w for _, _, w, _ in found])
+    draws = np.repeat([n for _, _, _, n in found], [len(w) for _, _, w, _ in found])
+    place_class = np.repeat([c for c, _, _, _ in found], [len(w) for _, _, w, _ in found])
+    place_instance = np.repeat([j for _, j, _, _ in found], [len(w) for _, _, w, _ in found])
+    y, inst = np.repeat(place_class, draws), np.repeat(place_instance, draws)
+    sig, keys = np.repeat(where, draws, axis=0), np.repeat(place_keys(where), draws)
+    return X, y, sig, inst, keys
+
+
+def _codebook(sample, name: str, j: int, points, located=None) -> tuple:
+    """A training instance's codebook (k, draws, d) at its touchable places, or at a fixed plan's points (from
+    ``points``), and where those lie against its landmarks (k, LANDMARKS) when ``located`` is given (else None)."""
+    sample = sample.in_memory()  # read once: a stored sample reads its file on each use
+    if sample.codebook is None:
+        raise ValueError(f"{name}, training instance {j}: no touch codebook (run with the place-aware recognizer)")
+    if points is None:
+        ok = sample.places.touchable
+        positions, book = sample.places.positions[ok], sample.codebook[ok]
+    else:
+        plan = points[name, j]
+        positions, book = plan.positions, plan.codebook
+    return book, None if located is None else located(positions, sample.landmarks)
 
 
 def _session_touches(samples: dict, names: tuple) -> tuple:
@@ -264,11 +281,12 @@ def fit_place_knowledge(training: dict, params: dict | None = None) -> PlaceKnow
     names = tuple(sorted({name for name, _ in training}))
     X, y, sig, inst, keys = place_touches(training, names, dtype=np.float64)
     model = make("place", **(params or {}).get("place", {}))
-    # The banks take X standardized in place (no float64 copy beside it); the touches then go before the fit
-    # chooses its parameters, whose scoring (under every object, screened by place) would lie beside them.
-    session = model._fit_banks(X, y, sig, inst, keys, _session_touches(training, names), overwrite_X=True)
+    # The banks take X standardized in place (no float64 copy beside it); the touches then go before the
+    # held-out session is read and the fit chooses its parameters, whose scoring (under every object, screened
+    # by place) would lie beside them.
+    model._fit_banks(X, y, sig, inst, keys, overwrite_X=True, first_touches=False)
     del X, y, sig, inst, keys
-    model._choose(session)
+    model._choose(_session_touches(training, names))
     table, weights = model.forecast_table()
     # Each object's first training instance.
     first = {}

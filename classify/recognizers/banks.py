@@ -10,9 +10,12 @@ from __future__ import annotations
 
 import numpy as np
 
+from classify.runtime.cluster import release_free_memory
+
 __all__ = [
     "Bank",
     "BankStack",
+    "RESIDUAL_ROWS",
     "entries",
     "evenly_spaced",
     "free_d2",
@@ -50,6 +53,10 @@ class Bank:
         self.free_sq = np.einsum("fd,fd->f", free, free)
 
 
+#: Bytes of lent bank samples between two hand-backs of the heap's freed pages while a stack is built.
+_RELEASE_EVERY = 1 << 26
+
+
 class BankStack:
     """Every object's bank in padded arrays, to score a touch under all objects in one pass.
 
@@ -60,9 +67,10 @@ class BankStack:
     place-free samples (C, F, d) and their instances (C, F), -1 past an
     object's.  With ``lend``, each bank then reads its samples, their
     squared norms and instances, and its place-free samples, from views of
-    the stack's (the same values), as soon as they are copied: the samples
-    are held once, and never twice even while the stack is built (at 1,000
-    objects they are hundreds of megabytes per process).
+    the stack's (the same values), as soon as they are copied, and the
+    pages of its own go back to the system (``release_free_memory``): the
+    samples are held once, and never twice even while the stack is built
+    (at 1,000 objects they are hundreds of megabytes per process).
     """
 
     def __init__(self, banks: list, lend: bool = False):
@@ -80,6 +88,7 @@ class BankStack:
         self.free, self.free_sq = np.zeros((C, F, d)), np.zeros((C, F))
         self.free_instances = np.full((C, F), -1, np.int64)
         self.match_width = np.array([b.match_width for b in banks], np.float64)
+        lent = 0
         for c, (b, a) in enumerate(zip(banks, self.starts)):
             e, s, f = len(b.keys), b.samples.shape[1], len(b.free)
             self.signatures[c, :e] = b.signatures
@@ -88,8 +97,14 @@ class BankStack:
             self.instances[a : a + e, :s] = b.instances
             self.free[c, :f], self.free_sq[c, :f], self.free_instances[c, :f] = b.free, b.free_sq, b.free_instances
             if lend:
+                lent += b.samples.nbytes
                 b.samples, b.sq, b.instances = (x[a : a + e, :s] for x in (self.samples, self.sq, self.instances))
                 b.free, b.free_sq, b.free_instances = (x[c, :f] for x in (self.free, self.free_sq, self.free_instances))
+                # A bank's arrays, below the mmap threshold, came from the heap: their pages go back as they go, or
+                # every bank would stay resident beside the stack.
+                if lent >= _RELEASE_EVERY or c == C - 1:
+                    release_free_memory()
+                    lent = 0
 
     def match(self, G: np.ndarray, neighbours: int) -> tuple[np.ndarray, np.ndarray]:
         """(m, C, K) stacked entry rows and log weights (summing to one) of places G (m, L), the same under every
@@ -207,17 +222,29 @@ def spacing(signatures) -> float:
     return float(np.median(d)) if d.size else 1.0
 
 
-def within_place_whitening(Z, y, keys) -> np.ndarray:
+#: Residual rows ``within_place_whitening`` holds at once (44 MB of 42 float64 descriptors).
+RESIDUAL_ROWS = 1 << 17
+
+
+def within_place_whitening(Z, y, keys, rows: int = RESIDUAL_ROWS) -> np.ndarray:
     """(d, d) map that makes the touches of one place spread alike in every direction: the inverse square root
-    of the pooled covariance of the touches about their place's mean, shrunk towards its diagonal."""
+    of the pooled covariance of the touches about their place's mean, shrunk towards its diagonal.
+
+    The residuals are formed ``rows`` at a time, never as a touch-sized array
+    (a thousand objects' codebooks are millions of touches); up to ``rows``
+    touches they are one block, one product.
+    """
     _, group = np.unique(np.c_[y, keys], axis=0, return_inverse=True)
     group = group.reshape(-1)
     means = np.zeros((group.max() + 1, Z.shape[1]))
     np.add.at(means, group, Z)
     means /= np.bincount(group)[:, None]
-    R = means[group]
-    np.subtract(Z, R, out=R)  # in place: one touch-sized array, not two
-    W = R.T @ R / max(len(R) - group.max() - 1, 1)
+    W = None
+    for a in range(0, len(Z), rows):
+        R = means[group[a : a + rows]]
+        np.subtract(Z[a : a + rows], R, out=R)
+        W = R.T @ R if W is None else W + R.T @ R
+    W = W / max(len(Z) - group.max() - 1, 1)
     W = 0.9 * W + 0.1 * np.diag(np.diag(W)) + 1e-6 * np.trace(W) / len(W) * np.eye(len(W))
     vals, vecs = np.linalg.eigh(W)
     return vecs @ np.diag(1.0 / np.sqrt(vals)) @ vecs.T

@@ -300,13 +300,19 @@ class PlaceAware(ClassifierMixin, BaseEstimator):
         -------
         self
         """
-        self._choose(self._fit_banks(X, y, signatures, instances, places, session, overwrite_X))
+        first = self._fit_banks(X, y, signatures, instances, places, overwrite_X, first_touches=session is None)
+        self._choose(first if session is None else session)
         return self
 
-    def _fit_banks(self, X, y, signatures, instances, places, session, overwrite_X):
-        """The first half of :meth:`fit`: check the parameters and touches, standardize and whiten, build the banks;
-        returns the held-out session the second half (``_choose``) scores.  A caller whose ``X`` is spent lets it
-        go in between (``fit_place_knowledge``): the choice, screened by place, scores under every object."""
+    def _fit_banks(self, X, y, signatures, instances, places, overwrite_X, first_touches=True):
+        """The first half of :meth:`fit`: check the parameters and touches, standardize and whiten, build the banks.
+
+        Returns, with ``first_touches``, the default held-out session the
+        second half (``_choose``) scores: the first touch of each place and
+        instance (else None).  A caller with its own session, whose ``X`` is
+        spent, lets it go in between (``fit_place_knowledge``): the choice,
+        screened by place, scores under every object.
+        """
         Z = describe_touches(X, copy=not overwrite_X)
         y = np.asarray(y, np.int64)
         sig = np.asarray(signatures, np.float64)
@@ -337,7 +343,8 @@ class PlaceAware(ClassifierMixin, BaseEstimator):
             raise ValueError(f"screening must be one of {SCREENINGS}, got {self.screening!r}")
         self.mean_ = Z.mean(axis=0)
         self.scale_ = np.maximum(Z.std(axis=0), 1e-9 * max(float(Z.std()), 1e-300))
-        if session is None:
+        session = None
+        if first_touches:
             first = np.unique(np.c_[y, inst, keys], axis=0, return_index=True)[1]
             session = (Z[first], y[first], sig[first], inst[first])
         # Standardized and whitened in place, a block of rows at a time: the operations of _standardized with one
@@ -726,6 +733,8 @@ class PlaceAware(ClassifierMixin, BaseEstimator):
         # Many objects' rows are scored together: under each object, the rows that shortlist it come in one
         # call, not one per object whose rows they are.  A group's (rows, C) arrays stay near _FORECAST bytes.
         most = max(_CHUNK, _FORECAST // (8 * C))
+        # The smallest signed integers that index every object: the table holds T of them per row.
+        index = np.min_scalar_type(-C)
         sizes = [len(rows_e) for _, rows_e, _, _ in picked]
         posteriors, weights = [], []
         first = 0
@@ -747,9 +756,13 @@ class PlaceAware(ClassifierMixin, BaseEstimator):
             ll /= self.temperature_
             post = np.exp(ll - lse(ll, axis=1, keepdims=True))
             if member is None:
-                values, classes, rest = post, np.tile(np.arange(T), (len(post), 1)), np.full(len(post), 1.0 / C)
+                values, classes, rest = (
+                    post,
+                    np.tile(np.arange(T, dtype=index), (len(post), 1)),
+                    np.full(len(post), 1.0 / C),
+                )
             else:
-                classes = np.nonzero(member)[1].reshape(len(post), T)
+                classes = np.nonzero(member)[1].reshape(len(post), T).astype(index)
                 values = np.take_along_axis(post, classes, axis=1)
                 rest = np.maximum(1.0 - values.sum(axis=1), 0.0) / (C - T)
             start = 0
@@ -758,7 +771,7 @@ class PlaceAware(ClassifierMixin, BaseEstimator):
                 E, stop = len(used), start + len(rows_e)
                 # Rows past an entry's touches are uniform, with no weight.
                 v = np.full((E, samples, T), 1.0 / C)
-                k = np.tile(np.arange(T), (E, samples, 1))
+                k = np.tile(np.arange(T, dtype=index), (E, samples, 1))
                 r = np.full((E, samples), 1.0 / C)
                 v[rows_e, rows_s], k[rows_e, rows_s], r[rows_e, rows_s] = (
                     values[start:stop],

@@ -142,7 +142,7 @@ class SparseRows:
     """Posteriors over many objects, each row kept at its shortlisted objects.
 
     ``values`` (..., T) float64 the posterior of each shortlisted object,
-    ``classes`` (..., T) int64 which objects (increasing), ``rest`` (...)
+    ``classes`` (..., T) signed integers, which objects (increasing), ``rest`` (...)
     float64 the posterior of every other object, ``n_classes`` C.
     """
 
