@@ -60,7 +60,7 @@ def place_touches(samples: dict, names: tuple, points=None, dtype=None) -> tuple
         found.append((c, j, where, book.shape[1]))
         kinds.append(book.dtype)
         d = book.shape[2]
-    X = np.empty((sum(len(where) * draws for _, _, where, draws in found), d), dtype or np.result_type(*kinds))
+    X = np.empty((sum(len(w) * n for _, _, w, n in found), d), dtype or np.result_type(*kinds))
     start = 0
     for _, name, j, sample in in_object_order(samples, names):
         book = _codebook(sample, name, j, points)[0]
@@ -68,10 +68,10 @@ def place_touches(samples: dict, names: tuple, points=None, dtype=None) -> tuple
         start += book.shape[0] * book.shape[1]
     # Per place, then repeated per draw: no per-touch array is gathered in pieces.
     where = np.concatenate([w for _, _, w, _ in found])
-    draws = np.repeat([n for _, _, _, n in found], [len(w) for _, _, w, _ in found])
-    place_class = np.repeat([c for c, _, _, _ in found], [len(w) for _, _, w, _ in found])
-    place_instance = np.repeat([j for _, j, _, _ in found], [len(w) for _, _, w, _ in found])
-    y, inst = np.repeat(place_class, draws), np.repeat(place_instance, draws)
+    places = [len(w) for _, _, w, _ in found]
+    draws = np.repeat([n for _, _, _, n in found], places)
+    y = np.repeat(np.repeat([c for c, _, _, _ in found], places), draws)
+    inst = np.repeat(np.repeat([j for _, j, _, _ in found], places), draws)
     sig, keys = np.repeat(where, draws, axis=0), np.repeat(place_keys(where), draws)
     return X, y, sig, inst, keys
 
