@@ -180,17 +180,23 @@ def _die_with_parent() -> None:
 MALLOC_THRESHOLDS = {"mmap": 32 << 20, "trim": 64 << 20}
 
 
-def _set_malloc_thresholds() -> None:
-    """Set :data:`MALLOC_THRESHOLDS` in this process with ``mallopt`` (glibc on Linux; elsewhere nothing)."""
+def _glibc():
+    """The C library, when it is glibc on Linux (whose malloc the functions below tune); else None."""
     import ctypes
     import platform
 
     if sys.platform != "linux" or platform.libc_ver()[0] != "glibc":
-        return
-    mallopt = ctypes.CDLL("libc.so.6").mallopt
-    # glibc's M_MMAP_THRESHOLD and M_TRIM_THRESHOLD.
-    mallopt(-3, MALLOC_THRESHOLDS["mmap"])
-    mallopt(-1, MALLOC_THRESHOLDS["trim"])
+        return None
+    return ctypes.CDLL("libc.so.6")
+
+
+def _set_malloc_thresholds() -> None:
+    """Set :data:`MALLOC_THRESHOLDS` in this process with ``mallopt`` (glibc on Linux; elsewhere nothing)."""
+    libc = _glibc()
+    if libc is not None:
+        # glibc's M_MMAP_THRESHOLD and M_TRIM_THRESHOLD.
+        libc.mallopt(-3, MALLOC_THRESHOLDS["mmap"])
+        libc.mallopt(-1, MALLOC_THRESHOLDS["trim"])
 
 
 def release_free_memory() -> None:
@@ -203,12 +209,9 @@ def release_free_memory() -> None:
     banks into one stack, each bank's own arrays let go as they are copied,
     would hold both copies at once otherwise.
     """
-    import ctypes
-    import platform
-
-    if sys.platform != "linux" or platform.libc_ver()[0] != "glibc":
-        return
-    ctypes.CDLL("libc.so.6").malloc_trim(0)
+    libc = _glibc()
+    if libc is not None:
+        libc.malloc_trim(0)
 
 
 def _worker_setup():
