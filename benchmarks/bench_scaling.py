@@ -18,14 +18,16 @@ time and peak memory (all processes, sampled every 0.1 s:
 ``classify.runtime.usage``); a PNG plots time per object against the
 number of objects.
 Stages whose time per object grows with the objects are the ones to fix.
-Past 16 objects the place-aware recognizer and ``info_gain`` work on
-shortlists of 16 objects (``classify.recognizers.shortlist``): their
-rates there are the shortlisted model's, below what the full model gives.
-``--screening place`` runs the recognizer with ``screening="place"`` (every
-touch scored under every object) and writes ``bench_scaling_place.md``
-and its PNG instead, so the default screening's page stays.
+Past 16 objects ``info_gain`` forecasts under the belief's 16 most likely
+objects, and screened by touch the place-aware recognizer scores a touch in
+full under 16 (``classify.recognizers.shortlist``): their rates there are
+the shortlisted model's, below what the full model gives.
+The page is named by the screening it ran (``--screening``, default the
+recognizer's own, ``place``: every touch scored under every object):
+``bench_scaling_place.md`` or ``bench_scaling_touch.md``, with its PNG, so
+a page keeps its name when the default changes.
 
-    python -m meshsal.util.reproducible .venv/bin/python benchmarks/bench_scaling.py [--counts 16,64,256,1000] [--repeats 3] [--keep DIR] [--screening touch|place]
+    python -m meshsal.util.reproducible .venv/bin/python benchmarks/bench_scaling.py [--counts 16,64,256,1000] [--repeats 3] [--keep DIR] [--screening place|touch]
 """
 
 from __future__ import annotations
@@ -40,6 +42,7 @@ from pathlib import Path
 import numpy as np
 from benchlib import CORPUS, arguments, corpus_files, run
 
+from classify.recognizers.place import SCREENINGS, PlaceAware
 from classify.runtime.cache import code_fingerprint, file_fingerprint
 from meshsal.util.atomic import atomic_path
 from meshsal.util.pages import machine
@@ -73,8 +76,8 @@ print(json.dumps({"objects": n, "timings": result.timings, "usage": result.usage
 
 
 def _page(screening: str | None) -> str:
-    """The page's name: ``bench_scaling`` under the recognizer's default screening, else with the screening's."""
-    return "bench_scaling" if screening is None else f"bench_scaling_{screening}"
+    """The page's name, after the screening it runs (None: the place-aware recognizer's default)."""
+    return f"bench_scaling_{screening or PlaceAware().screening}"
 
 
 def _measure(count: int, params: dict) -> dict | None:
@@ -108,9 +111,9 @@ def parser():
     )
     parser.add_argument(
         "--screening",
-        choices=("touch", "place"),
+        choices=SCREENINGS,
         help="the place-aware recognizer's screening past its shortlist (default: the recognizer's own); "
-        "a screening given writes its own page, bench_scaling_SCREENING.md",
+        "the page is bench_scaling_SCREENING.md",
     )
     return parser
 
@@ -209,6 +212,5 @@ def _plot(rows, stages, png: Path) -> None:
 if __name__ == "__main__":
     args = parser().parse_args()
     title = "How the experiment's cost grows with the number of objects"
-    run(
-        _page(args.screening), title + (f", screened by {args.screening}" if args.screening else ""), lambda: main(args)
-    )
+    screening = args.screening or PlaceAware().screening
+    run(_page(screening), f"{title}, screened by {screening}", lambda: main(args))

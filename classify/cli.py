@@ -187,10 +187,10 @@ def _experiment_options(p) -> None:
     p.add_argument(
         "--screening",
         choices=SCREENINGS,
-        default="touch",
-        help=f"place-aware recognizer past {SHORTLIST} objects: score a touch in full under the {SHORTLIST} objects "
-        f"its touch alone puts nearest, registering onto the {EXACT_PLACES} nearest ('touch', the default), or under "
-        "every object at its place located through the two surface frames ('place')",
+        default="place",
+        help=f"place-aware recognizer past {SHORTLIST} objects: score a touch in full under every object at its "
+        "place located through the two surface frames ('place', the default), or under the "
+        f"{SHORTLIST} objects its touch alone puts nearest, registering onto the {EXACT_PLACES} nearest ('touch')",
     )
     p.add_argument(
         "--mismatch",
@@ -383,7 +383,7 @@ def _experiment(args) -> int:
         policies=args.policies,
         replicates=FULL_REPLICATES if args.full else replicates,
         control=args.control,
-        params={} if args.screening == "touch" else {"place": {"screening": args.screening}},
+        params={} if args.screening == "place" else {"place": {"screening": args.screening}},
     )
     if args.real:
         result = run_real(args.real, config, out_dir=args.out, quiet=args.quiet, n_jobs=args.jobs)

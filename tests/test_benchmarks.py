@@ -1,6 +1,7 @@
 """The benchmarks' measuring code against the library it measures: a benchmark that reaches for an attribute the
 library no longer has fails here, on tiny inputs, and not at the end of an hour's run."""
 
+import importlib
 import sys
 from pathlib import Path
 
@@ -10,13 +11,16 @@ import shapes
 BENCHMARKS = Path(__file__).resolve().parents[1] / "benchmarks"
 
 
+def _benchmark(monkeypatch, name: str):
+    """The benchmark script ``name`` imported as a module, then forgotten."""
+    monkeypatch.syspath_prepend(str(BENCHMARKS))  # the benchmarks import their helpers as 'benchlib'
+    yield importlib.import_module(name)
+    sys.modules.pop(name, None)
+
+
 @pytest.fixture
 def bench_batch(monkeypatch):
-    monkeypatch.syspath_prepend(str(BENCHMARKS))  # the benchmarks import their helpers as 'benchlib'
-    import bench_batch
-
-    yield bench_batch
-    sys.modules.pop("bench_batch", None)
+    yield from _benchmark(monkeypatch, "bench_batch")
 
 
 def test_bench_batch_counts_the_meshes_and_the_cpu_time_of_every_process(bench_batch, tmp_path):
@@ -47,11 +51,7 @@ def test_bench_batch_measures_the_same_meshes_in_its_own_process(bench_batch, tm
 
 @pytest.fixture
 def bench_locate(monkeypatch):
-    monkeypatch.syspath_prepend(str(BENCHMARKS))
-    import bench_locate
-
-    yield bench_locate
-    sys.modules.pop("bench_locate", None)
+    yield from _benchmark(monkeypatch, "bench_locate")
 
 
 def test_bench_locate_finds_every_place_of_a_turned_copy_and_puts_it_back_in_the_meshs_frame(bench_locate):
@@ -71,3 +71,20 @@ def test_bench_locate_finds_every_place_of_a_turned_copy_and_puts_it_back_in_the
     for how in ("own", "frames", "registration"):
         excess, seconds = bench_locate._located(bench_locate._pair(mesh, copy, undo), how)
         assert excess.size > 20 and np.abs(excess).max() < 1e-6 and seconds > 0, how
+
+
+@pytest.fixture
+def bench_scaling(monkeypatch):
+    yield from _benchmark(monkeypatch, "bench_scaling")
+
+
+def test_bench_scaling_names_its_page_by_the_screening_it_runs(bench_scaling):
+    from classify.recognizers.place import SCREENINGS, PlaceAware
+
+    # With no screening asked, the recognizer's default runs, and the page says which: it keeps its name and its
+    # figures when the default changes.
+    assert bench_scaling._page(None) == f"bench_scaling_{PlaceAware().screening}" == "bench_scaling_place"
+    assert [bench_scaling._page(s) for s in SCREENINGS] == ["bench_scaling_place", "bench_scaling_touch"]
+    assert bench_scaling.parser().parse_args(["--screening", "touch"]).screening == "touch"
+    with pytest.raises(SystemExit):
+        bench_scaling.parser().parse_args(["--screening", "sight"])

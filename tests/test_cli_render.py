@@ -212,7 +212,7 @@ def test_a_renamed_option_keeps_its_old_spelling_for_a_release(capsys, argv, old
     assert f"visuotactile {argv[0]}: warning: {old} is deprecated and goes in 0.3: use {new}" in capsys.readouterr().err
 
 
-@pytest.mark.parametrize("screening, params", [(None, {}), ("touch", {}), ("place", {"place": {"screening": "place"}})])
+@pytest.mark.parametrize("screening, params", [(None, {}), ("place", {}), ("touch", {"place": {"screening": "touch"}})])
 def test_experiment_passes_the_place_aware_screening_to_the_recognizer(monkeypatch, tmp_path, screening, params):
     import classify.experiment
     from classify.cli import main

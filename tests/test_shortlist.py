@@ -62,8 +62,8 @@ def _places(positions, rng):
 def fitted():
     """The same training set fitted with every object on the shortlist, and with three."""
     training, feels = _training()
-    full = fit_place_knowledge(training, {"place": {"shortlist": 16}})
-    short = fit_place_knowledge(training, {"place": {"shortlist": 3}})
+    full = fit_place_knowledge(training, {"place": {"shortlist": 16, "screening": "touch"}})
+    short = fit_place_knowledge(training, {"place": {"shortlist": 3, "screening": "touch"}})
     return training, feels, full, short
 
 
@@ -249,7 +249,7 @@ def test_exact_places_is_a_non_negative_integer():
             X, np.repeat([0, 1], 4), signatures=np.zeros((8, 2)), instances=np.tile([1, 2], 4), places=np.zeros(8, int)
         )
     assert PlaceAware().get_params()["exact_places"] is None
-    assert PlaceAware()._exact_places() == 8 and PlaceAware(screening="place")._exact_places() == 0
+    assert PlaceAware(screening="touch")._exact_places() == 8 and PlaceAware()._exact_places() == 0
     assert PlaceAware(screening="place", exact_places=3)._exact_places() == 3
 
 
@@ -812,8 +812,8 @@ def test_place_touches_copies_the_codebooks_into_one_array_and_holds_no_second_c
 
 def test_screening_is_touch_or_place():
     X = np.random.default_rng(0).normal(size=(8, 3))
-    with pytest.raises(ValueError, match=r"screening must be one of \('touch', 'place'\), got 'sight'"):
+    with pytest.raises(ValueError, match=r"screening must be one of \('place', 'touch'\), got 'sight'"):
         PlaceAware(screening="sight").fit(
             X, np.repeat([0, 1], 4), signatures=np.zeros((8, 2)), instances=np.tile([1, 2], 4), places=np.zeros(8, int)
         )
-    assert PlaceAware().get_params()["screening"] == "touch"
+    assert PlaceAware().get_params()["screening"] == "place"

@@ -78,7 +78,7 @@ _FORECAST = 1 << 23
 #: Bytes of matched samples gathered at once when every object scores a touch (``BankStack``).
 _STACKED = 1 << 26
 #: How a touch is scored past the shortlist (``PlaceAware(screening=...)``).
-SCREENINGS = ("touch", "place")
+SCREENINGS = ("place", "touch")
 
 
 def describe_touches(X, copy: bool = True) -> np.ndarray:
@@ -196,17 +196,20 @@ class PlaceAware(ClassifierMixin, BaseEstimator):
         the shortlisted objects nearest by the screening (None: 8,
         ``EXACT_PLACES``); screened by place, the objects most likely at the
         cheap place, which are then scored again (None: 0, none).
-    screening : {"touch", "place"}
+    screening : {"place", "touch"}
         How a touch is scored past the shortlist (more objects than
-        ``shortlist``).  ``"touch"``: by the touch alone; the ``shortlist``
-        objects whose place-free samples come nearest are scored in full,
-        every other object by a lower bound.  ``"place"``: every object is
+        ``shortlist``).  ``"place"`` (the default): every object is
         scored in full, the touch's place located through the surface frames,
         in one pass over the banks stacked (``BankStack``,
         whose arrays the banks then read: the samples held once); it keeps
-        the true object where a touch alone would drop it.  The fit then
-        scores its held-out touches under every object, and the forecast
-        tables stay shortlisted by the touch alone.
+        the true object where a touch alone would drop it, and the fit scores
+        its held-out touches under every object (the forecast tables stay
+        shortlisted by the touch alone).  ``"touch"``: by the touch alone; the
+        ``shortlist`` objects whose place-free samples come nearest are scored
+        in full, every other object by a lower bound; at 999 objects it is
+        no faster, and right after five touches in 26 % of cases where
+        ``"place"`` is in 98 % (``docs/benchmarks/bench_scaling_touch.md``,
+        ``bench_scaling_place.md``).
         Registering the most likely objects again (``exact_places``) lets
         the test instance's shape in: the true object, when among those
         scored again, tends to win even when what was felt came from another
@@ -253,7 +256,7 @@ class PlaceAware(ClassifierMixin, BaseEstimator):
         whiten=True,
         shortlist=SHORTLIST,
         exact_places=None,
-        screening="touch",
+        screening="place",
         fit_objects=64,
         random_state=0,
     ):
