@@ -50,16 +50,14 @@ def place_touches(samples: dict, names: tuple, points=None, dtype=None) -> tuple
     -------
     X (N, d), y (N,), signatures (N, LANDMARKS), instances (N,), keys (N,)
     """
-    from meshsal.points.places import signatures as located
-
     # Two passes: the first locates the touches and counts them, the second copies the codebooks into X, which is
     # allocated once (a thousand objects' codebooks, gathered and then joined, would lie twice in memory).
     found, kinds = [], []
     for c, name, j, sample in in_object_order(samples, names):
-        book, where = _codebook(sample, name, j, points, located)
+        book, where = _codebook(sample, name, j, points, locate=True)
         found.append((c, j, where, book.shape[1]))
         kinds.append(book.dtype)
-        d = book.shape[2]
+    d = book.shape[2]
     X = np.empty((sum(len(w) * n for _, _, w, n in found), d), dtype or np.result_type(*kinds))
     start = 0
     for _, name, j, sample in in_object_order(samples, names):
@@ -76,9 +74,11 @@ def place_touches(samples: dict, names: tuple, points=None, dtype=None) -> tuple
     return X, y, sig, inst, keys
 
 
-def _codebook(sample, name: str, j: int, points, located=None) -> tuple:
+def _codebook(sample, name: str, j: int, points, locate: bool = False) -> tuple:
     """A training instance's codebook (k, draws, d) at its touchable places, or at a fixed plan's points (from
-    ``points``), and where those lie against its landmarks (k, LANDMARKS) when ``located`` is given (else None)."""
+    ``points``), and with ``locate`` where those lie against its landmarks (k, LANDMARKS) (else None)."""
+    from meshsal.points.places import signatures
+
     sample = sample.in_memory()  # read once: a stored sample reads its file on each use
     if sample.codebook is None:
         raise ValueError(f"{name}, training instance {j}: no touch codebook (run with the place-aware recognizer)")
@@ -88,7 +88,7 @@ def _codebook(sample, name: str, j: int, points, located=None) -> tuple:
     else:
         plan = points[name, j]
         positions, book = plan.positions, plan.codebook
-    return book, None if located is None else located(positions, sample.landmarks)
+    return book, signatures(positions, sample.landmarks) if locate else None
 
 
 def _session_touches(samples: dict, names: tuple) -> tuple:

@@ -239,12 +239,12 @@ def within_place_whitening(Z, y, keys, rows: int = RESIDUAL_ROWS) -> np.ndarray:
     means = np.zeros((group.max() + 1, Z.shape[1]))
     np.add.at(means, group, Z)
     means /= np.bincount(group)[:, None]
-    W = None
+    W = np.zeros((Z.shape[1], Z.shape[1]))
     for a in range(0, len(Z), rows):
         R = means[group[a : a + rows]]
         np.subtract(Z[a : a + rows], R, out=R)
-        W = R.T @ R if W is None else W + R.T @ R
-    W = W / max(len(Z) - group.max() - 1, 1)
+        W += R.T @ R
+    W /= max(len(Z) - group.max() - 1, 1)
     W = 0.9 * W + 0.1 * np.diag(np.diag(W)) + 1e-6 * np.trace(W) / len(W) * np.eye(len(W))
     vals, vecs = np.linalg.eigh(W)
     return vecs @ np.diag(1.0 / np.sqrt(vals)) @ vecs.T

@@ -42,6 +42,7 @@ takes from it (:data:`MALLOC_THRESHOLDS`).
 
 from __future__ import annotations
 
+import functools
 import itertools
 import logging
 import multiprocessing
@@ -180,8 +181,14 @@ def _die_with_parent() -> None:
 MALLOC_THRESHOLDS = {"mmap": 32 << 20, "trim": 64 << 20}
 
 
+@functools.cache
 def _glibc():
-    """The C library, when it is glibc on Linux (whose malloc the functions below tune); else None."""
+    """The C library, when it is glibc on Linux (whose malloc the functions below tune); else None.
+
+    Looked up once, though a stack of a thousand banks hands its pages back
+    many times: each lookup loads the library, and off glibc
+    ``platform.libc_ver`` scans the interpreter's binary to say so.
+    """
     import ctypes
     import platform
 
