@@ -17,9 +17,11 @@ mesh: for the corpus on one worker and the same meshes in this process, run
 in turn with the cluster's runs (what a Dask worker adds to a task shows as
 the ratio of their CPU per mesh), and for the ten embedded YCB scans (15,728
 faces); and with ``--all`` the whole corpus through ``visuotactile batch
---workers 2``, timed from the command to its exit.  Tables go to ``docs/benchmarks/bench_batch.md``.
+--workers 2``, timed from the command to its exit, ``--all-runs`` times
+(the median against the goal, 4 min: one run moves by 5 % with the
+machine's other load).  Tables go to ``docs/benchmarks/bench_batch.md``.
 
-    .venv/bin/python benchmarks/bench_batch.py [--meshes 120] [--repeats 3] [--corpus DIR] [--all]
+    .venv/bin/python benchmarks/bench_batch.py [--meshes 120] [--repeats 3] [--corpus DIR] [--all [--all-runs 3]]
 """
 
 from __future__ import annotations
@@ -43,6 +45,8 @@ from classify.runtime.cluster import open_executor
 
 SHARED = Path(__file__).resolve().parents[2] / "shared" / "corpus" / "random-objects"
 SETTINGS = BatchSettings(methods=("attention", "uniform"), n_points=15)
+#: The whole corpus on 2 workers, end to end (issue 32's goal), seconds.
+WHOLE_CORPUS_GOAL_S = 240.0
 
 
 def _peak_rss_mb() -> float:
@@ -106,23 +110,47 @@ def _ycb_stages(scratch: Path) -> dict:
     return _in_process(Path(ycb.path(ycb.NAMES[0])).parent, scratch / "ycb")["stages"]
 
 
-def _whole_corpus(corpus: Path, scratch: Path) -> str:
-    """``visuotactile batch CORPUS --workers 2``, end to end: wall time, CPU of the command and its workers."""
+def _whole_corpus_run(corpus: Path, store: Path) -> dict:
+    """One ``visuotactile batch CORPUS --workers 2`` into a fresh ``store``, timed from the command to its exit."""
     before, load = resource.getrusage(resource.RUSAGE_CHILDREN), os.getloadavg()[0]
     started = time.perf_counter()
     visuotactile = Path(sys.executable).parent / "visuotactile"
-    command = [str(visuotactile), "batch", str(corpus), "--out", str(scratch / "all")]
+    command = [str(visuotactile), "batch", str(corpus), "--out", str(store)]
     # The corpus holds one unreadable mesh (168.obj, a non-finite vertex): the run skips it, as asked.
     run = subprocess.run([*command, "--workers", "2", "--skip-bad", "--quiet"], capture_output=True, text=True)
     wall = time.perf_counter() - started
     after = resource.getrusage(resource.RUSAGE_CHILDREN)
     cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
     table = "\n".join(line for line in run.stdout.splitlines() if line.startswith("|"))
+    return {"wall": wall, "cpu": cpu, "load": load, "status": run.returncode, "table": table, "notes": run.stderr}
+
+
+def _whole_corpus(corpus: Path, scratch: Path, runs: int) -> str:
+    """The whole corpus through ``visuotactile batch --workers 2``, ``runs`` times, each into a fresh store: every
+    run's wall and CPU time, their median against the goal (4 min), and the last run's own tables."""
+    done = []
+    for k in range(runs):
+        done.append(_whole_corpus_run(corpus, scratch / f"all-{k}"))
+        shutil.rmtree(scratch / f"all-{k}", ignore_errors=True)
+    lines = [
+        f"### The whole corpus: `visuotactile batch {corpus.name} --workers 2 --skip-bad`, end to end, {runs} runs\n",
+        "| run | wall | CPU of the command and its workers | cores the run got | load average at the start "
+        "| exit status |",
+        "|---:|---:|---:|---:|---:|---:|",
+    ]
+    for k, r in enumerate(done, 1):
+        lines.append(
+            f"| {k} | {r['wall']:.1f} s | {r['cpu']:.0f} s | {r['cpu'] / r['wall']:.2f} | {r['load']:.2f} "
+            f"| {r['status']} |"
+        )
+    wall = statistics.median(r["wall"] for r in done)
+    verdict = "met" if wall <= WHOLE_CORPUS_GOAL_S else "missed"
+    # The notes name files in the run's store, which is gone: only what they say stays.
+    notes = "\n".join(line.split(": see ")[0] for line in done[-1]["notes"].strip().splitlines())
     return (
-        f"### The whole corpus: `visuotactile batch {corpus.name} --workers 2 --skip-bad`, end to end\n\n"
-        f"{wall / 60:.1f} min wall ({wall:.0f} s), {cpu:.0f} s CPU of the command and its workers "
-        f"({cpu / wall:.2f} cores), exit status {run.returncode}; load average {load:.2f} at the start.\n\n"
-        f"{table}\n\n{run.stderr.strip()}\n"
+        "\n".join(lines)
+        + f"\n\nMedian wall: {wall / 60:.2f} min ({wall:.1f} s); goal <= {WHOLE_CORPUS_GOAL_S / 60:.0f} min on 2 "
+        f"workers: {verdict}.\n\nThe last run's own tables:\n\n{done[-1]['table']}\n\n{notes}\n"
     )
 
 
@@ -136,7 +164,10 @@ def main() -> int:
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--corpus", type=Path, default=SHARED)
     parser.add_argument("--all", action="store_true", help="also the whole corpus on 2 workers, end to end")
+    parser.add_argument("--all-runs", type=int, default=3, help="runs of the whole corpus with --all (median)")
     args = parser.parse_args()
+    if args.all_runs < 1:
+        parser.error(f"--all-runs must be at least 1, got {args.all_runs}")
     if not args.corpus.is_dir():
         print(f"corpus not found at {args.corpus}", file=sys.stderr)
         return 1
@@ -154,7 +185,7 @@ def main() -> int:
         body = _throughput(args.meshes, args.repeats, runs)
         body += _stages(runs[1], here, _ycb_stages(scratch))
         if args.all:
-            body += "\n" + _whole_corpus(args.corpus, scratch)
+            body += "\n" + _whole_corpus(args.corpus, scratch, args.all_runs)
         print(body)
     finally:
         shutil.rmtree(scratch, ignore_errors=True)

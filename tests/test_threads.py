@@ -37,7 +37,7 @@ def test_saliency_views_leaves_the_process_thread_settings_as_it_found_them(monk
 
     cup = meshsal.scale_to(meshsal.objects.toys.make("cup"), 150.0)
     # More views than a stack holds, so that two threads share them.
-    views = render_views(cup, [c for s in view_rig()[:5] for c in s], size=32, threads=1)
+    views = render_views(cup, [c for s in view_rig()[:10] for c in s], size=32, threads=1)
     assert len(views) > combine._VIEWS_PER_STACK
     before = (sys.getswitchinterval(), cv2.getNumThreads())
     one = attention.saliency_views(views, cup, threads=1)
