@@ -75,9 +75,14 @@ print(json.dumps({"objects": n, "timings": result.timings, "usage": result.usage
 """
 
 
+def _screening(asked: str | None) -> str:
+    """The screening a run uses: the one asked for, else the place-aware recognizer's default."""
+    return asked or PlaceAware().screening
+
+
 def _page(screening: str | None) -> str:
     """The page's name, after the screening it runs (None: the place-aware recognizer's default)."""
-    return f"bench_scaling_{screening or PlaceAware().screening}"
+    return f"bench_scaling_{_screening(screening)}"
 
 
 def _measure(count: int, params: dict) -> dict | None:
@@ -212,5 +217,4 @@ def _plot(rows, stages, png: Path) -> None:
 if __name__ == "__main__":
     args = parser().parse_args()
     title = "How the experiment's cost grows with the number of objects"
-    screening = args.screening or PlaceAware().screening
-    run(_page(screening), f"{title}, screened by {screening}", lambda: main(args))
+    run(_page(args.screening), f"{title}, screened by {_screening(args.screening)}", lambda: main(args))

@@ -77,8 +77,6 @@ def place_touches(samples: dict, names: tuple, points=None, dtype=None) -> tuple
 def _codebook(sample, name: str, j: int, points, locate: bool = False) -> tuple:
     """A training instance's codebook (k, draws, d) at its touchable places, or at a fixed plan's points (from
     ``points``), and with ``locate`` where those lie against its landmarks (k, LANDMARKS) (else None)."""
-    from meshsal.points.places import signatures
-
     sample = sample.in_memory()  # read once: a stored sample reads its file on each use
     if sample.codebook is None:
         raise ValueError(f"{name}, training instance {j}: no touch codebook (run with the place-aware recognizer)")
@@ -88,7 +86,7 @@ def _codebook(sample, name: str, j: int, points, locate: bool = False) -> tuple:
     else:
         plan = points[name, j]
         positions, book = plan.positions, plan.codebook
-    return book, signatures(positions, sample.landmarks) if locate else None
+    return book, signatures(sample.places, positions) if locate else None
 
 
 def _session_touches(samples: dict, names: tuple) -> tuple:
