@@ -73,15 +73,15 @@ def stopped(event):
             ran[site] += 1
 
 gdb.events.stop.connect(stopped)
-exit_code = None
-gdb.events.exited.connect(lambda event: globals().__setitem__("exit_code", getattr(event, "exit_code", 0)))
-while exit_code is None:
+state = {"exit_code": None}
+gdb.events.exited.connect(lambda event: state.update(exit_code=getattr(event, "exit_code", 0)))
+while state["exit_code"] is None:
     try:
         gdb.execute("continue")
     except gdb.error:
         break
 with open(os.environ["PROBE_OUT"], "w") as out:
-    json.dump({"found": found, "ran": [[p, m, n] for (p, m), n in ran.items()], "exit_code": exit_code}, out)
+    json.dump({"found": found, "ran": [[p, m, n] for (p, m), n in ran.items()], "exit_code": state["exit_code"]}, out)
 """
 
 
@@ -109,6 +109,7 @@ def inferior(experiment: list[str]) -> int:
 
 
 def table(report: dict) -> str:
+    """The Markdown table of a report: each library's instructions of the kind, and the sites that ran, by mnemonic."""
     ran = {}
     for path, mnemonic, _ in report["ran"]:
         ran.setdefault(path, {}).setdefault(mnemonic, 0)
