@@ -144,8 +144,8 @@ def main(argv=None) -> int:
         command = ["gdb", "-q", "-batch", "-x", str(script), "--args", sys.executable, __file__, "--inferior", *run]
         # gdb's own chatter (declined auto-loads, threads) says nothing about the run; its last lines go with a failure.
         done = subprocess.run(command, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+        tail = "\n".join(done.stderr.strip().splitlines()[-5:])
         if not out.exists():
-            tail = "\n".join(done.stderr.strip().splitlines()[-5:])
             print(
                 f"approximate_instructions: error: gdb wrote no report (is ptrace allowed here?)\n{tail}",
                 file=sys.stderr,
@@ -153,7 +153,10 @@ def main(argv=None) -> int:
             return 1
         report = json.loads(out.read_text())
     if report["exit_code"] != 0:
-        print(f"approximate_instructions: error: the experiment exited with {report['exit_code']}", file=sys.stderr)
+        print(
+            f"approximate_instructions: error: the experiment exited with {report['exit_code']}\n{tail}",
+            file=sys.stderr,
+        )
         return 1
     experiment = " ".join(["visuotactile experiment --jobs 1", *args.experiment])
     body = (
@@ -165,7 +168,9 @@ def main(argv=None) -> int:
     if args.page:
         from meshsal.util.pages import write_page
 
-        title = "Instructions each CPU vendor rounds its own way, in the demo"
+        title = (
+            f"Instructions each CPU vendor rounds its own way, in {'an experiment' if args.experiment else 'the demo'}"
+        )
         write_page(args.page, title, body, command=["scripts/approximate_instructions.py", *argv])
     return 0
 
