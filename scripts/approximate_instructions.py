@@ -22,6 +22,7 @@ Needs gdb (``apt-get install gdb``).
 from __future__ import annotations
 
 import argparse
+import collections
 import json
 import os
 import shutil
@@ -36,7 +37,7 @@ VEX = r"vrcpps|vrcpss|vrsqrtps|vrsqrtss|vrcp14ps|vrcp14ss|vrsqrt14ps|vrsqrt14ss|
 
 # Run by gdb: stop at the inferior's SIGTRAP, set a temporary breakpoint on each instruction, count the ones hit.
 _GDB_SCRIPT = r"""
-import collections, json, os, re, subprocess
+import json, os, re, subprocess
 import gdb
 
 pattern = re.compile(r"^\s*([0-9a-f]+):\s+(" + os.environ["PROBE_MNEMONICS"] + r")\b")
@@ -64,13 +65,14 @@ for path, base in sorted(bases.items()):
         found[path] = count
 for address in sites:
     gdb.Breakpoint(f"*{address:#x}", internal=True, temporary=True)
-ran = collections.Counter()
+# A breakpoint is temporary: each site that runs stops the run once.
+ran = set()
 
 def stopped(event):
     if isinstance(event, gdb.BreakpointEvent):
-        site = sites.get(int(gdb.selected_frame().pc()))
-        if site:
-            ran[site] += 1
+        pc = int(gdb.selected_frame().pc())
+        if pc in sites:
+            ran.add(pc)
 
 gdb.events.stop.connect(stopped)
 state = {"exit_code": None}
@@ -81,7 +83,8 @@ while state["exit_code"] is None:
     except gdb.error:
         break
 with open(os.environ["PROBE_OUT"], "w") as out:
-    json.dump({"found": found, "ran": [[p, m, n] for (p, m), n in ran.items()], "exit_code": state["exit_code"]}, out)
+    where = [[*sites[pc], hex(pc - bases[sites[pc][0]])] for pc in sorted(ran)]
+    json.dump({"found": found, "ran": where, "exit_code": state["exit_code"]}, out)
 """
 
 
@@ -110,17 +113,15 @@ def inferior(experiment: list[str]) -> int:
 
 def table(report: dict) -> str:
     """The Markdown table of a report: each library's instructions of the kind, and the sites that ran, by mnemonic."""
-    ran = {}
-    for path, mnemonic, _ in report["ran"]:
-        ran.setdefault(path, {}).setdefault(mnemonic, 0)
-        ran[path][mnemonic] += 1
+    sites = collections.Counter((path, mnemonic) for path, mnemonic, _ in report["ran"])  # -> sites that ran
+    ran = collections.Counter(path for path, _ in sites.elements())
     lines = [
         "| library | such instructions | of them ran (sites) | which |",
         "|---|---:|---:|---|",
     ]
-    for path, count in sorted(report["found"].items(), key=lambda kv: (-sum(ran.get(kv[0], {}).values()), kv[0])):
-        which = ", ".join(f"{m} ({n})" for m, n in sorted(ran.get(path, {}).items())) or "-"
-        lines.append(f"| {Path(path).name} | {count} | {sum(ran.get(path, {}).values())} | {which} |")
+    for path, count in sorted(report["found"].items(), key=lambda kv: (-ran[kv[0]], kv[0])):
+        which = ", ".join(f"{m} ({n})" for (p, m), n in sorted(sites.items()) if p == path) or "-"
+        lines.append(f"| {Path(path).name} | {count} | {ran[path]} | {which} |")
     return "\n".join(lines)
 
 

@@ -21,9 +21,9 @@ def test_the_table_puts_the_libraries_whose_instructions_ran_first_and_counts_ea
     report = {
         "found": {"/x/cv2.abi3.so": 681, "/y/libembree4-1.so.4": 3560, "/z/libm.so.6": 40},
         "ran": [
-            ["/y/libembree4-1.so.4", "rcpps", 120],
-            ["/y/libembree4-1.so.4", "rcpps", 3],
-            ["/y/libembree4-1.so.4", "rsqrtss", 1],
+            ["/y/libembree4-1.so.4", "rcpps", "0x99215"],
+            ["/y/libembree4-1.so.4", "rcpps", "0x9e8a4"],
+            ["/y/libembree4-1.so.4", "rsqrtss", "0x91321"],
         ],
         "exit_code": 0,
     }

@@ -427,7 +427,7 @@ def saliency_views(
 ) -> list[SaliencyResult]:
     """:func:`saliency` of many views of one mesh, in a thread pool, bit for bit view by view.
 
-    The mesh saliency is computed once.  Each thread takes up to 36 views
+    The mesh saliency is computed once.  Each thread takes up to ``_VIEWS_PER_STACK`` views
     of one size at once (:func:`image_channels_stack`): per view, the
     center-surround pyramids' hundreds of calls on small maps, each of which
     holds Python's lock and hands it over between threads, become a share of
