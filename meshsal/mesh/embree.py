@@ -17,6 +17,12 @@ is created in one device per process made with ``$VISUOTACTILE_EMBREE_CONFIG``
 (``isa=sse2`` once :func:`meshsal.util.reproducible.pin_kernels` has run),
 handed to embreex through ctypes.  With the variable unset or empty, Embree
 chooses.
+
+Even with one instruction set, Embree's SSE kernels divide by the CPU's
+approximate reciprocal (``rcpps`` and a Newton step), which Intel and AMD
+round with their own tables.  So every scene here is a :class:`Scene`, whose
+hits' distances and barycentrics are computed again from their faces with
+NumPy's correctly rounded arithmetic: the same on every x86-64 CPU.
 """
 
 from __future__ import annotations
@@ -26,6 +32,7 @@ import functools
 import os
 import threading
 import warnings
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -217,16 +224,137 @@ def is_robust(scene) -> bool:
     flags cannot be read.
     """
     lib = _library()
-    handle = _scene_handle(scene) if lib is not None else None
+    handle = _scene_handle(getattr(scene, "embree", scene)) if lib is not None else None
     return bool(handle) and bool(lib.rtcGetSceneFlags(handle) & _SCENE_FLAG_ROBUST)
 
 
+@dataclass(frozen=True, eq=False)
+class Scene:
+    """An Embree scene whose hits are the same on every x86-64 CPU.
+
+    Embree's ``tfar``, ``u`` and ``v`` are quotients taken with the CPU's
+    approximate reciprocal, so :meth:`run` computes them again from the face's
+    float32 corners, the ray's origin and its direction (Cramer's rule in
+    float64, rounded once to float32): the same on every CPU, and nearer the
+    exact crossing than Embree's own.  The face (``primID``) and its geometric
+    normal (``Ng``, a cross product) are Embree's: it picks the face by
+    comparisons without division, except between faces within a unit in the
+    last place of each other along the ray.
+
+    Attributes
+    ----------
+    embree : embreex ``EmbreeScene``
+    corners : (12, m) float64
+        Each face's first corner, its edges to the second and the third
+        corners, and their cross product: 96 bytes a face, beside Embree's
+        own hundred or so.
+    """
+
+    embree: object
+    corners: np.ndarray
+
+    @property
+    def is_committed(self) -> int:
+        return self.embree.is_committed
+
+    def run(self, origins, directions, dists=None, query="INTERSECT", output=None):
+        """embreex's ``EmbreeScene.run``, with each hit's ``tfar``, ``u`` and ``v`` computed again (see :class:`Scene`).
+
+        Parameters
+        ----------
+        origins : (k, 3) float32
+        directions : (k, 3) float32, or (1, 3) shared by every ray
+        dists : float or (k,) float32, optional
+            How far each ray looks (``tfar`` on entry).
+        query : str
+        output : int, optional
+            1 for the dict of hits described in :func:`embree_scene`; else
+            what embreex gives (the face ids).
+        """
+        hit = self.embree.run(origins, directions, dists=dists, query=query, output=output)
+        if isinstance(hit, dict):
+            _settle(hit, origins, directions, self.corners)
+        return hit
+
+
+def _corners(mesh: Mesh) -> np.ndarray:
+    """(12, m) float64: each face's first corner ``a``, its edges ``e``, ``f`` to the others and ``n = e x f``.
+
+    From the float32 vertices Embree holds.
+    """
+    V = np.asarray(mesh.vertices, np.float32).astype(np.float64)
+    a, b, c = (np.take(V, corner, axis=0) for corner in np.asarray(mesh.faces).T)
+    e, f = b - a, c - a
+    n = np.stack(
+        [
+            e[:, 1] * f[:, 2] - e[:, 2] * f[:, 1],
+            e[:, 2] * f[:, 0] - e[:, 0] * f[:, 2],
+            e[:, 0] * f[:, 1] - e[:, 1] * f[:, 0],
+        ],
+        axis=1,
+    )
+    return np.ascontiguousarray(np.concatenate([a, e, f, n], axis=1).T)
+
+
+def _crossing(faces: np.ndarray, origins: np.ndarray, directions: np.ndarray) -> tuple:
+    """``(t, u, v)`` float64 solving ``o + t d = a + u e + v f`` for the (12, k) ``faces`` of :func:`_corners`.
+
+    Cramer's rule with ``m = s x d``, ``s = o - a``: ``t = -(s . n) / (d . n)``,
+    ``u = -(f . m) / (d . n)``, ``v = (e . m) / (d . n)``.  Elementwise
+    arithmetic only (no dot products, whose summation order and fused
+    multiply-adds vary by library), each operation correctly rounded.
+    """
+    ax, ay, az, ex, ey, ez, fx, fy, fz, nx, ny, nz = faces
+    ox, oy, oz = origins.astype(np.float64).T
+    dx, dy, dz = directions.astype(np.float64).T
+    sx, sy, sz = ox - ax, oy - ay, oz - az
+    mx = sy * dz
+    mx -= sz * dy
+    my = sz * dx
+    my -= sx * dz
+    mz = sx * dy
+    mz -= sy * dx
+    dn = dx * nx
+    dn += dy * ny
+    dn += dz * nz
+    t, u, v = sx * nx, fx * mx, ex * mx
+    t += sy * ny
+    t += sz * nz
+    u += fy * my
+    u += fz * mz
+    v += ey * my
+    v += ez * mz
+    with np.errstate(divide="ignore", invalid="ignore"):
+        for quotient in (t, u, v):
+            quotient /= dn
+    np.negative(t, out=t)
+    np.negative(u, out=u)
+    return t, u, v
+
+
+def _settle(hit: dict, origins: np.ndarray, directions: np.ndarray, corners: np.ndarray) -> None:
+    """Overwrite each hit's ``tfar``, ``u``, ``v`` with their values computed again (see :class:`Scene`)."""
+    hits = np.flatnonzero(hit["primID"] >= 0)
+    if hits.size == 0:
+        return
+    origins = origins if len(origins) == 1 else np.take(origins, hits, axis=0)
+    directions = directions if len(directions) == 1 else np.take(directions, hits, axis=0)
+    faces = np.take(corners, hit["primID"][hits], axis=1)
+    for key, values in zip(("tfar", "u", "v"), _crossing(faces, origins, directions)):
+        if np.isfinite(values).all():
+            hit[key][hits] = values
+        else:  # a face parallel to the ray in float64 too is degenerate: Embree's own value stays
+            keep = np.isfinite(values)
+            hit[key][hits[keep]] = values[keep]
+
+
 def embree_scene(mesh: Mesh, robust: bool = True):
-    """An Embree scene of the mesh's triangles, built and ready for concurrent queries.
+    """A :class:`Scene` of the mesh's triangles, built and ready for concurrent queries.
 
     ``scene.run(origins, directions, output=1)`` takes (k, 3) float32 arrays
     and returns a dict with ``primID`` (-1 on a miss), ``u``, ``v`` (the hit's
-    barycentrics on the triangle's 2nd and 3rd corners), ``tfar`` and ``Ng``.
+    barycentrics on the triangle's 2nd and 3rd corners), ``tfar`` and ``Ng``,
+    the same on every x86-64 CPU.
     Embree releases the GIL while tracing, so threads may share one scene.
     Every scene is created in :func:`embree_device`, whose instruction set
     ``$VISUOTACTILE_EMBREE_CONFIG`` chooses.
@@ -257,4 +385,4 @@ def embree_scene(mesh: Mesh, robust: bool = True):
         )
     # The first query commits (builds) the scene: do it before threads share it.
     scene.run(np.zeros((1, 3), np.float32), np.ones((1, 3), np.float32), output=0)
-    return scene
+    return Scene(embree=scene, corners=_corners(mesh))
