@@ -12,9 +12,9 @@ SMALL = Settings(n_points=6, train_instances=2, train_sessions=1, view_size=48, 
 QUICK = ExperimentConfig(classifiers=("knn",), settings=SMALL, replicates=2, repeats=2, folds=3)
 
 
-def run(objects, config=QUICK, **options):
-    """:func:`classify.experiment.run_experiment` with no cache and no progress bars.
+def run(objects, config=QUICK, cache_dir=None, **options):
+    """:func:`classify.experiment.run_experiment` with no progress bars, and no cache unless given one.
 
-    ``options`` are its keywords besides those (``n_jobs``, ``executor``, ``out_dir``).
+    ``options`` are its other keywords (``n_jobs``, ``executor``, ``out_dir``).
     """
-    return run_experiment(objects, config, cache_dir=None, quiet=True, **options)
+    return run_experiment(objects, config, cache_dir=cache_dir, quiet=True, **options)

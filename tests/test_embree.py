@@ -206,3 +206,18 @@ def test_views_do_not_depend_on_how_the_cpu_rounds_embrees_hits(monkeypatch, sha
         np.testing.assert_array_equal(view.face_id, other_view.face_id)
         for key in ("rgb", "bary", "depth"):
             np.testing.assert_array_equal(getattr(view, key), getattr(other_view, key))
+
+
+def test_imprints_do_not_depend_on_how_the_cpu_rounds_embrees_hits():
+    import tactile
+
+    surface = bumps(n=40)
+    rng = np.random.default_rng(4)
+    P = np.column_stack([rng.uniform(-20, 20, 30), np.zeros(30), rng.uniform(-20, 20, 30)])
+    N = np.tile([0.0, 1.0, 0.0], (30, 1))
+    sensor = tactile.Sensor(supersample=2, mode="pressure")  # depths themselves, not their contour levels
+    scene = embree_scene(surface)
+    other = Scene(embree=_OtherRounding(scene.embree, 1.0, np.random.default_rng(2)), corners=scene.corners)
+    ours = tactile.imprints(surface, P, N, sensor, scene=scene)
+    assert np.count_nonzero(ours) > 0
+    np.testing.assert_array_equal(ours, tactile.imprints(surface, P, N, sensor, scene=other))
