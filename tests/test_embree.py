@@ -62,9 +62,14 @@ def test_hits_are_the_exact_crossing_rounded_to_float32(mesh):
     origins, directions = _rays(mesh)
     scene = embree_scene(mesh)
     hit, embrees = scene.run(origins, directions, output=1), scene.embree.run(origins, directions, output=1)
-    np.testing.assert_array_equal(hit["primID"], embrees["primID"])
+    np.testing.assert_array_equal(hit["primID"] >= 0, embrees["primID"] >= 0)
     hits = np.flatnonzero(hit["primID"] >= 0)
     assert hits.size > 500
+    # Another face than Embree's only across an edge of both, where float32 put the crossing on the wrong side.
+    moved = np.flatnonzero(hit["primID"] != embrees["primID"])
+    assert moved.size <= 5
+    for i in moved:
+        assert len(set(mesh.faces[hit["primID"][i]]) & set(mesh.faces[embrees["primID"][i]])) == 2
     V = mesh.vertices.astype(np.float32).astype(np.float64)
     a, b, c = (V[mesh.faces[hit["primID"][hits], j]] for j in range(3))
     o, d = origins[hits].astype(np.float64), directions[hits].astype(np.float64)
@@ -77,15 +82,51 @@ def test_hits_are_the_exact_crossing_rounded_to_float32(mesh):
         assert error.mean() < np.abs(embrees[key][hits] - exact).mean(), key
 
 
-def test_a_scene_gives_the_same_hits_whatever_embrees_last_bits():
+def test_a_scene_gives_the_same_hits_whatever_embrees_last_bits_and_its_choice_at_an_edge():
     mesh = bumps(n=40)
-    origins, directions = _rays(mesh)
+    origins, directions = _rays(mesh, n=20000)
     scene = embree_scene(mesh)
-    other = Scene(embree=_OtherRounding(scene.embree, 0.5, np.random.default_rng(1)), corners=scene.corners)
+    stand_in = _OtherRounding(scene.embree, 0.5, np.random.default_rng(1), settled=scene)
+    other = Scene(embree=stand_in, corners=scene.corners, mesh=scene.mesh)
     ours, theirs = scene.run(origins, directions, output=1), other.run(origins, directions, output=1)
-    assert (ours["primID"] >= 0).sum() > 500
+    assert (ours["primID"] >= 0).sum() > 2000 and stand_in.turned > 0
     for key in ("primID", "tfar", "u", "v", "Ng"):
         np.testing.assert_array_equal(ours[key], theirs[key])
+
+
+def _square(seam):
+    """Two triangles meeting on the diagonal x + y = 4 of a 4 x 4 square at z = 0, facing +z; with ``seam`` the
+    second has corners of its own at the same places (as across a texture seam)."""
+    V = [[0, 0, 0], [4, 0, 0], [0, 4, 0], [4, 4, 0]]
+    if seam:
+        return Mesh(vertices=V + [[0, 4, 0], [4, 0, 0]], faces=[[0, 1, 2], [3, 4, 5]])
+    return Mesh(vertices=V, faces=[[0, 1, 2], [3, 2, 1]])
+
+
+@pytest.mark.parametrize("seam", [False, True], ids=["shared-corners", "seam"])
+def test_a_ray_through_an_edge_meets_the_lower_face_of_two_facing_it(seam):
+    scene = embree_scene(_square(seam))
+    assert scene.neighbors.tolist() == [[1, -1, -1], [0, -1, -1]]
+    origins = np.array([[1, 3, 2], [2, 2, 5], [3.5, 0.5, 1], [3, 3, 1]], np.float32)
+    down = np.array([[0, 0, -1]], np.float32)
+    hit = scene.run(origins, down, output=1)
+    assert hit["primID"].tolist() == [0, 0, 0, 1]
+    np.testing.assert_array_equal(hit["tfar"], [2, 5, 1, 1])
+    np.testing.assert_array_equal(hit["Ng"], [[0, 0, 16]] * 4)
+    # Embree's other face for the three on the edge: the same answer.
+    swapped = SimpleNamespace(run=lambda *a, **k: {**scene.embree.run(*a, **k), "primID": np.ones(4, np.int32)})
+    again = Scene(embree=swapped, corners=scene.corners, mesh=scene.mesh).run(origins, down, output=1)
+    for key in ("primID", "tfar", "u", "v", "Ng"):
+        np.testing.assert_array_equal(again[key], hit[key])
+
+
+def test_a_ray_through_an_edge_meets_the_face_facing_it_first():
+    # A ridge along the y axis: face 0 turns its back to a ray coming down, face 1 (its corners flipped) faces it.
+    ridge = Mesh(vertices=[[0, -1, 0], [0, 1, 0], [1, 0, -1], [-1, 0, -1]], faces=[[0, 1, 2], [0, 1, 3]])
+    scene = embree_scene(ridge)
+    hit = scene.run(np.array([[0, 0.25, 5]], np.float32), np.array([[0, 0, -1]], np.float32), output=1)
+    assert hit["primID"].tolist() == [1] and hit["tfar"][0] == 5
+    assert float(hit["Ng"][0] @ [0, 0, -1]) < 0
 
 
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="the direct copy is checked where CI runs: Linux")
@@ -165,26 +206,54 @@ def test_a_configuration_embree_refuses_is_an_error_naming_the_variable(monkeypa
 
 
 class _OtherRounding:
-    """A scene whose hits' distances and barycentrics round as another CPU's may: a ``share`` of them one unit in
-    the last place up or down, at seeded random (Embree's SSE kernels divide with the CPU's approximate
-    reciprocal, ``rcpps``, which Intel and AMD round differently)."""
+    """A scene whose hits round as another CPU's may (Embree's SSE kernels divide with the CPU's approximate
+    reciprocal, ``rcpps``, which Intel and AMD round differently): a ``share`` of the hits' distances and
+    barycentrics one unit in the last place up or down, at seeded random; with ``settled``, the
+    :class:`Scene` whose corners to use, every hit whose crossings with its face and with the face across an
+    edge both lie within a ten-thousandth of that edge's length of it (away from the faces' other edges) on
+    the other face, as float32 arithmetic and another rounding of the two distances may put it."""
 
-    def __init__(self, scene, share, rng):
-        self.scene, self.share, self.rng = scene, share, rng
+    def __init__(self, scene, share, rng, settled=None):
+        self.scene, self.share, self.rng, self.settled = scene, share, rng, settled
+        self.turned = 0
 
-    def run(self, *args, **kwargs):
-        hit = self.scene.run(*args, **kwargs)
+    def run(self, origins, directions, **kwargs):
+        hit = self.scene.run(origins, directions, **kwargs)
         if isinstance(hit, dict):
             hits = np.flatnonzero(hit["primID"] >= 0)
             for key in ("tfar", "u", "v"):
                 some = hits[self.rng.random(hits.size) < self.share]
                 away = np.where(self.rng.random(some.size) < 0.5, -np.inf, np.inf).astype(np.float32)
                 hit[key][some] = np.nextafter(hit[key][some], away)
+            if self.settled is not None and hits.size:
+                self._turn_edges(hit, hits, origins, directions)
         return hit
+
+    def _turn_edges(self, hit, hits, origins, directions):
+        from meshsal.mesh.embree import _crossing, _inside
+
+        def near_one_edge_only(faces, o, d):
+            _, u, v, _ = _crossing(faces, o, d)
+            inside = np.sort(_inside(faces, u, v), axis=0)
+            return (np.abs(inside[0]) < 1e-4) & (inside[1] > 1e-3)
+
+        corners = self.settled.corners
+        o = origins if len(origins) == 1 else origins[hits]
+        d = directions if len(directions) == 1 else directions[hits]
+        f = hit["primID"][hits]
+        _, u, v, _ = _crossing(corners[:, f], o, d)
+        g = self.settled.neighbors[f, np.argmin(_inside(corners[:, f], u, v), axis=0)]
+        near = np.flatnonzero(near_one_edge_only(corners[:, f], o, d) & (g >= 0))
+        o = o if len(o) == 1 else o[near]
+        d = d if len(d) == 1 else d[near]
+        turned = near[near_one_edge_only(corners[:, g[near]], o, d)]
+        hit["primID"][hits[turned]] = g[turned]
+        self.turned += turned.size
 
 
 @pytest.mark.parametrize("share", [0.0, 0.1, 1.0], ids=["as-rounded", "a-tenth-rounded-otherwise", "all"])
 def test_views_do_not_depend_on_how_the_cpu_rounds_embrees_hits(monkeypatch, share):
+    # With every share, each hit near an edge goes to the face across it, as another rounding may choose.
     import meshsal
     from meshsal.mesh import embree as embree_module
     from meshsal.views import cameras, render
@@ -195,13 +264,17 @@ def test_views_do_not_depend_on_how_the_cpu_rounds_embrees_hits(monkeypatch, sha
     views = render.render_views(mesh, rig, size=48, threads=1)
     rng, built = np.random.default_rng(0), embree_module.embree_scene
 
+    stand_ins = []
+
     def other(*args, **kwargs):
         scene = built(*args, **kwargs)
-        return Scene(embree=_OtherRounding(scene.embree, share, rng), corners=scene.corners)
+        stand_ins.append(_OtherRounding(scene.embree, share, rng, settled=scene))
+        return Scene(embree=stand_ins[-1], corners=scene.corners, mesh=scene.mesh)
 
     monkeypatch.setattr(tracer_module, "embree_scene", other)
     monkeypatch.setattr(tracer_module, "is_robust", lambda scene: is_robust(scene.embree.scene))
     again = render.render_views(mesh, rig, size=48, threads=1)
+    assert sum(stand_in.turned for stand_in in stand_ins) > 0
     for view, other_view in zip(views, again):
         np.testing.assert_array_equal(view.face_id, other_view.face_id)
         for key in ("rgb", "bary", "depth"):
@@ -217,7 +290,9 @@ def test_imprints_do_not_depend_on_how_the_cpu_rounds_embrees_hits():
     N = np.tile([0.0, 1.0, 0.0], (30, 1))
     sensor = tactile.Sensor(supersample=2, mode="pressure")  # depths themselves, not their contour levels
     scene = embree_scene(surface)
-    other = Scene(embree=_OtherRounding(scene.embree, 1.0, np.random.default_rng(2)), corners=scene.corners)
+    other = Scene(
+        embree=_OtherRounding(scene.embree, 1.0, np.random.default_rng(2)), corners=scene.corners, mesh=scene.mesh
+    )
     ours = tactile.imprints(surface, P, N, sensor, scene=scene)
     assert np.count_nonzero(ours) > 0
     np.testing.assert_array_equal(ours, tactile.imprints(surface, P, N, sensor, scene=other))

@@ -20,9 +20,9 @@ chooses.
 
 Even with one instruction set, Embree's SSE kernels divide by the CPU's
 approximate reciprocal (``rcpps`` and a Newton step), which Intel and AMD
-round with their own tables.  So every scene here is a :class:`Scene`, whose
-hits' distances and barycentrics are computed again from their faces with
-NumPy's correctly rounded arithmetic: the same on every x86-64 CPU.
+round with their own tables.  So every scene here is a :class:`Scene`, which
+settles each hit's face, distance, barycentrics and normal with NumPy's
+correctly rounded arithmetic: the same on every x86-64 CPU.
 """
 
 from __future__ import annotations
@@ -32,6 +32,7 @@ import functools
 import os
 import threading
 import warnings
+import weakref
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -228,37 +229,75 @@ def is_robust(scene) -> bool:
     return bool(handle) and bool(lib.rtcGetSceneFlags(handle) & _SCENE_FLAG_ROBUST)
 
 
+#: Within this fraction of an edge's length of an edge, Embree's float32 arithmetic may put a hit on either
+#: face there, so the face across it is weighed too.
+_NEAR_EDGE = 1e-3
+#: A crossing this near a face (a fraction of the edge's length), or two distances this near (relative), are the
+#: same: far above the error of float64's :func:`_crossing`, far below float32's.
+_SAME = 1e-9
+#: Each mesh's :attr:`Scene.neighbors`, for as long as the mesh lives.
+_NEIGHBORS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+_neighbors_lock = threading.Lock()
+
+
 @dataclass(frozen=True, eq=False)
 class Scene:
     """An Embree scene whose hits are the same on every x86-64 CPU.
 
     Embree's ``tfar``, ``u`` and ``v`` are quotients taken with the CPU's
-    approximate reciprocal, so :meth:`run` computes them again from the face's
-    float32 corners, the ray's origin and its direction (Cramer's rule in
-    float64, rounded once to float32): the same on every CPU, and nearer the
-    exact crossing than Embree's own.  The face (``primID``) and its geometric
-    normal (``Ng``, a cross product) are Embree's: it picks the face by
-    comparisons without division, except between faces within a unit in the
-    last place of each other along the ray.
+    approximate reciprocal, and between two faces meeting at an edge it keeps
+    the one it meets first unless the other is nearer by that quotient.  So
+    :meth:`run` keeps only Embree's answer to which faces a ray meets, and
+    settles the rest from the faces' float32 corners, the ray's origin and
+    its direction in float64 (Cramer's rule, elementwise, rounded once to
+    float32):
+
+    - the distance and barycentrics, nearer the exact crossing than Embree's;
+    - the face: within a thousandth of an edge's length of an edge Embree's
+      face shares with one other face (by the corners' positions, so across
+      texture seams too), the one of the two that holds its crossing with
+      the ray nearer the ray's origin; at the same distance (the ray through
+      the edge) the one facing the ray, then the lower index;
+    - the geometric normal ``Ng``: the cross product of the face's edges
+      from its first corner.
+
+    What stays Embree's: a crossing near a corner, or on an edge of three or
+    more faces, and faces at the same place that share no edge.
 
     Attributes
     ----------
     embree : embreex ``EmbreeScene``
-    corners : (12, m) float64
-        Each face's first corner, its edges to the second and the third
-        corners, and their cross product: 96 bytes a face, beside Embree's
-        own hundred or so.
+    corners : (15, m) float64
+        Each face's first corner, its edges to the second and third corners,
+        their cross product, and the cross product's length over each edge's
+        squared length (edges opposite the first, second and third corner):
+        120 bytes a face, beside Embree's own hundred or so.
+    mesh : Mesh
+        The mesh the scene holds.
     """
 
     embree: object
     corners: np.ndarray
+    mesh: Mesh
 
     @property
     def is_committed(self) -> int:
         return self.embree.is_committed
 
+    @property
+    def neighbors(self) -> np.ndarray:
+        """(m, 3) int64: the other face across each face's edge opposite its first, second, third corner, or -1.
+
+        Found at the first hit near an edge, once for all the mesh's scenes.
+        """
+        with _neighbors_lock:
+            found = _NEIGHBORS.get(self.mesh)
+            if found is None:
+                found = _NEIGHBORS[self.mesh] = _neighbors(self.mesh)
+        return found
+
     def run(self, origins, directions, dists=None, query="INTERSECT", output=None):
-        """embreex's ``EmbreeScene.run``, with each hit's ``tfar``, ``u`` and ``v`` computed again (see :class:`Scene`).
+        """embreex's ``EmbreeScene.run``, each hit settled as :class:`Scene` says.
 
         Parameters
         ----------
@@ -273,38 +312,66 @@ class Scene:
         """
         hit = self.embree.run(origins, directions, dists=dists, query=query, output=output)
         if isinstance(hit, dict):
-            _settle(hit, origins, directions, self.corners)
+            _settle(hit, origins, directions, self)
         return hit
 
 
 def _corners(mesh: Mesh) -> np.ndarray:
-    """(12, m) float64: each face's first corner ``a``, its edges ``e``, ``f`` to the others and ``n = e x f``.
+    """The (15, m) float64 table of :attr:`Scene.corners`, from the float32 vertices Embree holds."""
+    V = np.asarray(mesh.vertices, np.float32).T.astype(np.float64)
+    F = np.asarray(mesh.faces)
+    table = np.empty((15, len(F)))
+    a, e, f, n, spans = table[0:3], table[3:6], table[6:9], table[9:12], table[12:15]
+    for axis in range(3):
+        np.take(V[axis], F[:, 0], out=a[axis])
+        np.subtract(np.take(V[axis], F[:, 1]), a[axis], out=e[axis])
+        np.subtract(np.take(V[axis], F[:, 2]), a[axis], out=f[axis])
+    for axis in range(3):
+        i, j = (axis + 1) % 3, (axis + 2) % 3
+        np.subtract(e[i] * f[j], e[j] * f[i], out=n[axis])
+    area = np.sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2])
+    with np.errstate(divide="ignore", invalid="ignore"):
+        for row, (x, y) in zip(spans, ((f, e), (f, None), (e, None))):
+            side = x - y if y is not None else x
+            np.divide(area, side[0] * side[0] + side[1] * side[1] + side[2] * side[2], out=row)
+    return table
 
-    From the float32 vertices Embree holds.
-    """
-    V = np.asarray(mesh.vertices, np.float32).astype(np.float64)
-    a, b, c = (np.take(V, corner, axis=0) for corner in np.asarray(mesh.faces).T)
-    e, f = b - a, c - a
-    n = np.stack(
-        [
-            e[:, 1] * f[:, 2] - e[:, 2] * f[:, 1],
-            e[:, 2] * f[:, 0] - e[:, 0] * f[:, 2],
-            e[:, 0] * f[:, 1] - e[:, 1] * f[:, 0],
-        ],
-        axis=1,
-    )
-    return np.ascontiguousarray(np.concatenate([a, e, f, n], axis=1).T)
+
+def _neighbors(mesh: Mesh) -> np.ndarray:
+    """(m, 3) int64: across the edge opposite each corner, the one other face with that edge's two positions, or -1."""
+    V = np.asarray(mesh.vertices, np.float32) + np.float32(0.0)  # -0.0 becomes 0.0: one position, one key
+    F = np.asarray(mesh.faces, np.int64)
+    # Vertices at the same float32 position are one: faces across a texture seam are neighbours too.
+    order = np.lexsort(V.T[::-1])
+    ranked = V[order]
+    fresh = np.r_[True, np.any(ranked[1:] != ranked[:-1], axis=1)]
+    place = np.empty(len(V), np.int64)
+    place[order] = np.cumsum(fresh) - 1
+    corners = place[F]
+    n, m = int(place.max()) + 1, len(F)
+    ends = [(corners[:, (j + 1) % 3], corners[:, (j + 2) % 3]) for j in range(3)]
+    keys = np.concatenate([np.minimum(p, q) * n + np.maximum(p, q) for p, q in ends])
+    order = np.argsort(keys)
+    ranked = keys[order]
+    starts = np.r_[True, ranked[1:] != ranked[:-1]]
+    group = np.cumsum(starts) - 1
+    size = np.bincount(group)[group]
+    first = np.flatnonzero((size == 2) & starts)  # the first of each edge two faces have
+    out = np.full(3 * m, -1, np.int64)
+    out[order[first]] = order[first + 1] % m
+    out[order[first + 1]] = order[first] % m
+    return out.reshape(3, m).T
 
 
 def _crossing(faces: np.ndarray, origins: np.ndarray, directions: np.ndarray) -> tuple:
-    """``(t, u, v)`` float64 solving ``o + t d = a + u e + v f`` for the (12, k) ``faces`` of :func:`_corners`.
+    """``(t, u, v, d . n)`` float64 solving ``o + t d = a + u e + v f`` for the (15, k) ``faces`` of :func:`_faces`.
 
     Cramer's rule with ``m = s x d``, ``s = o - a``: ``t = -(s . n) / (d . n)``,
     ``u = -(f . m) / (d . n)``, ``v = (e . m) / (d . n)``.  Elementwise
     arithmetic only (no dot products, whose summation order and fused
     multiply-adds vary by library), each operation correctly rounded.
     """
-    ax, ay, az, ex, ey, ez, fx, fy, fz, nx, ny, nz = faces
+    ax, ay, az, ex, ey, ez, fx, fy, fz, nx, ny, nz = faces[:12]
     ox, oy, oz = origins.astype(np.float64).T
     dx, dy, dz = directions.astype(np.float64).T
     sx, sy, sz = ox - ax, oy - ay, oz - az
@@ -329,23 +396,76 @@ def _crossing(faces: np.ndarray, origins: np.ndarray, directions: np.ndarray) ->
             quotient /= dn
     np.negative(t, out=t)
     np.negative(u, out=u)
-    return t, u, v
+    return t, u, v, dn
 
 
-def _settle(hit: dict, origins: np.ndarray, directions: np.ndarray, corners: np.ndarray) -> None:
-    """Overwrite each hit's ``tfar``, ``u``, ``v`` with their values computed again (see :class:`Scene`)."""
-    hits = np.flatnonzero(hit["primID"] >= 0)
-    if hits.size == 0:
-        return
-    origins = origins if len(origins) == 1 else np.take(origins, hits, axis=0)
-    directions = directions if len(directions) == 1 else np.take(directions, hits, axis=0)
-    faces = np.take(corners, hit["primID"][hits], axis=1)
-    for key, values in zip(("tfar", "u", "v"), _crossing(faces, origins, directions)):
+def _inside(faces: np.ndarray, u: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """(3, k): how far inside each face's edge opposite its 1st, 2nd, 3rd corner the crossing lies, in edge lengths."""
+    with np.errstate(invalid="ignore"):
+        return np.stack([1.0 - u - v, u, v]) * faces[12:15]
+
+
+def _faces(scene: Scene, ids: np.ndarray) -> np.ndarray:
+    """(15, k) float64: the faces' columns of :attr:`Scene.corners`, each row contiguous for the arithmetic."""
+    return np.take(scene.corners, ids, axis=1)
+
+
+def _settle(hit: dict, origins: np.ndarray, directions: np.ndarray, scene: Scene) -> None:
+    """Settle each hit's face, ``tfar``, ``u``, ``v`` and ``Ng`` in float64 arithmetic (see :class:`Scene`)."""
+    every = hit["primID"] >= 0
+    hits = slice(None) if every.all() else np.flatnonzero(every)
+    if not isinstance(hits, slice):
+        if hits.size == 0:
+            return
+        origins = origins if len(origins) == 1 else np.take(origins, hits, axis=0)
+        directions = directions if len(directions) == 1 else np.take(directions, hits, axis=0)
+    ids = hit["primID"][hits].astype(np.int64)
+    faces = _faces(scene, ids)
+    crossing = _crossing(faces, origins, directions)
+    _, u, v, _ = crossing
+    with np.errstate(invalid="ignore"):
+        nearest = np.minimum(np.minimum((1.0 - u - v) * faces[12], u * faces[13]), v * faces[14])
+    near = np.flatnonzero(nearest <= _NEAR_EDGE)
+    if near.size:
+        inside = _inside(faces[:, near], u[near], v[near])
+        _weigh_the_face_across(scene, near, np.argmin(inside, axis=0), inside, ids, crossing, origins, directions)
+        faces = _faces(scene, ids)
+    for key, values in zip(("tfar", "u", "v"), crossing):
         if np.isfinite(values).all():
             hit[key][hits] = values
         else:  # a face parallel to the ray in float64 too is degenerate: Embree's own value stays
-            keep = np.isfinite(values)
-            hit[key][hits[keep]] = values[keep]
+            keep = np.flatnonzero(np.isfinite(values))
+            hit[key][np.arange(len(every))[hits][keep]] = values[keep]
+    hit["primID"][hits] = ids
+    hit["Ng"][hits] = faces[9:12].T
+
+
+def _weigh_the_face_across(scene: Scene, near, edge, inside, ids, crossing, origins, directions) -> None:
+    """Give the ``near`` hits, whose faces' ``edge`` they lie near, the face of the two there that :class:`Scene`
+    says (``ids`` and ``crossing``, ``(t, u, v, d . n)``, are changed in place)."""
+    f = ids[near]
+    g = scene.neighbors[f, edge]
+    known = np.flatnonzero(g >= 0)
+    near, f, g, edge, inside = near[known], f[known], g[known], edge[known], inside[:, known]
+    if near.size == 0:
+        return
+    rays_o = origins if len(origins) == 1 else origins[near]
+    rays_d = directions if len(directions) == 1 else directions[near]
+    faces = _faces(scene, g)
+    across = _crossing(faces, rays_o, rays_d)
+    t_f, t_g = crossing[0][near], across[0]
+    with np.errstate(invalid="ignore"):
+        holds_f = inside.min(axis=0) >= -_SAME
+        holds_g = (_inside(faces, across[1], across[2]).min(axis=0) >= -_SAME) & (t_g > 0)
+        same = np.abs(t_g - t_f) <= _SAME * np.maximum(np.abs(t_f), np.abs(t_g))
+    # The ray through the edge: the face it meets from the front (d . n < 0), then the lower index.
+    front_f, front_g = crossing[3][near] < 0, across[3] < 0
+    rather = (front_g & ~front_f) | ((front_g == front_f) & (g < f))
+    move = np.flatnonzero(holds_g & (~holds_f | np.where(same, rather, t_g < t_f)))
+    rows = near[move]
+    ids[rows] = g[move]
+    for ours, theirs in zip(crossing, across):
+        ours[rows] = theirs[move]
 
 
 def embree_scene(mesh: Mesh, robust: bool = True):
@@ -385,4 +505,4 @@ def embree_scene(mesh: Mesh, robust: bool = True):
         )
     # The first query commits (builds) the scene: do it before threads share it.
     scene.run(np.zeros((1, 3), np.float32), np.ones((1, 3), np.float32), output=0)
-    return Scene(embree=scene, corners=_corners(mesh))
+    return Scene(embree=scene, corners=_corners(mesh), mesh=mesh)
