@@ -296,3 +296,16 @@ def test_imprints_do_not_depend_on_how_the_cpu_rounds_embrees_hits():
     ours = tactile.imprints(surface, P, N, sensor, scene=scene)
     assert np.count_nonzero(ours) > 0
     np.testing.assert_array_equal(ours, tactile.imprints(surface, P, N, sensor, scene=other))
+
+
+def test_neighbours_are_found_by_position_and_only_across_edges_of_two_faces():
+    from meshsal.mesh.embree import _neighbors
+
+    # Faces 0 and 1 share the edge (0, 1), face 1 with its corners flipped; faces 2, 3, 4 make a fin on (4, 5);
+    # face 5 meets face 0 on (0, 2) through a vertex of its own at vertex 0's place (a seam).
+    V = [[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, -1, 0], [5, 5, 0], [6, 5, 0], [5, 6, 0], [5, 5, 1], [5, 5, -1]]
+    V += [[0, 0, 0], [-1, 0, 0]]
+    F = [[0, 1, 2], [1, 0, 3], [4, 5, 6], [4, 5, 7], [4, 5, 8], [9, 2, 10]]
+    found = _neighbors(Mesh(vertices=V, faces=F))
+    assert found[[0, 1, 5]].tolist() == [[-1, 5, 1], [-1, -1, 0], [-1, -1, 0]]
+    assert found[2:5, 2].tolist() == [-1, -1, -1]  # a fin's edge has three faces: none is the other
