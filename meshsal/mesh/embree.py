@@ -446,7 +446,7 @@ def _weigh_the_face_across(scene: Scene, near, edge, inside, ids, crossing, orig
     f = ids[near]
     g = scene.neighbors[f, edge]
     known = np.flatnonzero(g >= 0)
-    near, f, g, edge, inside = near[known], f[known], g[known], edge[known], inside[:, known]
+    near, f, g, inside = near[known], f[known], g[known], inside[:, known]
     if near.size == 0:
         return
     rays_o = origins if len(origins) == 1 else origins[near]
