@@ -22,14 +22,18 @@ def _embreex_scene(mesh, robust):
     return scene
 
 
+def _rays(mesh, n=5000, seed=0):
+    rng = np.random.default_rng(seed)
+    lo, hi = mesh.vertices.min(axis=0), mesh.vertices.max(axis=0)
+    origins = (rng.normal(size=(n, 3)) * 5.0 * np.linalg.norm(hi - lo)).astype(np.float32)
+    directions = (rng.uniform(lo, hi, size=origins.shape) - origins).astype(np.float32)
+    return origins, directions / np.linalg.norm(directions, axis=1, keepdims=True)
+
+
 @pytest.mark.parametrize("robust", [True, False], ids=["robust", "fast"])
 @pytest.mark.parametrize("mesh", [icosphere(radius=3.0, subdivisions=4), bumps(n=40)], ids=["sphere", "bumps"])
 def test_scene_answers_every_ray_as_embreex_own_build_does(mesh, robust):
-    rng = np.random.default_rng(0)
-    lo, hi = mesh.vertices.min(axis=0), mesh.vertices.max(axis=0)
-    origins = (rng.normal(size=(5000, 3)) * 5.0 * np.linalg.norm(hi - lo)).astype(np.float32)
-    directions = (rng.uniform(lo, hi, size=origins.shape) - origins).astype(np.float32)
-    directions /= np.linalg.norm(directions, axis=1, keepdims=True)
+    origins, directions = _rays(mesh)
     ours = embree_scene(mesh, robust=robust).embree.run(origins, directions, output=1)
     theirs = _embreex_scene(mesh, robust).run(origins, directions, output=1)
     hits = theirs["primID"] >= 0
@@ -37,14 +41,6 @@ def test_scene_answers_every_ray_as_embreex_own_build_does(mesh, robust):
     np.testing.assert_array_equal(ours["primID"], theirs["primID"])
     for key in ("tfar", "u", "v", "Ng"):
         np.testing.assert_array_equal(ours[key][hits], theirs[key][hits])
-
-
-def _rays(mesh, n=5000, seed=0):
-    rng = np.random.default_rng(seed)
-    lo, hi = mesh.vertices.min(axis=0), mesh.vertices.max(axis=0)
-    origins = (rng.normal(size=(n, 3)) * 5.0 * np.linalg.norm(hi - lo)).astype(np.float32)
-    directions = (rng.uniform(lo, hi, size=origins.shape) - origins).astype(np.float32)
-    return origins, directions / np.linalg.norm(directions, axis=1, keepdims=True)
 
 
 def test_hits_with_representable_answers_are_exact():
@@ -147,12 +143,8 @@ def test_robustness_is_read_from_the_scene():
     assert not is_robust(SimpleNamespace(is_committed=1, run=None))
 
 
-def _hits(mesh, seed=0):
-    rng = np.random.default_rng(seed)
-    lo, hi = mesh.vertices.min(axis=0), mesh.vertices.max(axis=0)
-    origins = (rng.normal(size=(5000, 3)) * 5.0 * np.linalg.norm(hi - lo)).astype(np.float32)
-    directions = (rng.uniform(lo, hi, size=origins.shape) - origins).astype(np.float32)
-    return embree_scene(mesh).embree.run(origins, directions, output=1)  # Embree's own rounding
+def _hits(mesh):
+    return embree_scene(mesh).embree.run(*_rays(mesh), output=1)  # Embree's own rounding
 
 
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="the device is configured where CI runs: Linux")

@@ -235,9 +235,19 @@ _NEAR_EDGE = 1e-3
 #: A crossing this near a face (a fraction of the edge's length), or two distances this near (relative), are the
 #: same: far above the error of float64's :func:`_crossing`, far below float32's.
 _SAME = 1e-9
-#: Each mesh's :attr:`Scene.neighbors`, for as long as the mesh lives.
-_NEIGHBORS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
-_neighbors_lock = threading.Lock()
+#: Each mesh's :attr:`Scene.corners` and :attr:`Scene.neighbors`, for as long as the mesh lives: its fast and
+#: robust scenes share them.
+_TABLES = {"corners": weakref.WeakKeyDictionary(), "neighbors": weakref.WeakKeyDictionary()}
+_tables_lock = threading.Lock()
+
+
+def _per_mesh(kind: str, mesh: Mesh, compute) -> np.ndarray:
+    """``compute(mesh)``, once per mesh and ``kind``."""
+    with _tables_lock:
+        found = _TABLES[kind].get(mesh)
+        if found is None:
+            found = _TABLES[kind][mesh] = compute(mesh)
+    return found
 
 
 @dataclass(frozen=True, eq=False)
@@ -290,11 +300,7 @@ class Scene:
 
         Found at the first hit near an edge, once for all the mesh's scenes.
         """
-        with _neighbors_lock:
-            found = _NEIGHBORS.get(self.mesh)
-            if found is None:
-                found = _NEIGHBORS[self.mesh] = _neighbors(self.mesh)
-        return found
+        return _per_mesh("neighbors", self.mesh, _neighbors)
 
     def run(self, origins, directions, dists=None, query="INTERSECT", output=None):
         """embreex's ``EmbreeScene.run``, each hit settled as :class:`Scene` says.
@@ -331,8 +337,7 @@ def _corners(mesh: Mesh) -> np.ndarray:
         np.subtract(e[i] * f[j], e[j] * f[i], out=n[axis])
     area = np.sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2])
     with np.errstate(divide="ignore", invalid="ignore"):
-        for row, (x, y) in zip(spans, ((f, e), (f, None), (e, None))):
-            side = x - y if y is not None else x
+        for row, side in zip(spans, (f - e, f, e)):  # the edges opposite the first, second, third corner
             np.divide(area, side[0] * side[0] + side[1] * side[1] + side[2] * side[2], out=row)
     return table
 
@@ -422,20 +427,19 @@ def _settle(hit: dict, origins: np.ndarray, directions: np.ndarray, scene: Scene
     ids = hit["primID"][hits].astype(np.int64)
     faces = _faces(scene, ids)
     crossing = _crossing(faces, origins, directions)
-    _, u, v, _ = crossing
+    inside = _inside(faces, crossing[1], crossing[2])
     with np.errstate(invalid="ignore"):
-        nearest = np.minimum(np.minimum((1.0 - u - v) * faces[12], u * faces[13]), v * faces[14])
-    near = np.flatnonzero(nearest <= _NEAR_EDGE)
+        near = np.flatnonzero(inside.min(axis=0) <= _NEAR_EDGE)
     if near.size:
-        inside = _inside(faces[:, near], u[near], v[near])
+        inside = inside[:, near]
         _weigh_the_face_across(scene, near, np.argmin(inside, axis=0), inside, ids, crossing, origins, directions)
         faces = _faces(scene, ids)
     for key, values in zip(("tfar", "u", "v"), crossing):
         if np.isfinite(values).all():
             hit[key][hits] = values
         else:  # a face parallel to the ray in float64 too is degenerate: Embree's own value stays
-            keep = np.flatnonzero(np.isfinite(values))
-            hit[key][np.arange(len(every))[hits][keep]] = values[keep]
+            keep = np.isfinite(values)
+            hit[key][np.flatnonzero(every)[keep]] = values[keep]
     hit["primID"][hits] = ids
     hit["Ng"][hits] = faces[9:12].T
 
@@ -505,4 +509,4 @@ def embree_scene(mesh: Mesh, robust: bool = True):
         )
     # The first query commits (builds) the scene: do it before threads share it.
     scene.run(np.zeros((1, 3), np.float32), np.ones((1, 3), np.float32), output=0)
-    return Scene(embree=scene, corners=_corners(mesh), mesh=mesh)
+    return Scene(embree=scene, corners=_per_mesh("corners", mesh, _corners), mesh=mesh)
