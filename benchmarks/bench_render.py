@@ -5,7 +5,8 @@ Prints pixels (primary rays) per second of ``meshsal.views.render.render_views``
 pixel-to-surface maps): with its tracer prebuilt (``meshsal.views.tracer``: the
 fast Embree scene, the rays that slip through it traced again robustly),
 with everything built in the call, with a robust Embree scene answering
-every ray, and of the tracer alone.  In the same run it casts a ray for
+every ray, and of the tracer alone, with its hits settled
+(``meshsal.mesh.embree.Scene``) and as Embree gives them.  In the same run it casts a ray for
 every pixel of the same 72 images through Open3D's ``RaycastingScene``
 (tracing only; scene prebuilt, and built in the call), and our own
 candidate rays too, when Open3D is installed (``pip install -e '.[bench]'``;
@@ -28,6 +29,7 @@ tables to ``docs/benchmarks/bench_render.md``.
 from __future__ import annotations
 
 import cProfile
+import dataclasses
 import os
 import pstats
 import time
@@ -103,7 +105,7 @@ def open3d_contenders(mesh, every, same) -> dict:
 
 # Where a render's time goes: the functions whose cumulative time is each share, by name.
 _STAGES = (
-    ("tracing (Embree, the slipped rays traced again)", ("first_hits",)),
+    ("tracing (Embree, the slipped rays traced again, the hits settled)", ("first_hits",)),
     ("pixels to cast (hull image) and their rays", ("_candidates", "camera_rays")),
     ("shading (vertex light, texture, interpolation)", ("_shade",)),
     ("writing rgb and barycentrics into the views", ("_scatter",)),
@@ -121,6 +123,8 @@ def stage_profile(mesh, cameras, size: int, scene) -> list[tuple[str, float]]:
     cumulative = {name: ct for (_, _, name), (_, _, _, ct, _) in pstats.Stats(profile).stats.items()}
     rows = [(label, sum(cumulative.get(n, 0.0) for n in names)) for label, names in _STAGES]
     rows.append(("the rest (scene checks, depth and face ids, allocation, threads)", total - sum(t for _, t in rows)))
+    # Part of the tracing, not beside it: the float64 arithmetic that makes the hits the same on every CPU.
+    rows.insert(1, ("of the tracing: settling the hits (`Scene`)", cumulative.get("_settle", 0.0)))
     return rows + [("total, one thread", total)]
 
 
@@ -138,8 +142,11 @@ def main(argv=None) -> int:
     cast = sum(len(o) for o, _ in candidates)
     pool = ThreadPoolExecutor(max_workers=os.cpu_count())
 
-    def trace():
-        return list(pool.map(lambda r: prebuilt.first_hits(*r), candidates))
+    # The same tracer on Embree's scenes themselves: the hits as Embree gives them, nothing settled.
+    unsettled = dataclasses.replace(prebuilt, fast=prebuilt.fast.embree, robust=lambda: robust.embree)
+
+    def trace(tracer=prebuilt):
+        return list(pool.map(lambda r: tracer.first_hits(*r), candidates))
 
     same = np.vstack([np.hstack([o, np.broadcast_to(d, o.shape)]) for o, d in candidates])
     contenders = {
@@ -147,6 +154,7 @@ def main(argv=None) -> int:
         "built": lambda: render_views(mesh, cameras, size=args.size),
         "robust": lambda: render_views(mesh, cameras, size=args.size, scene=robust),
         "trace": trace,
+        "unsettled": lambda: trace(unsettled),
         **open3d_contenders(mesh, every_pixel_rays(mesh, cameras, args.size), same),
     }
     times = round_robin(contenders, args.repeats)
@@ -167,6 +175,7 @@ def main(argv=None) -> int:
         "built": "meshsal.render_views, scene built in the call",
         "robust": "meshsal.render_views, a robust scene prebuilt (every ray robust)",
         "trace": "its tracer alone, prebuilt (its rays, no shading)",
+        "unsettled": "its tracer alone, the hits as Embree gives them (not settled)",
         "o3d prebuilt": "Open3D RaycastingScene, trace only, a ray per pixel, scene prebuilt",
         "o3d built": "Open3D, scene built in the call, a ray per pixel",
         "o3d same": "Open3D, trace only, the renderer's rays",
@@ -174,6 +183,12 @@ def main(argv=None) -> int:
     for key, label in labels.items():
         if key in seconds:
             lines.append(f"| {label} | {seconds[key]:.3f} | {n_rays / seconds[key] / 1e6:.2f} |")
+    settling = times["trace"] / times["unsettled"]
+    lines.append(
+        f"\nSettling Embree's hits so that every CPU gets the same (`meshsal.mesh.embree.Scene`): "
+        f"{np.median(settling):.2f}x ({settling.min():.2f}-{settling.max():.2f}x) the time of the hits as they "
+        "come, tracers alone"
+    )
     if "o3d prebuilt" not in seconds:
         lines.append("\nOpen3D is not installed: no ratio.")
     else:

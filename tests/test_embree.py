@@ -233,12 +233,12 @@ class _OtherRounding:
         o = origins if len(origins) == 1 else origins[hits]
         d = directions if len(directions) == 1 else directions[hits]
         f = hit["primID"][hits]
-        _, u, v, _ = _crossing(corners[:, f], o, d)
-        g = self.settled.neighbors[f, np.argmin(_inside(corners[:, f], u, v), axis=0)]
-        near = np.flatnonzero(near_one_edge_only(corners[:, f], o, d) & (g >= 0))
+        _, u, v, _ = _crossing(corners[f].T, o, d)
+        g = self.settled.neighbors[f, np.argmin(_inside(corners[f].T, u, v), axis=0)]
+        near = np.flatnonzero(near_one_edge_only(corners[f].T, o, d) & (g >= 0))
         o = o if len(o) == 1 else o[near]
         d = d if len(d) == 1 else d[near]
-        turned = near[near_one_edge_only(corners[:, g[near]], o, d)]
+        turned = near[near_one_edge_only(corners[g[near]].T, o, d)]
         hit["primID"][hits[turned]] = g[turned]
         self.turned += turned.size
 

@@ -277,11 +277,12 @@ class Scene:
     Attributes
     ----------
     embree : embreex ``EmbreeScene``
-    corners : (15, m) float64
-        Each face's first corner, its edges to the second and third corners,
-        their cross product, and the cross product's length over each edge's
-        squared length (edges opposite the first, second and third corner):
-        120 bytes a face, beside Embree's own hundred or so.
+    corners : (m, 15) float64
+        A row per face: its first corner, its edges to the second and third
+        corners, their cross product, and the cross product's length over each
+        edge's squared length (edges opposite the first, second and third
+        corner): 120 contiguous bytes a face, beside Embree's own hundred or so,
+        so that a hit's face is gathered in one copy.
     mesh : Mesh
         The mesh the scene holds.
     """
@@ -323,11 +324,12 @@ class Scene:
 
 
 def _corners(mesh: Mesh) -> np.ndarray:
-    """The (15, m) float64 table of :attr:`Scene.corners`, from the float32 vertices Embree holds."""
+    """The (m, 15) float64 table of :attr:`Scene.corners`, from the float32 vertices Embree holds."""
     V = np.asarray(mesh.vertices, np.float32).T.astype(np.float64)
     F = np.asarray(mesh.faces)
-    table = np.empty((15, len(F)))
-    a, e, f, n, spans = table[0:3], table[3:6], table[6:9], table[9:12], table[12:15]
+    table = np.empty((len(F), 15))
+    columns = table.T
+    a, e, f, n, spans = columns[0:3], columns[3:6], columns[6:9], columns[9:12], columns[12:15]
     for axis in range(3):
         np.take(V[axis], F[:, 0], out=a[axis])
         np.subtract(np.take(V[axis], F[:, 1]), a[axis], out=e[axis])
@@ -411,8 +413,8 @@ def _inside(faces: np.ndarray, u: np.ndarray, v: np.ndarray) -> np.ndarray:
 
 
 def _faces(scene: Scene, ids: np.ndarray) -> np.ndarray:
-    """(15, k) float64: the faces' columns of :attr:`Scene.corners`, each row contiguous for the arithmetic."""
-    return np.take(scene.corners, ids, axis=1)
+    """(15, k) float64: the faces' rows of :attr:`Scene.corners`, gathered in one pass and seen by column."""
+    return np.take(scene.corners, ids, axis=0).T
 
 
 def _settle(hit: dict, origins: np.ndarray, directions: np.ndarray, scene: Scene) -> None:
