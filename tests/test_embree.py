@@ -10,6 +10,7 @@ from shapes import bumps, icosphere
 
 from meshsal.mesh import Mesh
 from meshsal.mesh.embree import Scene, _attach_directly, _scene_handle, embree_device, embree_scene, is_robust
+from meshsal.mesh.rounding import OtherRounding, rounded_otherwise
 from meshsal.util.reproducible import EMBREE_VARIABLE, cpu_flags
 
 
@@ -82,7 +83,7 @@ def test_a_scene_gives_the_same_hits_whatever_embrees_last_bits_and_its_choice_a
     mesh = bumps(n=40)
     origins, directions = _rays(mesh, n=20000)
     scene = embree_scene(mesh)
-    stand_in = _OtherRounding(scene.embree, 0.5, np.random.default_rng(1), settled=scene)
+    stand_in = OtherRounding(scene.embree, 0.5, np.random.default_rng(1), settled=scene)
     other = Scene(embree=stand_in, corners=scene.corners, mesh=scene.mesh)
     ours, theirs = scene.run(origins, directions, output=1), other.run(origins, directions, output=1)
     assert (ours["primID"] >= 0).sum() > 2000 and stand_in.turned > 0
@@ -197,80 +198,47 @@ def test_a_configuration_embree_refuses_is_an_error_naming_the_variable(monkeypa
         embree_scene(icosphere(subdivisions=1))
 
 
-class _OtherRounding:
-    """A scene whose hits round as another CPU's may (Embree's SSE kernels divide with the CPU's approximate
-    reciprocal, ``rcpps``, which Intel and AMD round differently): a ``share`` of the hits' distances and
-    barycentrics one unit in the last place up or down, at seeded random; with ``settled``, the
-    :class:`Scene` whose corners to use, every hit whose crossings with its face and with the face across an
-    edge both lie within a ten-thousandth of that edge's length of it (away from the faces' other edges) on
-    the other face, as float32 arithmetic and another rounding of the two distances may put it."""
+def _cow_views():
+    import meshsal
+    from meshsal.views import cameras, render
 
-    def __init__(self, scene, share, rng, settled=None):
-        self.scene, self.share, self.rng, self.settled = scene, share, rng, settled
-        self.turned = 0
-
-    def run(self, origins, directions, **kwargs):
-        hit = self.scene.run(origins, directions, **kwargs)
-        if isinstance(hit, dict):
-            hits = np.flatnonzero(hit["primID"] >= 0)
-            for key in ("tfar", "u", "v"):
-                some = hits[self.rng.random(hits.size) < self.share]
-                away = np.where(self.rng.random(some.size) < 0.5, -np.inf, np.inf).astype(np.float32)
-                hit[key][some] = np.nextafter(hit[key][some], away)
-            if self.settled is not None and hits.size:
-                self._turn_edges(hit, hits, origins, directions)
-        return hit
-
-    def _turn_edges(self, hit, hits, origins, directions):
-        from meshsal.mesh.embree import _crossing, _inside
-
-        def near_one_edge_only(faces, o, d):
-            _, u, v, _ = _crossing(faces, o, d)
-            inside = np.sort(_inside(faces, u, v), axis=0)
-            return (np.abs(inside[0]) < 1e-4) & (inside[1] > 1e-3)
-
-        corners = self.settled.corners
-        o = origins if len(origins) == 1 else origins[hits]
-        d = directions if len(directions) == 1 else directions[hits]
-        f = hit["primID"][hits]
-        _, u, v, _ = _crossing(corners[f].T, o, d)
-        g = self.settled.neighbors[f, np.argmin(_inside(corners[f].T, u, v), axis=0)]
-        near = np.flatnonzero(near_one_edge_only(corners[f].T, o, d) & (g >= 0))
-        o = o if len(o) == 1 else o[near]
-        d = d if len(d) == 1 else d[near]
-        turned = near[near_one_edge_only(corners[g[near]].T, o, d)]
-        hit["primID"][hits[turned]] = g[turned]
-        self.turned += turned.size
+    rig = [c for s in cameras.view_rig()[:2] for c in s]
+    return render.render_views(meshsal.objects.toys.make("cow"), rig, size=48, threads=1)
 
 
 @pytest.mark.parametrize("share", [0.0, 0.1, 1.0], ids=["as-rounded", "a-tenth-rounded-otherwise", "all"])
-def test_views_do_not_depend_on_how_the_cpu_rounds_embrees_hits(monkeypatch, share):
+def test_views_do_not_depend_on_how_the_cpu_rounds_embrees_hits(share):
     # With every share, each hit near an edge goes to the face across it, as another rounding may choose.
-    import meshsal
-    from meshsal.mesh import embree as embree_module
-    from meshsal.views import cameras, render
-    from meshsal.views import tracer as tracer_module
-
-    mesh = meshsal.objects.toys.make("cow")
-    rig = [c for s in cameras.view_rig()[:2] for c in s]
-    views = render.render_views(mesh, rig, size=48, threads=1)
-    rng, built = np.random.default_rng(0), embree_module.embree_scene
-
-    stand_ins = []
-
-    def other(*args, **kwargs):
-        scene = built(*args, **kwargs)
-        stand_ins.append(_OtherRounding(scene.embree, share, rng, settled=scene))
-        return Scene(embree=stand_ins[-1], corners=scene.corners, mesh=scene.mesh)
-
-    monkeypatch.setattr(tracer_module, "embree_scene", other)
-    monkeypatch.setattr(tracer_module, "is_robust", lambda scene: is_robust(scene.embree.scene))
-    again = render.render_views(mesh, rig, size=48, threads=1)
+    views = _cow_views()
+    with rounded_otherwise(share, seed=0) as stand_ins:
+        again = _cow_views()
     assert sum(stand_in.turned for stand_in in stand_ins) > 0
+    assert sum(stand_in.moved for stand_in in stand_ins) > 0 or share == 0.0
     for view, other_view in zip(views, again):
         np.testing.assert_array_equal(view.face_id, other_view.face_id)
         for key in ("rgb", "bary", "depth"):
             np.testing.assert_array_equal(getattr(view, key), getattr(other_view, key))
+
+
+def test_the_same_rounding_around_the_settled_hits_moves_the_views():
+    # The stand-in has teeth: placed where the settling cannot absorb it, it changes what the views hold.
+    views = _cow_views()
+    with rounded_otherwise(0.1, seed=0, where="settled") as stand_ins:
+        again = _cow_views()
+    assert stand_ins and all(not isinstance(s, Scene) for s in stand_ins)
+    assert any(not np.array_equal(a.face_id, b.face_id) for a, b in zip(views, again))
+    assert any(not np.array_equal(a.depth, b.depth) for a, b in zip(views, again))
+
+
+def test_rounded_otherwise_restores_the_scenes_and_refuses_an_unknown_place():
+    import meshsal.mesh.embree as embree_module
+
+    with pytest.raises(ValueError, match="where must be one of"):
+        with rounded_otherwise(where="elsewhere"):
+            pass
+    with pytest.raises(RuntimeError), rounded_otherwise():
+        raise RuntimeError
+    assert embree_module.Scene is Scene and isinstance(embree_scene(bumps(n=8)), Scene)
 
 
 def test_imprints_do_not_depend_on_how_the_cpu_rounds_embrees_hits():
@@ -283,7 +251,7 @@ def test_imprints_do_not_depend_on_how_the_cpu_rounds_embrees_hits():
     sensor = tactile.Sensor(supersample=2, mode="pressure")  # depths themselves, not their contour levels
     scene = embree_scene(surface)
     other = Scene(
-        embree=_OtherRounding(scene.embree, 1.0, np.random.default_rng(2)), corners=scene.corners, mesh=scene.mesh
+        embree=OtherRounding(scene.embree, 1.0, np.random.default_rng(2)), corners=scene.corners, mesh=scene.mesh
     )
     ours = tactile.imprints(surface, P, N, sensor, scene=scene)
     assert np.count_nonzero(ours) > 0

@@ -224,8 +224,10 @@ def is_robust(scene) -> bool:
     False for a scene built with ``robust=False``, and for any scene whose
     flags cannot be read.
     """
+    while hasattr(scene, "embree"):  # a Scene, or a stand-in around one (meshsal.mesh.rounding), holds embreex's
+        scene = scene.embree
     lib = _library()
-    handle = _scene_handle(getattr(scene, "embree", scene)) if lib is not None else None
+    handle = _scene_handle(scene) if lib is not None else None
     return bool(handle) and bool(lib.rtcGetSceneFlags(handle) & _SCENE_FLAG_ROBUST)
 
 
