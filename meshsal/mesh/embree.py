@@ -369,7 +369,7 @@ def _neighbors(mesh: Mesh) -> np.ndarray:
     out = np.full(3 * m, -1, np.int64)
     out[order[first]] = order[first + 1] % m
     out[order[first + 1]] = order[first] % m
-    return out.reshape(3, m).T
+    return np.ascontiguousarray(out.reshape(3, m).T)  # a row per face, as the hits read them
 
 
 def _crossing(faces: np.ndarray, origins: np.ndarray, directions: np.ndarray) -> tuple:
@@ -436,27 +436,30 @@ def _settle(hit: dict, origins: np.ndarray, directions: np.ndarray, scene: Scene
         near = np.flatnonzero(inside.min(axis=0) <= _NEAR_EDGE)
     if near.size:
         inside = inside[:, near]
-        _weigh_the_face_across(scene, near, np.argmin(inside, axis=0), inside, ids, crossing, origins, directions)
-        faces = _faces(scene, ids)
+        moved = _weigh_the_face_across(
+            scene, near, np.argmin(inside, axis=0), inside, ids, crossing, origins, directions
+        )
+        faces[:, moved] = _faces(scene, ids[moved])  # the faces the hits moved to, for their normals
+    # Rounded to float32 before the scatter: NumPy scatters values of another type several times more slowly.
     for key, values in zip(("tfar", "u", "v"), crossing):
         if np.isfinite(values).all():
-            hit[key][hits] = values
+            hit[key][hits] = values.astype(np.float32)
         else:  # a face parallel to the ray in float64 too is degenerate: Embree's own value stays
             keep = np.isfinite(values)
-            hit[key][np.flatnonzero(every)[keep]] = values[keep]
+            hit[key][np.flatnonzero(every)[keep]] = values[keep].astype(np.float32)
     hit["primID"][hits] = ids
-    hit["Ng"][hits] = faces[9:12].T
+    hit["Ng"][hits] = faces[9:12].T.astype(np.float32)
 
 
-def _weigh_the_face_across(scene: Scene, near, edge, inside, ids, crossing, origins, directions) -> None:
+def _weigh_the_face_across(scene: Scene, near, edge, inside, ids, crossing, origins, directions) -> np.ndarray:
     """Give the ``near`` hits, whose faces' ``edge`` they lie near, the face of the two there that :class:`Scene`
-    says (``ids`` and ``crossing``, ``(t, u, v, d . n)``, are changed in place)."""
+    says (``ids`` and ``crossing``, ``(t, u, v, d . n)``, are changed in place); returns the hits moved."""
     f = ids[near]
     g = scene.neighbors[f, edge]
     known = np.flatnonzero(g >= 0)
     near, f, g, inside = near[known], f[known], g[known], inside[:, known]
     if near.size == 0:
-        return
+        return near
     rays_o = origins if len(origins) == 1 else origins[near]
     rays_d = directions if len(directions) == 1 else directions[near]
     faces = _faces(scene, g)
@@ -474,6 +477,7 @@ def _weigh_the_face_across(scene: Scene, near, edge, inside, ids, crossing, orig
     ids[rows] = g[move]
     for ours, theirs in zip(crossing, across):
         ours[rows] = theirs[move]
+    return rows
 
 
 def embree_scene(mesh: Mesh, robust: bool = True):
