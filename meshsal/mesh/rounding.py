@@ -113,6 +113,9 @@ class OtherRounding:
 def rounded_otherwise(share: float = 1.0, seed: int = 0, where: str = "embree"):
     """Every Embree scene built in the block gives its hits as another CPU may round them.
 
+    It replaces :class:`meshsal.mesh.embree.Scene` for the block's duration,
+    in every thread: a check to run on its own, not beside other work.
+
     Parameters
     ----------
     share : float in [0, 1]
