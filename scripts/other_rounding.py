@@ -22,6 +22,7 @@ turned, and how many rows of ``results.csv`` differ.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import os
 import subprocess
@@ -43,8 +44,6 @@ def arm(where: str | None, share: float, seed: int, out: Path, experiment: list[
     from meshsal.util.reproducible import pin_kernels
 
     pin_kernels()
-    import contextlib
-
     from classify.cli import main
     from meshsal.mesh.rounding import rounded_otherwise
 

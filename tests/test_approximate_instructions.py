@@ -1,20 +1,14 @@
 """scripts/approximate_instructions.py: its table of the instructions each CPU vendor rounds its own way, from a
 report of the kind its gdb script writes, and its refusal without gdb."""
 
-import importlib.util
-from pathlib import Path
-
 import pytest
 
-SCRIPT = Path(__file__).resolve().parents[1] / "scripts" / "approximate_instructions.py"
+import scripts
 
 
 @pytest.fixture(scope="module")
 def probe():
-    spec = importlib.util.spec_from_file_location("approximate_instructions", SCRIPT)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+    return scripts.load("approximate_instructions")
 
 
 def test_the_table_puts_the_libraries_whose_instructions_ran_first_and_counts_each_site_once(probe):

@@ -1,22 +1,18 @@
 """scripts/other_rounding.py: its comparison of each run's results.csv with the plain run's, its table, and its
 refusals (the runs themselves: the stand-in's tests in test_embree.py)."""
 
-import importlib.util
 import json
 import subprocess
 from pathlib import Path
 
 import pytest
 
-SCRIPT = Path(__file__).resolve().parents[1] / "scripts" / "other_rounding.py"
+import scripts
 
 
 @pytest.fixture(scope="module")
 def script():
-    spec = importlib.util.spec_from_file_location("other_rounding", SCRIPT)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+    return scripts.load("other_rounding")
 
 
 def test_rows_are_compared_place_for_place_and_missing_rows_count(script, tmp_path):

@@ -20,7 +20,7 @@ import threading
 import numpy as np
 
 from meshsal.mesh import embree as embree_module
-from meshsal.mesh.embree import Scene, _crossing, _inside
+from meshsal.mesh.embree import Scene, _crossing, _faces, _inside
 
 #: Where :func:`rounded_otherwise` puts the stand-in: around Embree's hits, or around the settled ones.
 WHERE = ("embree", "settled")
@@ -89,21 +89,24 @@ class OtherRounding:
         return hit
 
     def _turn_edges(self, hit, hits, origins, directions) -> None:
-        def near_one_edge_only(faces, o, d):
-            _, u, v, _ = _crossing(faces, o, d)
-            inside = np.sort(_inside(faces, u, v), axis=0)
+        def near_one_edge_only(inside):
+            inside = np.sort(inside, axis=0)
             return (np.abs(inside[0]) < 1e-4) & (inside[1] > 1e-3)
 
-        corners = self.settled.corners
+        def inside_of(ids, o, d):
+            faces = _faces(self.settled, ids)
+            _, u, v, _ = _crossing(faces, o, d)
+            return _inside(faces, u, v)
+
         o = origins if len(origins) == 1 else origins[hits]
         d = directions if len(directions) == 1 else directions[hits]
         f = hit["primID"][hits]
-        _, u, v, _ = _crossing(corners[f].T, o, d)
-        g = self.settled.neighbors[f, np.argmin(_inside(corners[f].T, u, v), axis=0)]
-        near = np.flatnonzero(near_one_edge_only(corners[f].T, o, d) & (g >= 0))
+        inside = inside_of(f, o, d)
+        g = self.settled.neighbors[f, np.argmin(inside, axis=0)]
+        near = np.flatnonzero(near_one_edge_only(inside) & (g >= 0))
         o = o if len(o) == 1 else o[near]
         d = d if len(d) == 1 else d[near]
-        turned = near[near_one_edge_only(corners[g[near]].T, o, d)]
+        turned = near[near_one_edge_only(inside_of(g[near], o, d))]
         hit["primID"][hits[turned]] = g[turned]
         with self._lock:
             self.turned += turned.size
@@ -149,12 +152,9 @@ def rounded_otherwise(share: float = 1.0, seed: int = 0, where: str = "embree"):
 
     def scene(embree, corners, mesh):
         settled = built(embree=embree, corners=corners, mesh=mesh)
-        if where == "embree":
-            stand_ins.append(OtherRounding(embree, share, rng, settled=settled))
-            return built(embree=stand_ins[-1], corners=corners, mesh=mesh)
-        # Around the settled hits, and not inside another Scene, which would settle them again.
-        stand_ins.append(OtherRounding(settled, share, rng, settled=settled))
-        return stand_ins[-1]
+        stand_ins.append(OtherRounding(embree if where == "embree" else settled, share, rng, settled=settled))
+        # Around the settled hits the stand-in is the scene: inside another Scene they would be settled again.
+        return built(embree=stand_ins[-1], corners=corners, mesh=mesh) if where == "embree" else stand_ins[-1]
 
     embree_module.Scene = scene
     try:
