@@ -49,17 +49,16 @@ from meshsal.util.pages import machine
 
 #: Counts whose first run takes less than this run ``--repeats`` times.
 _REPEAT_UNDER_S = 300
-PAGES = Path(__file__).resolve().parents[1] / "docs" / "benchmarks"
+BENCHMARKS = Path(__file__).resolve().parent
+PAGES = BENCHMARKS.parent / "docs" / "benchmarks"
 
 _ONE = """
 import json, resource, sys, time, warnings
-from classify.experiment import ExperimentConfig, Settings, run_experiment
+sys.path.insert(0, sys.argv[3])
+from benchlib import scaling_config
+from classify.experiment import run_experiment
 files = json.loads(sys.argv[1])
-config = ExperimentConfig(
-    methods=("mesh_saliency", "uniform"), protocols=("instance",), classifiers=("knn", "place"),
-    features="polar", policies=("info_gain",), replicates=2,
-    settings=Settings(n_points=5, view_size=64, seed=0), params=json.loads(sys.argv[2]),
-)
+config = scaling_config(json.loads(sys.argv[2]))
 with warnings.catch_warnings():
     warnings.simplefilter("ignore")
     result = run_experiment(files, config, cache_dir=None, quiet=True, skip_bad=True)
@@ -88,7 +87,7 @@ def _page(screening: str | None) -> str:
 def _measure(count: int, params: dict) -> dict | None:
     """One run on the first ``count`` corpus objects, in a fresh process: its JSON row (None when it fails)."""
     done = subprocess.run(
-        [sys.executable, "-c", _ONE, json.dumps(corpus_files(count)), json.dumps(params)],
+        [sys.executable, "-c", _ONE, json.dumps(corpus_files(count)), json.dumps(params), str(BENCHMARKS)],
         capture_output=True,
         text=True,
         check=False,
@@ -129,8 +128,9 @@ def main(args) -> int:
     if not CORPUS.is_dir():
         print(f"bench_scaling: error: {CORPUS} not found", file=sys.stderr)
         return 1
-    # Rows are kept under the code they measured: the toolkit's sources and this script.
-    code = code_fingerprint("meshsal", "tactile", "classify") + file_fingerprint(__file__) + json.dumps(params)
+    # Rows are kept under the code they measured: the toolkit's sources, this script and the settings' helper.
+    code = code_fingerprint("meshsal", "tactile", "classify") + json.dumps(params)
+    code += file_fingerprint(__file__) + file_fingerprint(BENCHMARKS / "benchlib.py")
     code = hashlib.sha256(code.encode()).hexdigest()[:16]
     rows = []
     for count in counts:

@@ -39,18 +39,17 @@ import json
 import subprocess
 import sys
 import tempfile
+from pathlib import Path
 
 from benchlib import CORPUS, arguments, corpus_files, run
 
 _ONE = """
 import json, sys, warnings
-from classify.experiment import ExperimentConfig, Settings, run_experiment
-files, params, control, mismatch, cache = json.loads(sys.argv[1])
-config = ExperimentConfig(
-    methods=("mesh_saliency", "uniform"), protocols=("instance",), classifiers=("knn", "place"),
-    features="polar", policies=("info_gain",), replicates=2, control=control,
-    settings=Settings(n_points=5, view_size=64, seed=0, mismatch=tuple(mismatch)), params={"place": params},
-)
+files, params, control, mismatch, cache, here = json.loads(sys.argv[1])
+sys.path.insert(0, here)
+from benchlib import scaling_config
+from classify.experiment import run_experiment
+config = scaling_config({"place": params}, control, mismatch)
 with warnings.catch_warnings():
     warnings.simplefilter("ignore")
     result = run_experiment(files, config, cache_dir=cache, quiet=True, skip_bad=True)
@@ -78,7 +77,7 @@ CONTROLS = (None, "shuffled", "scrambled")
 def _arm(files: list, label: str, params: dict, control, mismatch: list, cache: str) -> dict:
     """One run in a fresh process: its JSON row (SystemExit naming the arm when it fails)."""
     done = subprocess.run(
-        [sys.executable, "-c", _ONE, json.dumps([files, params, control, mismatch, cache])],
+        [sys.executable, "-c", _ONE, json.dumps([files, params, control, mismatch, cache, str(Path(__file__).parent)])],
         capture_output=True,
         text=True,
         check=False,

@@ -57,25 +57,38 @@ class _Tee(io.TextIOBase):
         self.terminal.flush()
 
 
+class _Outcome:
+    """What :func:`page` writes: the page, unless the benchmark failed."""
+
+    failed = False
+
+
 @contextlib.contextmanager
 def page(name: str, title: str):
     """Run a benchmark: its machine line before and after, and everything it prints as ``docs/benchmarks/NAME.md``.
 
-    The page is written only when the benchmark finishes (not on an error or ``--help``).
+    The page is written only when the benchmark finishes and succeeds: not on
+    an error, ``--help``, or when the block marks the yielded outcome
+    ``failed`` (a non-zero exit status), so a failed run leaves the page of
+    the last good one.
     """
-    tee = _Tee(sys.stdout)
+    tee, outcome = _Tee(sys.stdout), _Outcome()
     with contextlib.redirect_stdout(tee):
         print(f"{machine()}\n", flush=True)
-        yield
+        yield outcome
         print(f"\n{machine()}", flush=True)
+    if outcome.failed:
+        print(f"docs/benchmarks/{name}.md not written: the benchmark failed", file=sys.stderr)
+        return
     write_page(name, title, tee.copy.getvalue())
     print(f"wrote docs/benchmarks/{name}.md", file=sys.stderr)
 
 
 def run(name: str, title: str, main) -> None:
     """``python benchmarks/NAME.py``: ``main()`` inside :func:`page`, its return value the exit status."""
-    with page(name, title):
+    with page(name, title) as outcome:
         status = main()
+        outcome.failed = bool(status)
     raise SystemExit(status)
 
 
@@ -92,6 +105,30 @@ def arguments(doc: str, repeats: int, meshes_dir: bool = True, repeats_help: str
     help = repeats_help or "timed runs; the figures are their medians"
     parser.add_argument("--repeats", type=int, default=repeats, help=f"{help} (default {repeats})")
     return parser
+
+
+def scaling_config(params: dict | None = None, control: str | None = None, mismatch=()):
+    """The experiment the scaling, screening and results.json benchmarks run on corpus objects.
+
+    2 replicates of the instance protocol, uniform and mesh-saliency points,
+    kNN and the place-aware recognizer (``params``: the classifiers'
+    parameters), polar features, ``info_gain``, 5 points per instance, 64 px
+    views, seed 0; ``control`` and ``mismatch`` as ``ExperimentConfig`` and
+    ``Settings`` take them.
+    """
+    from classify.experiment import ExperimentConfig, Settings
+
+    return ExperimentConfig(
+        methods=("mesh_saliency", "uniform"),
+        protocols=("instance",),
+        classifiers=("knn", "place"),
+        features="polar",
+        policies=("info_gain",),
+        replicates=2,
+        control=control,
+        settings=Settings(n_points=5, view_size=64, seed=0, mismatch=tuple(mismatch)),
+        params=params or {},
+    )
 
 
 def timed(fn):

@@ -33,7 +33,7 @@ _EXPORTS = {
     "TouchEnv": "experiment.env",
     "Cell": "reporting.results",
     "Comparison": "reporting.results",
-    "ConfusionMatrix": "reporting.results",
+    "ConfusionMatrix": "reporting.confusion",
     "ExperimentResult": "reporting.results",
     "run_experiment": "experiment",
     "run_real": "experiment",

@@ -121,3 +121,54 @@ def test_bench_scaling_names_its_page_by_the_screening_it_runs(bench_scaling):
     assert bench_scaling.parser().parse_args(["--screening", "touch"]).screening == "touch"
     with pytest.raises(SystemExit):
         bench_scaling.parser().parse_args(["--screening", "sight"])
+
+
+@pytest.fixture
+def benchlib(monkeypatch):
+    yield from _benchmark(monkeypatch, "benchlib")
+
+
+def test_a_benchmark_that_fails_leaves_the_page_of_its_last_good_run(benchlib, monkeypatch, capsys):
+    written = []
+    monkeypatch.setattr(benchlib, "write_page", lambda name, title, body: written.append((name, body)))
+
+    def missing_corpus():
+        print("bench_x: error: the corpus is not there", file=sys.stderr)
+        return 1
+
+    with pytest.raises(SystemExit) as failed:
+        benchlib.run("bench_x", "X", missing_corpus)
+    assert failed.value.code == 1 and written == []
+    assert "docs/benchmarks/bench_x.md not written" in capsys.readouterr().err
+    with pytest.raises(SystemExit) as done:
+        benchlib.run("bench_x", "X", lambda: print("| figure |") or 0)
+    assert done.value.code == 0 and written[0][0] == "bench_x" and "| figure |" in written[0][1]
+
+
+@pytest.fixture
+def bench_results_json(monkeypatch):
+    yield from _benchmark(monkeypatch, "bench_results_json")
+
+
+def test_bench_results_json_writes_the_peer_with_every_confusion_dense(bench_results_json):
+    import numpy as np
+
+    from classify.reporting import report
+    from classify.reporting.confusion import ConfusionMatrix, confusion_pairs
+    from classify.reporting.results import ExperimentResult
+
+    names = tuple(f"o{i}" for i in range(40))
+    truth = np.repeat(np.arange(40), 3)
+    pairs = confusion_pairs(truth, (truth + np.arange(truth.size) % 2) % 40)
+    result = ExperimentResult(
+        cells=(),
+        comparisons=(),
+        confusions=(ConfusionMatrix("uniform", "instance", "knn", 40, False, names, pairs),),
+        object_names=names,
+        object_sets=(40,),
+        classifiers=("knn",),
+    )
+    every, confusions = bench_results_json._dense(result)
+    # 1,600 cells, each a line of its own, against the 80 pairs the toolkit writes.
+    assert len(pairs) == 80 and every > confusions > 1600 * 8
+    assert confusions > 5 * len(report.json_text(result.to_json()["confusions"]))

@@ -503,6 +503,10 @@ def test_a_result_read_back_from_its_json_prints_the_same_tables(tmp_path):
     assert experiment.format_tables(again) == experiment.format_tables(r)
     assert again.cell("uniform", "instance", "knn", 2, False, 3) == r.cell("uniform", "instance", "knn", 2, False, 3)
     assert again.usage == r.usage
+    assert len(again.confusions) == len(r.confusions) > 0
+    for read, measured in zip(again.confusions, r.confusions):
+        assert read.object_names == measured.object_names and read.method == measured.method
+        np.testing.assert_array_equal(read.pairs, measured.pairs)
 
 
 def test_a_run_reports_each_stages_wall_and_cpu_time_and_peak_memory(tmp_path):
@@ -581,7 +585,7 @@ def test_replicates_measured_a_few_at_a_time_give_the_results_of_all_at_once_and
 def test_joined_blocks_of_replicates_sum_as_one_block_bit_for_bit():
     from classify.experiment.stages import Measurement, join_replicates
     from classify.reporting import stats
-    from classify.reporting.results import ConfusionMatrix
+    from classify.reporting.confusion import ConfusionMatrix, counts_pairs
 
     rng = np.random.default_rng(3)
     R, K, n, L = 7, 4, 9, 3
@@ -603,7 +607,7 @@ def test_joined_blocks_of_replicates_sum_as_one_block_bit_for_bit():
             True,
             {k: rates[:, k - 1, :] for k in range(1, K + 1)},
             {k: int(min(rng_sets[r][k - 1] for r in replicates)) for k in range(1, K + 1)},
-            ConfusionMatrix("uniform", "instance", "knn", n, True, tuple("abcdefghi"), counts),
+            ConfusionMatrix("uniform", "instance", "knn", n, True, tuple("abcdefghi"), counts_pairs(counts)),
             tuple(float(rng_kept[r]) for r in replicates),
             (stop, stop + 1.0),
         )
@@ -619,7 +623,8 @@ def test_joined_blocks_of_replicates_sum_as_one_block_bit_for_bit():
     for mine, theirs in zip(joined.stopping, whole.stopping):
         np.testing.assert_array_equal(mine, theirs)
         assert stats.summarize(mine[:, 1], 0) == stats.summarize(theirs[:, 1], 0)
-    np.testing.assert_array_equal(joined.confusion.counts, whole.confusion.counts)
+    np.testing.assert_array_equal(joined.confusion.pairs, whole.confusion.pairs)
+    np.testing.assert_array_equal(joined.confusion.counts, sum(rng_counts))
     assert joined.touch_sets == whole.touch_sets and joined.kept == whole.kept
     assert join_replicates([[whole]]) == [whole]
     other = dataclasses.replace(whole, method="random")

@@ -42,7 +42,7 @@ from classify.experiment.stages import (
     run_jobs,
 )
 from classify.policies import fit_place_knowledge, place_touches
-from classify.reporting.results import ConfusionMatrix
+from classify.reporting.confusion import ConfusionMatrix, reordered_pairs, summed_pairs
 
 __all__ = ["PlaceJob", "PlaceOutcome", "place_job", "place_jobs", "place_recognition"]
 
@@ -90,8 +90,9 @@ class PlaceOutcome:
     """A :class:`PlaceJob`'s results.
 
     ``plan_*``: per method, as :class:`~classify.experiment.protocols.InstanceOutcome`
-    (rates (M, K, n), sets (M, K), confusion (M, n, n), stop_correct and
-    stop_touches (M, L, n)); ``policy_*``: per policy, as
+    (rates (M, K, n), sets (M, K), stop_correct and stop_touches (M, L, n));
+    ``plan_confusion`` (k, 4) int64 rows (method, true, predicted, count), each
+    method's confusion pairs (:func:`classify.reporting.confusion.confusion_pairs`); ``policy_*``: per policy, as
     :class:`~classify.experiment.sequential.PolicyOutcome`; ``fitted`` the
     recognizer's bandwidth, mixture and temperature.
     """
@@ -138,7 +139,9 @@ def place_job(job: PlaceJob) -> PlaceOutcome:
     return PlaceOutcome(
         np.stack([o.rates for o in plans]).reshape(len(plans), K, n),
         np.stack([o.sets for o in plans]).reshape(len(plans), K),
-        np.stack([o.confusion for o in plans]).reshape(len(plans), n, n),
+        np.concatenate([np.column_stack([np.full(len(o.confusion), q), o.confusion]) for q, o in enumerate(plans)])
+        .reshape(-1, 4)
+        .astype(np.int64),
         np.stack([o.stop_correct for o in plans]).reshape(len(plans), L, n),
         np.stack([o.stop_touches for o in plans]).reshape(len(plans), L, n),
         *(np.asarray(a, np.float64) for a in policy_arrays),
@@ -244,7 +247,9 @@ def place_recognition(
     for q, method in enumerate(config.methods):
         stack = np.stack([o.plan_rates[q] for o in outcomes])[:, :, back]  # (replicates, k, objects)
         K = stack.shape[1]
-        confusion = sum(o.plan_confusion[q] for o in outcomes)[np.ix_(back, back)]
+        confusion = reordered_pairs(
+            summed_pairs(o.plan_confusion[o.plan_confusion[:, 0] == q, 1:] for o in outcomes), back
+        )
         stopping = (
             np.stack([o.plan_stop_correct[q] for o in outcomes])[:, :, back],
             np.stack([o.plan_stop_touches[q] for o in outcomes])[:, :, back],
@@ -258,7 +263,7 @@ def place_recognition(
                 False,
                 {k: stack[:, k - 1, :] for k in range(1, K + 1)},
                 {k: int(min(o.plan_sets[q, k - 1] for o in outcomes)) for k in range(1, K + 1)},
-                ConfusionMatrix(method, "instance", "place", n, False, tuple(names), confusion.astype(np.int64)),
+                ConfusionMatrix(method, "instance", "place", n, False, tuple(names), confusion),
                 None,
                 stopping,
             )

@@ -32,7 +32,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from sklearn.metrics import confusion_matrix
 from threadpoolctl import threadpool_limits
 
 from classify.experiment.streams import Stream, recognition_rng
@@ -41,6 +40,7 @@ from classify.recognizers import touches
 from classify.recognizers.folds import GroupFolds
 from classify.recognizers.fusion import calibrate, fit_calibration, fuse, touch_sets
 from classify.recognizers.touches import Recognizer, point_groups
+from classify.reporting.confusion import confusion_pairs
 from meshsal.util.registry import Registry
 from tactile.features import describe
 
@@ -138,13 +138,6 @@ def select_training_sets(imprints, labels, instances, threshold=0.85) -> list:
     return [np.flatnonzero(k) for k in keep]
 
 
-def _confusion(truth, guess, n_classes) -> np.ndarray:
-    """(n_classes, n_classes) int64 counts, rows true class (zeros when nothing was recognized)."""
-    if len(truth) == 0:
-        return np.zeros((n_classes, n_classes), np.int64)
-    return confusion_matrix(truth, guess, labels=np.arange(n_classes)).astype(np.int64)
-
-
 @dataclass(frozen=True, eq=False)
 class PaperJob:
     """One repeat of the paper protocol: the pool of imprints, its folds, the ways to recognize.
@@ -168,7 +161,8 @@ class PaperOutcome:
     """One repeat of the paper protocol for one classifier and selection setting.
 
     ``rates`` (n_objects,) percent of each object's imprints recognized;
-    ``confusion`` (n_objects, n_objects) counts, rows true object;
+    ``confusion`` (k, 3) the pairs of true and predicted objects with their counts
+    (:func:`classify.reporting.confusion.confusion_pairs`);
     ``kept`` the mean fraction of training imprints selection kept.
     """
 
@@ -222,7 +216,7 @@ def paper_job(job: PaperJob) -> tuple[PaperOutcome, ...]:
 
 def _paper_outcome(y, pred, kept, n_classes) -> PaperOutcome:
     hit = pred >= 0
-    confusion = _confusion(y[hit], pred[hit], n_classes)
+    confusion = confusion_pairs(y[hit], pred[hit])
     rates = np.array([100.0 * np.mean(pred[y == c] == c) for c in range(n_classes)])
     return PaperOutcome(rates, confusion, float(np.mean(kept)))
 
@@ -276,7 +270,8 @@ class InstanceOutcome:
     ``rates`` (n_touches, n_objects) percent of touch sets recognized after
     k = 1..n_touches touches; ``sets`` (n_touches,) the fewest distinct touch
     sets any object had at k (0 where an object had fewer than k points);
-    ``confusion`` single-touch counts, rows true object; ``kept`` the
+    ``confusion`` the single-touch pairs of true and predicted objects with their counts, (k, 3)
+    (:func:`classify.reporting.confusion.confusion_pairs`); ``kept`` the
     fraction of training imprints selection kept; ``stop_correct``,
     ``stop_touches`` (len(stop_levels), n_objects): with the plan's points
     touched in order and the stopping rule at each level, 100 where the
@@ -373,7 +368,7 @@ def plan_outcome(
     n_classes = len(proba)
     truth = np.concatenate([np.full(len(p), c) for c, p in enumerate(proba)]).astype(np.int64)
     guess = np.concatenate([np.argmax(p, axis=1) for p in proba]).astype(np.int64)
-    confusion = _confusion(truth, guess, n_classes)
+    confusion = confusion_pairs(truth, guess)
     rates = np.zeros((n_touches, n_classes))
     sets = np.full(n_touches, np.iinfo(np.int64).max)
     for k in range(1, n_touches + 1):

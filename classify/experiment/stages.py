@@ -44,7 +44,7 @@ from classify.experiment.samples import (
 )
 from classify.experiment.spill import stored
 from classify.experiment.survey import fit_replicate_model
-from classify.reporting.results import ConfusionMatrix
+from classify.reporting.confusion import ConfusionMatrix, reordered_pairs, summed_pairs
 from classify.runtime import cache as cache_mod
 from meshsal.points import MODEL_METHODS
 from meshsal.util.errors import naming
@@ -392,7 +392,7 @@ def join_replicates(blocks) -> list[Measurement]:
         rates = _as_measured([np.stack([m.rates[k] for k in touches], axis=1) for m in ms])
         confusion = first.confusion
         if confusion is not None:
-            confusion = dataclasses.replace(confusion, counts=sum(m.confusion.counts for m in ms))
+            confusion = dataclasses.replace(confusion, pairs=summed_pairs(m.confusion.pairs for m in ms))
         joined.append(
             dataclasses.replace(
                 first,
@@ -497,7 +497,7 @@ def paper_recognition(
     for c, s in _recognizers(config):
         mine = [o for (cj, sj, _), o in zip(jobs, outcomes) if (cj, sj) == (c, s)]
         confusion = ConfusionMatrix(
-            method, "paper", c, n, s, tuple(names), sum(o.confusion for o in mine)[np.ix_(back, back)]
+            method, "paper", c, n, s, tuple(names), reordered_pairs(summed_pairs(o.confusion for o in mine), back)
         )
         out.append(
             Measurement(
@@ -589,7 +589,7 @@ def instance_recognition(
         rates = {k: stack[:, k - 1, :] for k in range(1, settings.n_points + 1)}
         sets = {k: int(min(o.sets[k - 1] for o in mine)) for k in range(1, settings.n_points + 1)}
         confusion = ConfusionMatrix(
-            method, "instance", c, n, s, names, sum(o.confusion for o in mine)[np.ix_(back, back)]
+            method, "instance", c, n, s, names, reordered_pairs(summed_pairs(o.confusion for o in mine), back)
         )
         stopping = (
             np.stack([o.stop_correct for o in mine])[:, :, back],

@@ -17,6 +17,7 @@ import json
 import cv2
 import numpy as np
 
+from classify.reporting.confusion import ConfusionMatrix, counts_pairs, dense_counts, top_pairs
 from meshsal.util.atomic import write_png, write_text
 
 __all__ = [
@@ -29,6 +30,7 @@ __all__ = [
     "stopping_markdown",
     "write_csv",
     "write_stopping_csv",
+    "json_text",
     "write_json",
     "confusion_image",
     "touches_image",
@@ -272,8 +274,25 @@ def write_csv(path, cells, comparisons=()) -> None:
     write_text(path, buffer.getvalue())
 
 
-def write_json(path, payload) -> None:
-    """Indented JSON (numpy scalars and arrays converted)."""
+def json_text(payload, indent: int = 2) -> str:
+    """JSON indented by level, with every list of plain values on one line.
+
+    ``json.dumps(payload, indent=2)`` gives each number of a rate matrix a
+    line of its own; here a list holding no list or dict stays on one line,
+    so a (replicates, objects) matrix takes a line per replicate.  The text
+    parses to what ``json.dumps`` writes (numpy scalars and arrays converted).
+
+    Examples
+    --------
+    >>> print(json_text({"rates": [[1.0, 0.5], [0.0, 1.0]], "name": "cup"}))
+    {
+      "rates": [
+        [1.0, 0.5],
+        [0.0, 1.0]
+      ],
+      "name": "cup"
+    }
+    """
 
     def convert(obj):
         if isinstance(obj, np.ndarray):
@@ -282,7 +301,26 @@ def write_json(path, payload) -> None:
             return obj.item()
         raise TypeError(f"cannot write {type(obj).__name__} to JSON")
 
-    write_text(path, json.dumps(payload, indent=2, default=convert) + "\n")
+    def text(obj, level):
+        if isinstance(obj, (np.ndarray, np.generic)):
+            obj = convert(obj)
+        inner, outer = " " * (indent * (level + 1)), " " * (indent * level)
+        if isinstance(obj, dict) and obj:
+            items = (
+                f"{inner}{json.dumps(k if isinstance(k, str) else json.dumps(k))}: {text(v, level + 1)}"
+                for k, v in obj.items()
+            )
+            return "{\n" + ",\n".join(items) + "\n" + outer + "}"
+        if isinstance(obj, (list, tuple)) and any(isinstance(v, (list, tuple, dict, np.ndarray)) for v in obj):
+            return "[\n" + ",\n".join(inner + text(v, level + 1) for v in obj) + "\n" + outer + "]"
+        return json.dumps(obj, default=convert)
+
+    return text(payload, 0)
+
+
+def write_json(path, payload) -> None:
+    """:func:`json_text` of the payload, written whole or not at all."""
+    write_text(path, json_text(payload) + "\n")
 
 
 def _put(img, text, org, scale=0.45, color=(0, 0, 0), thickness=1, anchor="left"):
@@ -307,25 +345,15 @@ def top_confusions(counts, names, k: int = 20) -> list[tuple[str, str, int, floa
     >>> top_confusions(np.array([[8, 2, 0], [1, 9, 0], [0, 5, 5]]), ["a", "b", "c"], k=2)
     [('c', 'b', 5, 0.5), ('a', 'b', 2, 0.2)]
     """
-    M = np.asarray(counts, dtype=np.int64)
-    off = M.copy()
-    np.fill_diagonal(off, 0)
-    rows = M.sum(axis=1)
-    flat = np.lexsort((np.arange(off.size), -off.ravel()))[:k]
-    return [
-        (names[i], names[j], int(off[i, j]), float(off[i, j] / rows[i]) if rows[i] else 0.0)
-        for i, j in (divmod(int(f), M.shape[1]) for f in flat)
-        if off[i, j] > 0
-    ]
+    return top_pairs(counts_pairs(counts), list(names), k)
 
 
-def _confusion_list(matrix, names, title, k: int = 20, line=22):
+def _confusion_list(pairs, names, title, k: int = 20, line=22):
     """A panel for many classes: the overall rate and the ``k`` largest confusions as lines of text."""
-    M = np.asarray(matrix)
-    rows = top_confusions(M, list(names), k)
+    rows = top_pairs(pairs, list(names), k)
     img = np.full((70 + line * max(len(rows), 1), 640, 3), 255, np.uint8)
     _put(img, title, (8, 12), 0.5)
-    right = np.trace(M) / max(M.sum(), 1)
+    right = pairs[pairs[:, 0] == pairs[:, 1], 2].sum() / max(pairs[:, 2].sum(), 1)
     _put(
         img,
         f"{len(names)} classes: {100 * right:.1f} % right; the largest confusions (true -> predicted):",
@@ -338,10 +366,11 @@ def _confusion_list(matrix, names, title, k: int = 20, line=22):
     return img
 
 
-def _confusion_panel(matrix, names, title, cell=44):
+def _confusion_panel(pairs, names, title, cell=44):
     n = len(names)
     if n > GRID_CLASSES:
-        return _confusion_list(matrix, names, title)
+        return _confusion_list(pairs, names, title)
+    matrix = dense_counts(pairs, n).astype(float)
     label_w = max(cv2.getTextSize(s, _FONT, 0.45, 1)[0][0] for s in names) + 16
     top = 56
     img = np.full((top + n * cell + 30, label_w + n * cell + 16, 3), 255, np.uint8)
@@ -377,13 +406,18 @@ def confusion_image(panels) -> np.ndarray:
 
     Parameters
     ----------
-    panels : sequence of (title, counts (n, n), names) with rows = true class
+    panels : sequence of (title, counts, names)
+        ``counts`` a :class:`~classify.reporting.confusion.ConfusionMatrix`
+        or its dense (n, n) counts, rows true class.
 
     Returns
     -------
     (H, W, 3) uint8 RGB
     """
-    images = [_confusion_panel(np.asarray(m, float), list(names), title) for title, m, names in panels]
+    images = [
+        _confusion_panel(m.pairs if isinstance(m, ConfusionMatrix) else counts_pairs(m), list(names), title)
+        for title, m, names in panels
+    ]
     height = max(im.shape[0] for im in images)
     images = [np.pad(im, ((0, height - im.shape[0]), (0, 0), (0, 0)), constant_values=255) for im in images]
     return np.concatenate(images, axis=1)

@@ -21,6 +21,7 @@ from typing import NamedTuple
 import numpy as np
 
 from classify.reporting import report
+from classify.reporting.confusion import ConfusionMatrix, counts_pairs
 
 __all__ = [
     "CellKey",
@@ -89,19 +90,6 @@ class Comparison:
     ci_high: float
     p_value: float
     replicates: int
-
-
-@dataclass(frozen=True)
-class ConfusionMatrix:
-    """Single-touch counts summed over all folds and replicates; rows true object, columns predicted."""
-
-    method: str
-    protocol: str
-    classifier: str
-    n_objects: int
-    selection: bool
-    object_names: tuple
-    counts: np.ndarray
 
 
 @dataclass(frozen=True)
@@ -183,10 +171,7 @@ class ExperimentResult:
         def key(d):
             return tuple(d[c] for c in _COORDINATES)
 
-        confusions = tuple(
-            ConfusionMatrix(**{**c, "object_names": tuple(c["object_names"]), "counts": np.asarray(c["counts"])})
-            for c in document.get("confusions", [])
-        )
+        confusions = tuple(_confusion_from(c) for c in document.get("confusions", []))
         return cls(
             cells=tuple(Cell(**c) for c in document["cells"]),
             comparisons=tuple(Comparison(**c) for c in document.get("comparisons", [])),
@@ -218,7 +203,11 @@ class ExperimentResult:
             "cells": [dataclasses.asdict(c) for c in self.cells],
             "comparisons": [dataclasses.asdict(c) for c in self.comparisons],
             "confusions": [
-                {**dataclasses.asdict(c), "object_names": list(c.object_names), "counts": c.counts.tolist()}
+                {
+                    **{f: getattr(c, f) for f in ("method", "protocol", "classifier", "n_objects", "selection")},
+                    "object_names": list(c.object_names),
+                    "pairs": np.asarray(c.pairs).tolist(),
+                }
                 for c in self.confusions
             ],
             "rates": [
@@ -252,6 +241,15 @@ class ExperimentResult:
 
 
 _COORDINATES = ("method", "protocol", "classifier", "n_objects", "selection", "touches")
+
+
+def _confusion_from(document: dict) -> ConfusionMatrix:
+    """A confusion as ``results.json`` holds it: its ``pairs``, or the dense ``counts`` of older files."""
+    fields = {f: document[f] for f in ("method", "protocol", "classifier", "n_objects", "selection")}
+    pairs = document["pairs"] if "pairs" in document else counts_pairs(np.asarray(document["counts"]))
+    return ConfusionMatrix(
+        **fields, object_names=tuple(document["object_names"]), pairs=np.asarray(pairs, np.int64).reshape(-1, 3)
+    )
 
 
 class MissingCell(KeyError):
@@ -356,7 +354,7 @@ def write_outputs(result: ExperimentResult, out_dir) -> None:
     n = result.object_sets[-1]
     for name in result.classifiers:
         panels = [
-            (f"{c.method} / {c.protocol} / {'sel' if c.selection else 'no sel'}", c.counts, c.object_names)
+            (f"{c.method} / {c.protocol} / {'sel' if c.selection else 'no sel'}", c, c.object_names)
             for c in result.confusions
             if c.classifier == name and c.n_objects == n and not c.selection
         ]
