@@ -48,7 +48,9 @@ def _dense(result: ExperimentResult) -> tuple[int, int]:
 def _row(count: int, cache: Path, out: Path, repeats: int) -> dict:
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        result = run_experiment(corpus_files(count), scaling_config(), cache_dir=cache, out_dir=out, quiet=True)
+        result = run_experiment(
+            corpus_files(count), scaling_config(), cache_dir=cache, out_dir=out, quiet=True, skip_bad=True
+        )
     path = out / "results.json"
     text = path.read_text()
     reads = []
