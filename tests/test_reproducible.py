@@ -39,9 +39,16 @@ X86_AVX2 = platform.machine().lower() in ("x86_64", "amd64") and "avx2" in (cpu_
 needs_avx2 = pytest.mark.skipif(not X86_AVX2, reason="forces an x86-64 CPU with AVX2 down to lower instruction sets")
 
 
-def env(environ=None, flags=AVX2, machine="x86_64", numpy_version=(2, 4)):
+ICE_LAKE = SKYLAKE_X | {"avx512ifma", "avx512vbmi", "avx512_vbmi2", "avx512_vnni", "avx512_bitalg", "avx512_vpopcntdq"}
+
+
+def env(environ=None, flags=AVX2, machine="x86_64", numpy_version=(2, 4), opencv_version=(5, 1)):
     return kernel_environment(
-        {} if environ is None else environ, flags=flags, machine=machine, numpy_version=numpy_version
+        {} if environ is None else environ,
+        flags=flags,
+        machine=machine,
+        numpy_version=numpy_version,
+        opencv_version=opencv_version,
     )
 
 
@@ -61,6 +68,21 @@ def test_an_avx512_cpu_also_has_opencvs_avx512_group_turned_off_not_just_its_fla
     assert {"AVX512F", "AVX512VL", "AVX512-SKX"} <= set(names)
     assert "AVX512-ICL" not in names and "AVX512-KNL" not in names  # groups this CPU does not have
     assert len(names) == len(set(names))
+
+
+def test_a_cpu_with_avx512_vnni_has_opencvs_cascade_lake_group_turned_off_too():
+    # OpenCV 5.1's wheels dispatch filters to AVX512-CLX on such CPUs (an Intel Xeon of the Ice Lake kind, seen).
+    names = env(flags=ICE_LAKE)["OPENCV_CPU_DISABLE"].split(",")
+    assert {"AVX512VNNI", "AVX512-SKX", "AVX512-CLX", "AVX512-CNL", "AVX512-ICL"} <= set(names)
+    assert "AVX512-CLX" not in env(flags=SKYLAKE_X)["OPENCV_CPU_DISABLE"].split(",")
+
+
+def test_avx_vnni_is_turned_off_where_opencv_knows_its_name():
+    flags = AVX2 | {"avx_vnni"}
+    assert "AVX_VNNI" in env(flags=flags)["OPENCV_CPU_DISABLE"].split(",")
+    assert "AVX_VNNI" in env(flags=flags, opencv_version=(4, 14))["OPENCV_CPU_DISABLE"].split(",")
+    # OpenCV 4.13 and older do not know the name and would complain on stderr; they do not dispatch to it either.
+    assert "AVX_VNNI" not in env(flags=flags, opencv_version=(4, 13))["OPENCV_CPU_DISABLE"].split(",")
 
 
 def test_numpy_before_2_4_gets_its_feature_names_and_never_its_sse3_baseline():
@@ -177,7 +199,10 @@ def test_the_visuotactile_command_pins_before_anything_loads_numpy():
 
 
 def test_every_opencv_feature_name_the_pin_may_use_is_known_to_this_opencv():
-    names = [name for _, name in reproducible._OPENCV_FEATURES] + [name for name, _ in reproducible._OPENCV_GROUPS]
+    every = frozenset(flag for _, needs in reproducible._OPENCV_GROUPS for flag in needs)
+    every |= {flag for flag, _ in reproducible._OPENCV_FEATURES}
+    names = reproducible._opencv_disable(every, reproducible._version(*reproducible._OPENCV_DISTRIBUTIONS))
+    assert {name for _, name in reproducible._OPENCV_FEATURES} - set(names) <= set(reproducible._OPENCV_SINCE)
     done = _python("import cv2", OPENCV_CPU_DISABLE=",".join(names), VISUOTACTILE_KERNELS="native")
     assert done.returncode == 0 and "unknown CPU feature" not in done.stderr, done.stderr
 

@@ -87,11 +87,24 @@ _OPENCV_FEATURES = (
     ("avx512_vpopcntdq", "AVX512VPOPCNTDQ"),
     ("avx512_4vnniw", "AVX5124VNNIW"),
     ("avx512_4fmaps", "AVX5124FMAPS"),
+    ("avx_vnni", "AVX_VNNI"),
+)
+#: The first OpenCV version naming each feature that older ones do not know (naming an unknown feature is a
+#: complaint on stderr): read from the wheels' feature tables, 4.8 to 5.1.
+_OPENCV_SINCE = {"AVX_VNNI": (4, 14)}
+#: The distributions that install ``cv2``, the project's own first.
+_OPENCV_DISTRIBUTIONS = (
+    "opencv-contrib-python-headless",
+    "opencv-contrib-python",
+    "opencv-python-headless",
+    "opencv-python",
 )
 #: OpenCV's AVX-512 groups and the flags each needs, as its CPU detection combines them (disabling a flag
-#: leaves a group on); only the groups both OpenCV 4 and 5 name ("AVX512-CEL" and "AVX512-CLX" are not).
+#: leaves a group on); every OpenCV from 4.8 to 5.1 names them.  OpenCV 5.1's wheels dispatch filters to
+#: AVX512-CLX on CPUs with AVX-512 VNNI (Cascade Lake, Ice Lake, Zen 4), which moves the attention's bits.
 _OPENCV_GROUPS = (
     ("AVX512-SKX", {"avx512f", "avx512cd", "avx512bw", "avx512dq", "avx512vl"}),
+    ("AVX512-CLX", {"avx512f", "avx512cd", "avx512bw", "avx512dq", "avx512vl", "avx512_vnni"}),
     ("AVX512-KNL", {"avx512f", "avx512cd", "avx512er", "avx512pf"}),
     (
         "AVX512-KNM",
@@ -134,7 +147,7 @@ _READ_BY = {
     EMBREE_VARIABLE: (),
 }
 #: The SIMD flags that decide which kernels a library picks when nothing is pinned.
-_SIMD_FLAGS = ("sse4_1", "sse4_2", "avx", "avx2", "fma", "avx512f", "avx512bw", "avx512vl", "avx512_vnni")
+_SIMD_FLAGS = ("sse4_1", "sse4_2", "avx", "avx2", "fma", "avx_vnni", "avx512f", "avx512bw", "avx512vl", "avx512_vnni")
 
 
 class KernelPinWarning(UserWarning):
@@ -162,19 +175,31 @@ def _is_x86_64(machine: str) -> bool:
     return machine.lower() in ("x86_64", "amd64")
 
 
-def _numpy_version() -> tuple[int, int] | None:
+def _version(*distributions: str) -> tuple[int, int] | None:
+    """(major, minor) of the first of the distributions installed, read from its metadata without importing it."""
     from importlib import metadata
 
-    try:
-        major, minor = metadata.version("numpy").split(".")[:2]
-        return int(major), int(minor)
-    except (metadata.PackageNotFoundError, ValueError):
-        return None
+    for distribution in distributions:
+        try:
+            major, minor = metadata.version(distribution).split(".")[:2]
+            return int(major), int(minor)
+        except metadata.PackageNotFoundError:
+            continue
+        except ValueError:
+            return None
+    return None
 
 
-def _opencv_disable(flags: frozenset) -> list[str]:
+def _numpy_version() -> tuple[int, int] | None:
+    return _version("numpy")
+
+
+def _opencv_disable(flags: frozenset, version: tuple | None) -> list[str]:
+    """OpenCV's names of the features above its baseline this CPU has, those this OpenCV knows (all when its
+    version is unknown)."""
     names = [name for flag, name in _OPENCV_FEATURES if flag in flags]
-    return names + [name for name, needs in _OPENCV_GROUPS if needs <= flags]
+    names += [name for name, needs in _OPENCV_GROUPS if needs <= flags]
+    return [name for name in names if version is None or version >= _OPENCV_SINCE.get(name, (0, 0))]
 
 
 def _merged(user: str | None, ours: list[str], separator: str) -> str:
@@ -183,7 +208,9 @@ def _merged(user: str | None, ours: list[str], separator: str) -> str:
     return separator.join(seen + [name for name in ours if name not in seen])
 
 
-def kernel_environment(environ=None, flags=None, machine: str | None = None, numpy_version=None) -> dict[str, str]:
+def kernel_environment(
+    environ=None, flags=None, machine: str | None = None, numpy_version=None, opencv_version=None
+) -> dict[str, str]:
     """The environment that pins every library's kernels on this machine: variable -> value.
 
     A value the user set is kept: their ``OPENBLAS_CORETYPE``, ``OPENCV_IPP``
@@ -202,6 +229,9 @@ def kernel_environment(environ=None, flags=None, machine: str | None = None, num
         ``platform.machine()`` by default; nothing is pinned off x86-64.
     numpy_version : (major, minor), optional
         The installed NumPy's (read from its metadata without importing it).
+    opencv_version : (major, minor), optional
+        The installed OpenCV's, likewise: an OpenCV older than a feature's
+        name is not told it (``AVX_VNNI`` from 4.14).
 
     Returns
     -------
@@ -239,7 +269,8 @@ def kernel_environment(environ=None, flags=None, machine: str | None = None, num
         env["OPENBLAS_CORETYPE"] = environ["OPENBLAS_CORETYPE"]
     elif flags is not None and "avx2" in flags:
         env["OPENBLAS_CORETYPE"] = BLAS_PIN
-    disable = _merged(environ.get("OPENCV_CPU_DISABLE"), _opencv_disable(flags or frozenset()), ",")
+    opencv = _version(*_OPENCV_DISTRIBUTIONS) if opencv_version is None else tuple(opencv_version)
+    disable = _merged(environ.get("OPENCV_CPU_DISABLE"), _opencv_disable(flags or frozenset(), opencv), ",")
     if disable:
         env["OPENCV_CPU_DISABLE"] = disable
     if flags is not None or "OPENCV_IPP" in environ:
