@@ -51,19 +51,18 @@ def _row(count: int, cache: Path, out: Path, repeats: int) -> dict:
         result = run_experiment(
             corpus_files(count), scaling_config(), cache_dir=cache, out_dir=out, quiet=True, skip_bad=True
         )
-    path = out / "results.json"
-    text = path.read_text()
+    text = (out / "results.json").read_text()
     reads = []
     for _ in range(repeats):
         started = time.perf_counter()
-        ExperimentResult.from_json(json.loads(text))
+        ExperimentResult.from_json(document := json.loads(text))
         reads.append(time.perf_counter() - started)
     dense, dense_confusions = _dense(result)
     return {
         "objects": len(result.object_names),
         "confusions": len(result.confusions),
-        "bytes": path.stat().st_size,
-        "confusion_bytes": len(report.json_text(result.to_json()["confusions"]).encode()),
+        "bytes": len(text.encode()),
+        "confusion_bytes": len(report.json_text(document["confusions"]).encode()),
         "read_s": statistics.median(reads),
         "dense": dense,
         "dense_confusions": dense_confusions,

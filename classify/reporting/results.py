@@ -204,7 +204,7 @@ class ExperimentResult:
             "comparisons": [dataclasses.asdict(c) for c in self.comparisons],
             "confusions": [
                 {
-                    **{f: getattr(c, f) for f in ("method", "protocol", "classifier", "n_objects", "selection")},
+                    **{f: getattr(c, f) for f in _CONFUSION_FIELDS},
                     "object_names": list(c.object_names),
                     "pairs": np.asarray(c.pairs).tolist(),
                 }
@@ -241,11 +241,13 @@ class ExperimentResult:
 
 
 _COORDINATES = ("method", "protocol", "classifier", "n_objects", "selection", "touches")
+#: A confusion's coordinates, as ``results.json`` writes them beside its names and pairs.
+_CONFUSION_FIELDS = _COORDINATES[:-1]
 
 
 def _confusion_from(document: dict) -> ConfusionMatrix:
     """A confusion as ``results.json`` holds it: its ``pairs``, or the dense ``counts`` of older files."""
-    fields = {f: document[f] for f in ("method", "protocol", "classifier", "n_objects", "selection")}
+    fields = {f: document[f] for f in _CONFUSION_FIELDS}
     pairs = document["pairs"] if "pairs" in document else counts_pairs(np.asarray(document["counts"]))
     return ConfusionMatrix(
         **fields, object_names=tuple(document["object_names"]), pairs=np.asarray(pairs, np.int64).reshape(-1, 3)
